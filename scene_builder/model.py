@@ -1,0 +1,708 @@
+"""The data model: frozen, typed dataclasses that every stage passes to the next.
+
+Frames and units (the one place they are written down)
+------------------------------------------------------
+* **Units**: metres, kilograms, seconds, radians, pascals. Field names carry the unit
+  (``depth_m``, ``mass_kg``, ``inertia_kg_m2``); unitless fields say so in their docstring.
+* **World frame**: right-handed, **Z up** (against gravity), metres. The floor is the plane
+  ``z = 0``. The X axis is the horizontal projection of the camera's optical axis unless the
+  room's walls were found, in which case X and Y follow the dominant wall directions
+  (Manhattan frame) closest to that projection.
+* **Camera frame**: OpenCV. x right, y down, z forward along the optical axis, metres.
+  Pixel ``(u, v)`` is column ``u``, row ``v``; integer coordinates are pixel centres, so the
+  top-left pixel's centre is ``(0, 0)``. A point ``p_cam`` projects to
+  ``u = fx * x / z + cx``, ``v = fy * y / z + cy``.
+* **Asset frame**: each :class:`ObjectAsset` has its own frame, Z up, origin at the centre of
+  the bottom face of the asset's axis-aligned bounding box, so an asset placed with the
+  identity rotation at ``(x, y, 0)`` stands on the floor. The asset's **front** (the side seen
+  in the photo, where doors and drawers open) faces **+X**.
+* **Transforms** are 4x4 homogeneous float64 matrices named ``a_from_b``: they map a point
+  expressed in frame ``b`` into frame ``a`` (``p_a = a_from_b @ [p_b, 1]``).
+* **Depth** is planar z-depth (distance along the optical axis), not ray length. Invalid depth
+  pixels hold ``0.0``.
+
+Arrays are stored read-only (``ndarray.flags.writeable`` is False) so that frozen really means
+frozen; copy before modifying. Dataclasses that hold arrays compare by identity (``eq=False``).
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = [
+    "AssetKind",
+    "BackendUse",
+    "Camera",
+    "CameraIntrinsics",
+    "DeformableSettings",
+    "Fidelity",
+    "GeneratedAsset",
+    "Inertial",
+    "Joint",
+    "JointType",
+    "LayoutResult",
+    "Material",
+    "ObjectAsset",
+    "ObjectVerdict",
+    "Observation",
+    "Part",
+    "PerceivedObject",
+    "Perception",
+    "PhysicsVerdict",
+    "PlacedObject",
+    "Plane",
+    "Room",
+    "Scene",
+    "SupportEdge",
+    "Trajectory",
+    "TriangleMesh",
+    "as_array",
+]
+
+
+def as_array(value, dtype, shape: tuple[int | None, ...], name: str) -> np.ndarray:
+    """Return ``value`` as a read-only array of ``dtype`` and check its shape.
+
+    ``shape`` uses ``None`` for a free dimension, e.g. ``(None, 3)`` for an (N, 3) array.
+    Raises ``ValueError`` naming the field when the shape does not match or values are not finite
+    (for floating dtypes).
+    """
+    arr = np.array(value, dtype=dtype, copy=True)
+    if arr.ndim != len(shape) or any(s is not None and s != a for s, a in zip(shape, arr.shape)):
+        want = "x".join("N" if s is None else str(s) for s in shape)
+        raise ValueError(f"{name}: expected shape ({want}), got {arr.shape}")
+    if np.issubdtype(arr.dtype, np.floating) and not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: contains NaN or infinite values")
+    arr.setflags(write=False)
+    return arr
+
+
+def _freeze(obj, name: str, dtype, shape) -> None:
+    object.__setattr__(obj, name, as_array(getattr(obj, name), dtype, shape, f"{type(obj).__name__}.{name}"))
+
+
+def _check_rigid(t: np.ndarray, name: str) -> None:
+    r = t[:3, :3]
+    if not np.allclose(r.T @ r, np.eye(3), atol=1e-6) or not np.isclose(np.linalg.det(r), 1.0, atol=1e-6):
+        raise ValueError(f"{name}: rotation block is not a proper rotation")
+    if not np.allclose(t[3], [0.0, 0.0, 0.0, 1.0]):
+        raise ValueError(f"{name}: last row must be [0, 0, 0, 1]")
+
+
+# --------------------------------------------------------------------------------------------
+# Camera and observation
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class CameraIntrinsics:
+    """Pinhole intrinsics of the input image, in pixels (OpenCV convention).
+
+    ``source`` says where they came from: ``"flag"``, ``"file"`` (camera.json), ``"exif"``,
+    ``"depth-model"``, ``"vanishing-points"`` or ``"default-fov"``.
+    """
+
+    fx_px: float
+    fy_px: float
+    cx_px: float
+    cy_px: float
+    width_px: int
+    height_px: int
+    source: str = "flag"
+
+    def __post_init__(self) -> None:
+        for name in ("fx_px", "fy_px"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"CameraIntrinsics.{name} must be a positive number, got {v}")
+        for name in ("cx_px", "cy_px"):
+            if not np.isfinite(getattr(self, name)):
+                raise ValueError(f"CameraIntrinsics.{name} must be finite")
+        if self.width_px <= 0 or self.height_px <= 0:
+            raise ValueError("CameraIntrinsics: width_px and height_px must be positive")
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """(3, 3) float64 camera matrix K."""
+        return np.array([[self.fx_px, 0.0, self.cx_px], [0.0, self.fy_px, self.cy_px], [0.0, 0.0, 1.0]])
+
+    @property
+    def fovy_deg(self) -> float:
+        """Vertical field of view in degrees."""
+        return float(np.degrees(2.0 * np.arctan2(self.height_px / 2.0, self.fy_px)))
+
+    @classmethod
+    def from_fov(cls, width_px: int, height_px: int, fov_deg: float, source: str = "default-fov") -> "CameraIntrinsics":
+        """Square-pixel intrinsics with horizontal field of view ``fov_deg`` and a centred principal point."""
+        if not (0.0 < fov_deg < 180.0):
+            raise ValueError(f"field of view must be between 0 and 180 degrees, got {fov_deg}")
+        f = (width_px / 2.0) / np.tan(np.radians(fov_deg) / 2.0)
+        return cls(float(f), float(f), (width_px - 1) / 2.0, (height_px - 1) / 2.0, int(width_px), int(height_px), source)
+
+    def scaled(self, width_px: int, height_px: int) -> "CameraIntrinsics":
+        """The same camera for an image resized to ``width_px`` x ``height_px``."""
+        sx, sy = width_px / self.width_px, height_px / self.height_px
+        return CameraIntrinsics(
+            self.fx_px * sx,
+            self.fy_px * sy,
+            (self.cx_px + 0.5) * sx - 0.5,
+            (self.cy_px + 0.5) * sy - 0.5,
+            int(width_px),
+            int(height_px),
+            self.source,
+        )
+
+    def unproject(self, depth_m: np.ndarray) -> np.ndarray:
+        """Back-project a depth image to camera-frame points.
+
+        depth_m: (H, W) planar depth. Returns (H, W, 3) float64 points in the camera frame
+        (invalid pixels, depth 0, map to the origin).
+        """
+        h, w = depth_m.shape
+        u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+        z = depth_m.astype(np.float64)
+        return np.stack([(u - self.cx_px) * z / self.fx_px, (v - self.cy_px) * z / self.fy_px, z], axis=-1)
+
+    def project(self, points_cam_m: np.ndarray) -> np.ndarray:
+        """Project (N, 3) camera-frame points to (N, 2) pixel coordinates (u, v)."""
+        p = np.asarray(points_cam_m, dtype=np.float64)
+        z = p[:, 2]
+        return np.stack([self.fx_px * p[:, 0] / z + self.cx_px, self.fy_px * p[:, 1] / z + self.cy_px], axis=-1)
+
+
+@dataclass(frozen=True, eq=False)
+class Camera:
+    """The input camera: intrinsics and its pose in the world frame.
+
+    world_from_camera: (4, 4) float64 rigid transform (camera frame is OpenCV).
+    """
+
+    intrinsics: CameraIntrinsics
+    world_from_camera: np.ndarray
+
+    def __post_init__(self) -> None:
+        _freeze(self, "world_from_camera", np.float64, (4, 4))
+        _check_rigid(self.world_from_camera, "Camera.world_from_camera")
+
+    @property
+    def position_m(self) -> np.ndarray:
+        """(3,) camera centre in the world frame."""
+        return self.world_from_camera[:3, 3].copy()
+
+
+@dataclass(frozen=True)
+class BackendUse:
+    """Which backend answered one task, and why (recorded in report.json).
+
+    task: ``"depth"``, ``"segmentation"``, ``"naming"``, ``"intrinsics"``, ``"generation"`` ...
+    backend: registry name of the backend that answered.
+    reason: one line: why this backend (e.g. "sensor depth given", "weights for
+    depth-anything-v2-small not found in models dir; using geometric single-view depth").
+    """
+
+    task: str
+    backend: str
+    reason: str
+
+
+@dataclass(frozen=True, eq=False)
+class Observation:
+    """What the camera saw, as loaded and checked.
+
+    rgb: (H, W, 3) uint8, EXIF orientation already applied.
+    depth_m: (H, W) float32 planar depth in metres, 0.0 where invalid. Either from a sensor
+      (``depth_source == "sensor"``) or estimated (``depth_source`` names the backend).
+    """
+
+    image_path: str
+    rgb: np.ndarray
+    depth_m: np.ndarray
+    intrinsics: CameraIntrinsics
+    depth_source: str
+
+    def __post_init__(self) -> None:
+        _freeze(self, "rgb", np.uint8, (None, None, 3))
+        _freeze(self, "depth_m", np.float32, self.rgb.shape[:2])
+        if float(self.depth_m.min(initial=0.0)) < 0.0:
+            raise ValueError("Observation.depth_m: negative depth")
+        if (self.intrinsics.width_px, self.intrinsics.height_px) != (self.rgb.shape[1], self.rgb.shape[0]):
+            raise ValueError("Observation: intrinsics size does not match the image size")
+
+    @property
+    def valid_depth(self) -> np.ndarray:
+        """(H, W) bool, True where depth was measured."""
+        return self.depth_m > 0.0
+
+
+# --------------------------------------------------------------------------------------------
+# Perception
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class Plane:
+    """An infinite plane ``normal . x + offset_m = 0`` in the world frame.
+
+    normal: (3,) float64 unit vector; for floors it is +Z, for walls it is horizontal and points
+      into the room (towards the camera).
+    kind: ``"floor"``, ``"wall"`` or ``"ceiling"``.
+    inlier_count: number of observed depth points that support the plane.
+    """
+
+    normal: np.ndarray
+    offset_m: float
+    kind: str
+    inlier_count: int = 0
+
+    def __post_init__(self) -> None:
+        _freeze(self, "normal", np.float64, (3,))
+        n = float(np.linalg.norm(self.normal))
+        if not np.isclose(n, 1.0, atol=1e-6):
+            raise ValueError(f"Plane.normal must be a unit vector, got norm {n}")
+
+    def signed_distance_m(self, points_m: np.ndarray) -> np.ndarray:
+        """(N,) signed distance of (N, 3) points; positive on the side the normal points to."""
+        return np.asarray(points_m, dtype=np.float64) @ self.normal + self.offset_m
+
+
+@dataclass(frozen=True, eq=False)
+class Room:
+    """The room's fixed geometry in the world frame: the floor is always ``z = 0``.
+
+    walls: vertical planes found in the observation, normals pointing into the room.
+    """
+
+    walls: tuple[Plane, ...] = ()
+
+
+@dataclass(frozen=True, eq=False)
+class PerceivedObject:
+    """One object instance seen in the photo.
+
+    object_id: 1-based instance id, unique in the observation.
+    name: unique, readable identifier (``"chair_2"``), safe for file and prim names.
+    label: category from the project vocabulary, ``"object"`` when unknown.
+    label_confidence: in [0, 1].
+    mask: (H, W) bool, True on the object's pixels; no pixel belongs to two objects.
+    points_world_m: (N, 3) float64 observed surface points in the world frame (N >= 1).
+    colors_rgb: (N, 3) uint8 colour of each point.
+    """
+
+    object_id: int
+    name: str
+    label: str
+    label_confidence: float
+    mask: np.ndarray
+    points_world_m: np.ndarray
+    colors_rgb: np.ndarray
+
+    def __post_init__(self) -> None:
+        _freeze(self, "mask", np.bool_, (None, None))
+        _freeze(self, "points_world_m", np.float64, (None, 3))
+        _freeze(self, "colors_rgb", np.uint8, (self.points_world_m.shape[0], 3))
+        if not 0.0 <= self.label_confidence <= 1.0:
+            raise ValueError("PerceivedObject.label_confidence must be in [0, 1]")
+
+
+@dataclass(frozen=True, eq=False)
+class Perception:
+    """Everything perception found: the observation, the gravity-aligned camera, room and objects."""
+
+    observation: Observation
+    camera: Camera
+    room: Room
+    objects: tuple[PerceivedObject, ...]
+    backends: tuple[BackendUse, ...] = ()
+
+
+# --------------------------------------------------------------------------------------------
+# Assets
+# --------------------------------------------------------------------------------------------
+
+
+class AssetKind(str, enum.Enum):
+    """How an asset moves: one rigid body, a tree of jointed parts, or a soft body."""
+
+    RIGID = "rigid"
+    ARTICULATED = "articulated"
+    DEFORMABLE = "deformable"
+
+
+class JointType(str, enum.Enum):
+    """Joint between a part and its parent (PhysX-Omni's movement types)."""
+
+    FIXED = "fixed"
+    REVOLUTE = "revolute"
+    PRISMATIC = "prismatic"
+    REVOLUTE_PRISMATIC = "revolute_prismatic"
+    BALL = "ball"
+    FREE = "free"
+
+
+@dataclass(frozen=True, eq=False)
+class TriangleMesh:
+    """A triangle mesh.
+
+    vertices_m: (V, 3) float64.
+    faces: (F, 3) int64 vertex indices, counter-clockwise seen from outside.
+    vertex_colors_rgba: (V, 4) uint8, or None.
+    """
+
+    vertices_m: np.ndarray
+    faces: np.ndarray
+    vertex_colors_rgba: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        _freeze(self, "vertices_m", np.float64, (None, 3))
+        _freeze(self, "faces", np.int64, (None, 3))
+        if self.faces.size and (self.faces.min() < 0 or self.faces.max() >= len(self.vertices_m)):
+            raise ValueError("TriangleMesh.faces: index out of range")
+        if self.vertex_colors_rgba is not None:
+            _freeze(self, "vertex_colors_rgba", np.uint8, (len(self.vertices_m), 4))
+
+    @property
+    def bounds_m(self) -> np.ndarray:
+        """(2, 3) float64: min and max corner."""
+        return np.stack([self.vertices_m.min(axis=0), self.vertices_m.max(axis=0)])
+
+
+@dataclass(frozen=True)
+class Material:
+    """Physical and visual material of a part.
+
+    density_kg_m3, static_friction and dynamic_friction (unitless Coulomb coefficients),
+    restitution (unitless, 0..1), youngs_modulus_pa, poisson_ratio (unitless, 0..0.5).
+    rgba: base colour, each channel in [0, 1]. source: where the numbers come from.
+    """
+
+    name: str
+    density_kg_m3: float
+    static_friction: float
+    dynamic_friction: float
+    restitution: float
+    youngs_modulus_pa: float
+    poisson_ratio: float
+    rgba: tuple[float, float, float, float] = (0.7, 0.7, 0.7, 1.0)
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.density_kg_m3 > 0:
+            raise ValueError(f"Material {self.name}: density must be positive")
+        if not (0 <= self.dynamic_friction <= self.static_friction):
+            raise ValueError(f"Material {self.name}: need 0 <= dynamic_friction <= static_friction")
+        if not 0 <= self.restitution <= 1:
+            raise ValueError(f"Material {self.name}: restitution must be in [0, 1]")
+        if not 0 <= self.poisson_ratio <= 0.5:
+            raise ValueError(f"Material {self.name}: Poisson's ratio must be in [0, 0.5]")
+
+
+@dataclass(frozen=True, eq=False)
+class Inertial:
+    """Mass properties of a part, computed from its geometry and material.
+
+    mass_kg: > 0.
+    com_m: (3,) centre of mass in the asset frame.
+    inertia_kg_m2: (3, 3) symmetric positive-definite inertia tensor about the centre of mass,
+      axes of the asset frame.
+    """
+
+    mass_kg: float
+    com_m: np.ndarray
+    inertia_kg_m2: np.ndarray
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.mass_kg) and self.mass_kg > 0):
+            raise ValueError(f"Inertial.mass_kg must be positive, got {self.mass_kg}")
+        _freeze(self, "com_m", np.float64, (3,))
+        _freeze(self, "inertia_kg_m2", np.float64, (3, 3))
+        if not np.allclose(self.inertia_kg_m2, self.inertia_kg_m2.T, atol=1e-12 + 1e-9 * np.abs(self.inertia_kg_m2).max()):
+            raise ValueError("Inertial.inertia_kg_m2 must be symmetric")
+        if np.linalg.eigvalsh(self.inertia_kg_m2).min() <= 0:
+            raise ValueError("Inertial.inertia_kg_m2 must be positive definite")
+
+    def principal(self) -> tuple[np.ndarray, np.ndarray]:
+        """Principal moments (3,) ascending and rotation (3, 3) whose columns are the principal axes
+        (a proper rotation, det +1), so ``inertia = R @ diag(moments) @ R.T``."""
+        moments, axes = np.linalg.eigh(self.inertia_kg_m2)
+        if np.linalg.det(axes) < 0:
+            axes[:, 2] *= -1.0
+        return moments, axes
+
+
+@dataclass(frozen=True, eq=False)
+class Joint:
+    """The joint that attaches a part to its parent part.
+
+    axis: (3,) unit vector in the asset frame (rest pose).
+    anchor_m: (3,) a point on the joint axis in the asset frame (hinge line, slide origin).
+    lower, upper: limits of the joint's first degree of freedom, radians for revolute, metres
+      for prismatic (0 = rest pose as modelled). For ``REVOLUTE_PRISMATIC`` the slide along the
+      same axis uses ``lower2``, ``upper2`` (metres). Ignored for fixed, ball and free joints.
+    damping: N*m*s/rad (revolute) or N*s/m (prismatic). friction: N*m or N (dry friction loss).
+    effort_limit: N*m or N.
+    """
+
+    type: JointType
+    axis: np.ndarray
+    anchor_m: np.ndarray
+    lower: float = 0.0
+    upper: float = 0.0
+    damping: float = 0.0
+    friction: float = 0.0
+    effort_limit: float = 0.0
+    lower2: float = 0.0
+    upper2: float = 0.0
+
+    def __post_init__(self) -> None:
+        _freeze(self, "axis", np.float64, (3,))
+        _freeze(self, "anchor_m", np.float64, (3,))
+        if not np.isclose(np.linalg.norm(self.axis), 1.0, atol=1e-6):
+            raise ValueError("Joint.axis must be a unit vector")
+        if self.lower > self.upper or self.lower2 > self.upper2:
+            raise ValueError("Joint: lower limit above upper limit")
+        if self.damping < 0 or self.friction < 0 or self.effort_limit < 0:
+            raise ValueError("Joint: damping, friction and effort_limit must be >= 0")
+
+
+@dataclass(frozen=True, eq=False)
+class Part:
+    """One rigid part of an asset, modelled at the asset's rest pose in the asset frame.
+
+    parent: name of the parent part, None for the root part (exactly one per asset).
+    joint: joint to the parent, None for the root.
+    visual: watertight visual mesh in the asset frame.
+    collision: convex pieces (each a closed convex mesh) in the asset frame.
+    affordance_rank: 1..10, 1 = most likely to be touched or grasped (PhysX convention).
+    affordance: short verb phrase ("pull handle to open", "sit", "place objects on top").
+    """
+
+    name: str
+    parent: str | None
+    joint: Joint | None
+    visual: TriangleMesh
+    collision: tuple[TriangleMesh, ...]
+    material: Material
+    inertial: Inertial
+    affordance_rank: int = 5
+    affordance: str = ""
+    description: str = ""
+
+    def __post_init__(self) -> None:
+        if (self.parent is None) != (self.joint is None):
+            raise ValueError(f"Part {self.name}: the root part has no joint; every other part has one")
+        if not self.collision:
+            raise ValueError(f"Part {self.name}: needs at least one collision piece")
+        if not 1 <= self.affordance_rank <= 10:
+            raise ValueError(f"Part {self.name}: affordance_rank must be in 1..10")
+
+
+@dataclass(frozen=True)
+class DeformableSettings:
+    """Soft-body parameters (exported as a MuJoCo flex / UsdPhysics deformable).
+
+    youngs_modulus_pa, poisson_ratio (unitless), damping (unitless Rayleigh-style ratio as used by
+    MuJoCo flex elasticity), thickness_m (for shells), resolution (unitless: nodes per axis of the
+    simulation grid).
+    """
+
+    youngs_modulus_pa: float
+    poisson_ratio: float
+    damping: float
+    thickness_m: float = 0.0
+    resolution: int = 4
+
+
+@dataclass(frozen=True, eq=False)
+class ObjectAsset:
+    """A simulation-ready object in the PhysX-Omni sense: a tree of parts with geometry, absolute
+    scale, materials, kinematics or deformation, affordances and a description.
+
+    name: unique in the scene. label: category from the project vocabulary.
+    size_m: (3,) extents of the axis-aligned bounding box of all parts, asset frame.
+    is_fixed: welded to the world (built-in furniture) instead of a free body.
+    backend: registry name of the generator that made it.
+    """
+
+    name: str
+    label: str
+    kind: AssetKind
+    parts: tuple[Part, ...]
+    size_m: np.ndarray
+    description: str = ""
+    is_fixed: bool = False
+    deformable: DeformableSettings | None = None
+    backend: str = ""
+
+    def __post_init__(self) -> None:
+        _freeze(self, "size_m", np.float64, (3,))
+        roots = [p for p in self.parts if p.parent is None]
+        if len(roots) != 1:
+            raise ValueError(f"ObjectAsset {self.name}: needs exactly one root part, has {len(roots)}")
+        names = [p.name for p in self.parts]
+        if len(set(names)) != len(names):
+            raise ValueError(f"ObjectAsset {self.name}: part names must be unique")
+        for p in self.parts:
+            if p.parent is not None and p.parent not in names:
+                raise ValueError(f"ObjectAsset {self.name}: part {p.name} has unknown parent {p.parent}")
+        if (self.kind is AssetKind.DEFORMABLE) != (self.deformable is not None):
+            raise ValueError(f"ObjectAsset {self.name}: deformable settings go with kind DEFORMABLE only")
+
+    @property
+    def root(self) -> Part:
+        return next(p for p in self.parts if p.parent is None)
+
+    @property
+    def mass_kg(self) -> float:
+        return float(sum(p.inertial.mass_kg for p in self.parts))
+
+
+@dataclass(frozen=True, eq=False)
+class GeneratedAsset:
+    """What the generator hands the layout solver: an asset and the pose at which it best explains
+    the observed points (gravity-aligned: rotation about Z only; bottom at the observed support).
+
+    world_from_asset: (4, 4) float64 rigid transform, the solver's starting point.
+    observed_points_world_m: (N, 3) float64, the object's observed points (for the solver's
+      data term: they should lie on the asset's surface).
+    """
+
+    asset: ObjectAsset
+    world_from_asset: np.ndarray
+    observed_points_world_m: np.ndarray
+
+    def __post_init__(self) -> None:
+        _freeze(self, "world_from_asset", np.float64, (4, 4))
+        _check_rigid(self.world_from_asset, f"GeneratedAsset {self.asset.name}.world_from_asset")
+        _freeze(self, "observed_points_world_m", np.float64, (None, 3))
+
+
+# --------------------------------------------------------------------------------------------
+# Layout and scene
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class PlacedObject:
+    """An asset placed in the world.
+
+    world_from_asset: (4, 4) float64 rigid transform.
+    support: what it rests on: ``"floor"``, ``"wall"`` or the name of another object.
+    """
+
+    asset: ObjectAsset
+    world_from_asset: np.ndarray
+    support: str = "floor"
+
+    def __post_init__(self) -> None:
+        _freeze(self, "world_from_asset", np.float64, (4, 4))
+        _check_rigid(self.world_from_asset, f"PlacedObject {self.asset.name}.world_from_asset")
+
+    @property
+    def name(self) -> str:
+        return self.asset.name
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """The simulation-ready scene: camera, room and placed objects, in the world frame."""
+
+    camera: Camera
+    room: Room
+    objects: tuple[PlacedObject, ...]
+
+    def __post_init__(self) -> None:
+        names = [o.name for o in self.objects]
+        if len(set(names)) != len(names):
+            raise ValueError("Scene: object names must be unique")
+
+    def object(self, name: str) -> PlacedObject:
+        for o in self.objects:
+            if o.name == name:
+                return o
+        raise KeyError(name)
+
+
+@dataclass(frozen=True)
+class SupportEdge:
+    """``child`` rests on ``parent`` (``"floor"``, ``"wall"`` or an object name)."""
+
+    child: str
+    parent: str
+    contact_gap_m: float = 0.0
+
+
+@dataclass(frozen=True)
+class LayoutResult:
+    """Output of the layout solver."""
+
+    scene: Scene
+    support: tuple[SupportEdge, ...]
+    iterations: int = 0
+    max_penetration_before_m: float = 0.0
+    max_penetration_after_m: float = 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """Simulated motion of one free body.
+
+    times_s: (T,) float64; positions_m: (T, 3) body origin in the world; quats_wxyz: (T, 4).
+    """
+
+    name: str
+    times_s: np.ndarray
+    positions_m: np.ndarray
+    quats_wxyz: np.ndarray
+
+    def __post_init__(self) -> None:
+        _freeze(self, "times_s", np.float64, (None,))
+        n = len(self.times_s)
+        _freeze(self, "positions_m", np.float64, (n, 3))
+        _freeze(self, "quats_wxyz", np.float64, (n, 4))
+
+
+@dataclass(frozen=True)
+class ObjectVerdict:
+    """Physics check of one object after layout."""
+
+    name: str
+    start_penetration_m: float
+    drift_m: float
+    rotation_deg: float
+    toppled: bool
+
+
+@dataclass(frozen=True)
+class PhysicsVerdict:
+    """Physics check of the whole exported scene (measured in MuJoCo from the exported MJCF).
+
+    max_penetration_m: deepest contact between distinct bodies (and body vs floor/walls) at t=0.
+    settle_max_drift_m: largest displacement of any free body over ``simulated_s``.
+    stable: every object stays within 1 cm and 2 degrees.
+    """
+
+    max_penetration_m: float
+    settle_max_drift_m: float
+    settle_max_rotation_deg: float
+    simulated_s: float
+    stable: bool
+    objects: tuple[ObjectVerdict, ...] = ()
+    trajectories: tuple[Trajectory, ...] = ()
+    contact_points_m: tuple[tuple[float, float, float], ...] = ()
+
+
+@dataclass(frozen=True)
+class Fidelity:
+    """Render-and-compare of the final scene against the observation.
+
+    depth_absrel: mean |d_render - d_obs| / d_obs over object pixels with valid depth.
+    mask_iou_mean: mean over objects of IoU(rendered segmentation, perceived mask).
+    mask_iou: per object name.
+    """
+
+    depth_absrel: float
+    mask_iou_mean: float
+    mask_iou: tuple[tuple[str, float], ...] = field(default_factory=tuple)

@@ -1,0 +1,30 @@
+#!/usr/bin/env bash
+# Idempotent set-up of a fresh machine: system libraries, a local virtual environment, the
+# project and its test dependencies. Called by `make demo` and `make test`; safe to run again.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+# System libraries: open3d needs libusb; MuJoCo's offscreen renderer needs EGL (Mesa llvmpipe);
+# rerun's headless screenshot needs Mesa's Vulkan driver.
+pkgs=(libusb-1.0-0 libegl1 libgl1 libglx-mesa0 libegl-mesa0 libgles2 mesa-vulkan-drivers libvulkan1)
+missing=()
+for p in "${pkgs[@]}"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
+if [ ${#missing[@]} -gt 0 ]; then
+  if [ "$(id -u)" = 0 ]; then SUDO=""; elif command -v sudo >/dev/null; then SUDO="sudo"; else
+    echo "error: missing system packages ${missing[*]}; install them with apt-get (needs root)" >&2; exit 1; fi
+  echo "installing system packages: ${missing[*]}"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${missing[@]}" >/dev/null
+fi
+
+PY=${PYTHON:-$(command -v python3.11 || command -v python3)}
+if [ ! -x .venv/bin/python ]; then "$PY" -m venv .venv; fi
+stamp=.venv/.installed-$(sha1sum pyproject.toml | cut -c1-12)
+if [ ! -f "$stamp" ]; then
+  .venv/bin/python -m pip install -q --upgrade pip
+  # torch first, pinned, so that nothing pulls a CUDA build.
+  .venv/bin/python -m pip install -q torch==2.13.0
+  .venv/bin/python -m pip install -q -e '.[test]'
+  rm -f .venv/.installed-*
+  touch "$stamp"
+fi
