@@ -62,7 +62,7 @@ def test_scene_json_round_trips_exactly():
     assert np.array_equal(a.asset.parts[0].visual.vertices_m, b.asset.parts[0].visual.vertices_m)
     assert b.asset.parts[1].joint.type is m.JointType.REVOLUTE
     assert back.objects[1].asset.deformable == scene.objects[1].asset.deformable
-    assert b.camera.intrinsics == scene.camera.intrinsics
+    assert back.camera.intrinsics == scene.camera.intrinsics
 
 
 @pytest.mark.parametrize(
