@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -38,6 +39,7 @@ __all__ = [
     "Camera",
     "CameraIntrinsics",
     "DeformableSettings",
+    "ExportedFiles",
     "Fidelity",
     "GeneratedAsset",
     "Inertial",
@@ -706,3 +708,14 @@ class Fidelity:
     depth_absrel: float
     mask_iou_mean: float
     mask_iou: tuple[tuple[str, float], ...] = field(default_factory=tuple)
+
+
+@dataclass(frozen=True)
+class ExportedFiles:
+    """Paths of the files the exporters wrote (None for a format that was switched off)."""
+
+    mjcf: Path | None = None
+    usd: Path | None = None
+    urdf: Path | None = None
+    gltf: Path | None = None
+    rerun: Path | None = None

@@ -1,0 +1,88 @@
+"""Frame conversions shared by every stage (part of the data model; see scene_builder.model for
+the frames themselves). Pure numpy, no heavy imports."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from scene_builder.model import CameraIntrinsics
+
+# OpenCV camera axes (x right, y down, z forward) -> MuJoCo / OpenGL camera axes (x right, y up,
+# looking along -z): flip y and z.
+CV_FROM_GL = np.diag([1.0, -1.0, -1.0])
+
+
+def pose(rotation: np.ndarray, translation_m) -> np.ndarray:
+    """(4, 4) rigid transform from a (3, 3) rotation and a (3,) translation."""
+    t = np.eye(4)
+    t[:3, :3] = rotation
+    t[:3, 3] = np.asarray(translation_m, dtype=np.float64)
+    return t
+
+
+def rot_z(yaw_rad: float) -> np.ndarray:
+    """(3, 3) rotation about +Z by ``yaw_rad`` (counter-clockwise seen from above)."""
+    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def yaw_of(rotation: np.ndarray) -> float:
+    """Yaw (rad) of a rotation's X axis projected on the floor plane."""
+    return float(np.arctan2(rotation[1, 0], rotation[0, 0]))
+
+
+def transform_points(a_from_b: np.ndarray, points_b: np.ndarray) -> np.ndarray:
+    """Apply a (4, 4) transform to (N, 3) points."""
+    p = np.asarray(points_b, dtype=np.float64)
+    return p @ a_from_b[:3, :3].T + a_from_b[:3, 3]
+
+
+def quat_wxyz_from_matrix(rotation: np.ndarray) -> np.ndarray:
+    """(4,) unit quaternion (w, x, y, z), w >= 0, of a (3, 3) rotation matrix."""
+    r = np.asarray(rotation, dtype=np.float64)
+    tr = np.trace(r)
+    if tr > 0:
+        s = np.sqrt(tr + 1.0) * 2
+        q = np.array([0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s])
+    elif r[0, 0] > r[1, 1] and r[0, 0] > r[2, 2]:
+        s = np.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2]) * 2
+        q = np.array([(r[2, 1] - r[1, 2]) / s, 0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s])
+    elif r[1, 1] > r[2, 2]:
+        s = np.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2]) * 2
+        q = np.array([(r[0, 2] - r[2, 0]) / s, (r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s])
+    else:
+        s = np.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1]) * 2
+        q = np.array([(r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s])
+    q /= np.linalg.norm(q)
+    return q if q[0] >= 0 else -q
+
+
+def matrix_from_quat_wxyz(q) -> np.ndarray:
+    """(3, 3) rotation of a (w, x, y, z) quaternion (normalised first)."""
+    w, x, y, z = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def mujoco_camera(world_from_camera: np.ndarray, k: CameraIntrinsics) -> dict[str, object]:
+    """Attributes of an MJCF ``<camera>`` that reproduces an OpenCV pinhole camera.
+
+    Returns pos (3,), quat (w, x, y, z), resolution (W, H), focalpixel (fx, fy),
+    principalpixel and sensorsize. Measured on MuJoCo 4.0: with these, a rendered point lands
+    within 0.2 px of ``k.project``; MuJoCo's principalpixel is the offset of the image centre from
+    the principal point, ((W - 1) / 2 - cx, (H - 1) / 2 - cy), the opposite sign of OpenCV's.
+    """
+    r_world_gl = world_from_camera[:3, :3] @ CV_FROM_GL
+    return {
+        "pos": world_from_camera[:3, 3].copy(),
+        "quat": quat_wxyz_from_matrix(r_world_gl),
+        "resolution": (k.width_px, k.height_px),
+        "focalpixel": (k.fx_px, k.fy_px),
+        "principalpixel": ((k.width_px - 1) / 2.0 - k.cx_px, (k.height_px - 1) / 2.0 - k.cy_px),
+        "sensorsize": (float(k.width_px), float(k.height_px)),
+    }
