@@ -1,0 +1,65 @@
+"""Small protocols behind which every perception backend sits (learned or geometric).
+
+Registries of these live in :mod:`perception.backends`; ``perceive`` resolves one backend per task
+and records the choice in ``Perception.backends``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from scene_builder.model import CameraIntrinsics
+
+
+@dataclass(frozen=True, eq=False)
+class DepthEstimate:
+    """depth_m: (H, W) float32 planar metric depth, 0 where unknown, at the input resolution.
+    focal_px: the focal length the model estimated (None if it does not estimate one)."""
+
+    depth_m: np.ndarray
+    focal_px: float | None = None
+
+
+class DepthEstimator(Protocol):
+    """Metric depth from one RGB image."""
+
+    def estimate(self, rgb: np.ndarray, intrinsics: CameraIntrinsics | None) -> DepthEstimate:
+        """rgb: (H, W, 3) uint8. intrinsics: known intrinsics, or None when only a default exists."""
+        ...
+
+
+@dataclass(frozen=True, eq=False)
+class InstanceMasks:
+    """labels: (H, W) int32, 0 = no instance, k > 0 = instance k (no pixel in two instances).
+    scores: (K,) float32 confidence of instances 1..K."""
+
+    labels: np.ndarray
+    scores: np.ndarray
+
+
+class InstanceSegmenter(Protocol):
+    """Instance masks from an RGB image (and depth/geometry when the backend uses it)."""
+
+    def segment(
+        self,
+        rgb: np.ndarray,
+        depth_m: np.ndarray,
+        intrinsics: CameraIntrinsics,
+        background: np.ndarray,
+    ) -> InstanceMasks:
+        """rgb: (H, W, 3) uint8; depth_m: (H, W) float32 (0 = invalid); background: (H, W) bool,
+        True on pixels already explained by the floor, walls or ceiling."""
+        ...
+
+
+class ObjectNamer(Protocol):
+    """Names an object crop with a label of ``scene_builder.vocabulary``."""
+
+    def name(self, crop_rgb: np.ndarray, crop_mask: np.ndarray, size_m: tuple[float, float, float]) -> tuple[str, float]:
+        """crop_rgb: (h, w, 3) uint8; crop_mask: (h, w) bool; size_m: gravity-aligned extents
+        (length, width, height) sorted so that length >= width. Returns (label, confidence in [0, 1]);
+        ``("object", c)`` when unknown."""
+        ...
