@@ -1,0 +1,274 @@
+"""Command line: ``scene-builder IMAGE`` (short for ``scene-builder build IMAGE``) and friends.
+
+Every failure the user can act on is printed as one line ``error: ...`` with a non-zero exit
+status; nothing half-written is left behind. Only argparse and the standard library are imported
+at start-up, so ``--help`` is instant.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+COMMANDS = ("build", "demo", "bench", "check", "view", "models")
+
+_DESCRIPTION = """\
+Turn one photo of a room into a simulation-ready digital twin: every visible object as a
+watertight, metric, physically parameterised asset, placed where it stands in the photo with
+nothing interpenetrating, exported as MJCF (MuJoCo), USD with UsdPhysics, URDF and glTF, with a
+rerun recording to inspect it.
+
+  scene-builder room.jpg                      plain photo (depth estimated)
+  scene-builder build room.jpg --depth d.png  RGB-D (uint16 PNG in millimetres)
+  scene-builder demo                          render a procedural room and rebuild it
+  scene-builder check room_scene              re-validate an output folder
+  scene-builder view room_scene               open the rerun viewer on a saved scene
+
+Frames: world Z up, metres, kilograms, floor at z = 0; camera frame OpenCV (x right, y down, z forward).
+"""
+
+
+def _intrinsics(text: str) -> tuple[float, float, float, float]:
+    try:
+        values = tuple(float(v) for v in text.replace(" ", "").split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected fx,fy,cx,cy in pixels, got {text!r}") from None
+    if len(values) != 4:
+        raise argparse.ArgumentTypeError(f"expected 4 numbers fx,fy,cx,cy, got {len(values)}")
+    return values  # type: ignore[return-value]
+
+
+def _positive(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return v
+
+
+def _add_build_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("-o", "--out", type=Path, help="output folder (default: <image stem>_scene/)")
+    p.add_argument("--seed", type=int, default=0, help="random seed; the output is deterministic for a given input and seed (default 0)")
+    p.add_argument(
+        "--viz",
+        choices=("save", "spawn", "off"),
+        default="save",
+        help="rerun recording: save OUT/scene.rrd (default), spawn = save and open the viewer, off = none",
+    )
+    p.add_argument("--models-dir", type=Path, help="folder with learned model weights (also $SCENE_BUILDER_MODELS)")
+    p.add_argument("--depth-backend", default="auto", help="depth backend when no depth map is given (default auto; see `models list`)")
+    p.add_argument("--segmentation-backend", default="auto", help="instance segmentation backend (default auto)")
+    p.add_argument("--settle-s", type=_positive, default=3.0, help="seconds of simulation in the stability check (default 3)")
+    p.add_argument("--adopt-settled", action="store_true", help="write the poses after the settle simulation instead of the solved ones")
+    p.add_argument("--no-usd", action="store_true", help="skip scene.usda")
+    p.add_argument("--no-urdf", action="store_true", help="skip scene.urdf")
+    p.add_argument("--no-gltf", action="store_true", help="skip scene.glb")
+    p.add_argument("-q", "--quiet", action="store_true", help="no per-stage lines")
+
+
+def make_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="scene-builder", description=_DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    b = sub.add_parser("build", help="build a scene from one photo (the default command)", description="Build a simulation-ready scene from one photo.")
+    b.add_argument("image", type=Path, help="the photo (JPEG/PNG; EXIF orientation is applied)")
+    b.add_argument("--depth", type=Path, help="aligned depth map: uint16 PNG (see --depth-scale) or .npy in metres; same size as the image")
+    b.add_argument("--depth-scale", type=_positive, default=0.001, help="metres per depth unit of a PNG depth map (default 0.001: millimetres)")
+    cam = b.add_mutually_exclusive_group()
+    cam.add_argument("--intrinsics", type=_intrinsics, metavar="FX,FY,CX,CY", help="pinhole intrinsics in pixels")
+    cam.add_argument(
+        "--fov-deg",
+        type=_positive,
+        metavar="F",
+        help="horizontal field of view in degrees, used when no --intrinsics, camera.json beside the image or EXIF focal length (default 60)",
+    )
+    _add_build_options(b)
+
+    d = sub.add_parser("demo", help="render a procedural room with MuJoCo, rebuild it, and compare with the truth")
+    d.add_argument("-o", "--out", type=Path, default=Path("demo_scene"), help="output folder (default demo_scene/)")
+    d.add_argument("--seed", type=int, default=0, help="room and build seed (default 0)")
+    d.add_argument("--objects", type=int, default=6, help="number of objects in the room (default 6)")
+    d.add_argument("--viz", choices=("save", "spawn", "off"), default="save", help="rerun recording (default save)")
+
+    be = sub.add_parser("bench", help="score the pipeline and a naive baseline against ground truth")
+    be.add_argument("--suite", choices=("synthetic", "real"), default="synthetic", help="procedural rooms or real RGB-D photos")
+    be.add_argument("--rooms", type=int, default=20, help="number of procedural rooms (synthetic suite)")
+    be.add_argument("--data", type=Path, help="folder of samples in the ../shared/data/real format (real suite)")
+    be.add_argument("--json", type=Path, default=Path("bench.json"), help="where to write the results (default bench.json)")
+    be.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+
+    c = sub.add_parser("check", help="re-validate an output folder (MJCF compiles and is stable, USD validates, files resolve)")
+    c.add_argument("out", type=Path, help="an output folder written by `scene-builder build`")
+
+    v = sub.add_parser("view", help="open the rerun viewer on OUT/scene.rrd")
+    v.add_argument("out", type=Path, help="an output folder (or a .rrd file)")
+
+    m = sub.add_parser("models", help="list or fetch learned model weights")
+    msub = m.add_subparsers(dest="models_command", metavar="ACTION", required=True)
+    ml = msub.add_parser("list", help="show each known model and whether its weights are available locally")
+    ml.add_argument("--models-dir", type=Path, help="folder with model weights (also $SCENE_BUILDER_MODELS)")
+    mf = msub.add_parser("fetch", help="download model weights (needs a network)")
+    mf.add_argument("names", nargs="*", help="model names (default: all)")
+    mf.add_argument("--models-dir", type=Path, help="where to put them (default: the Hugging Face cache)")
+    return parser
+
+
+def _version() -> str:
+    from scene_builder import __version__
+
+    return __version__
+
+
+def _normalise_argv(argv: list[str]) -> list[str]:
+    """``scene-builder IMAGE ...`` is short for ``scene-builder build IMAGE ...``."""
+    if argv and not argv[0].startswith("-") and argv[0] not in COMMANDS:
+        return ["build", *argv]
+    return argv
+
+
+def _cmd_build(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from scene_builder.config import BuildConfig, ExportConfig, InputSpec, LayoutConfig, PerceptionConfig
+    from scene_builder.pipeline import build, default_out_dir
+
+    inputs = InputSpec(args.image, args.depth, args.depth_scale, args.intrinsics, args.fov_deg)
+    config = BuildConfig(
+        seed=args.seed,
+        perception=replace(
+            PerceptionConfig(),
+            models_dir=args.models_dir,
+            depth_backend=args.depth_backend,
+            segmentation_backend=args.segmentation_backend,
+        ),
+        layout=replace(LayoutConfig(), settle_s=args.settle_s, adopt_settled=args.adopt_settled),
+        export=ExportConfig(usd=not args.no_usd, urdf=not args.no_urdf, gltf=not args.no_gltf, viz=args.viz),
+    )
+    out = args.out or default_out_dir(args.image)
+    result = build(inputs, out, config, progress=not args.quiet)
+    _print_summary(result)
+    return 0
+
+
+def _print_summary(result) -> None:
+    from rich.console import Console
+
+    v = result.verdict
+    console = Console(stderr=True, highlight=False)
+    console.print(
+        f"[bold]{len(result.scene.objects)} objects[/bold] -> {result.out_dir}/  "
+        f"(max penetration {v.max_penetration_m * 1000:.2f} mm, settle drift {v.settle_max_drift_m * 1000:.1f} mm, "
+        f"{'stable' if v.stable else 'NOT stable'})"
+    )
+    print(result.out_dir)
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    import json
+    import tempfile
+
+    from scene_builder.config import BuildConfig, ExportConfig, InputSpec
+    from scene_builder.pipeline import build
+    from scene_builder.procedural import compare_to_ground_truth, write_demo_input
+
+    with tempfile.TemporaryDirectory(prefix="scene-builder-demo-") as tmp:
+        sample = write_demo_input(Path(tmp) / "room", seed=args.seed, n_objects=args.objects)
+        cam = json.loads((sample / "camera.json").read_text())
+        inputs = InputSpec(sample / "rgb.png", sample / "depth.png", 0.001, (cam["fx"], cam["fy"], cam["cx"], cam["cy"]))
+        result = build(inputs, args.out, BuildConfig(seed=args.seed, export=ExportConfig(viz=args.viz)), progress=True)
+        comparison = compare_to_ground_truth(result.scene, sample)
+    (args.out / "ground_truth_comparison.json").write_text(json.dumps(comparison, indent=2) + "\n")
+    _print_summary(result)
+    from rich.console import Console
+
+    Console(stderr=True, highlight=False).print(
+        "fidelity vs the rendered room: "
+        + ", ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}" for k, v in comparison["summary"].items())
+    )
+    return 0
+
+
+def _cmd_bench(args: argparse.Namespace) -> int:
+    from scene_builder.bench import run_bench
+
+    run_bench(args.suite, args.rooms, args.data, args.json, seed=args.seed)
+    return 0
+
+
+def _cmd_check(args: argparse.Namespace) -> int:
+    from exporters import check_output
+
+    from scene_builder.errors import InputError
+
+    if not args.out.is_dir():
+        raise InputError(f"{args.out} is not an output folder; pass the folder written by `scene-builder build`")
+    problems = check_output(args.out)
+    for p in problems:
+        print(f"FAIL {p}", file=sys.stderr)
+    if problems:
+        print(f"error: {args.out}: {len(problems)} problem(s) found", file=sys.stderr)
+        return 1
+    print(f"ok: {args.out} passes every check")
+    return 0
+
+
+def _cmd_view(args: argparse.Namespace) -> int:
+    import subprocess
+
+    from scene_builder.errors import InputError
+
+    rrd = args.out if args.out.suffix == ".rrd" else args.out / "scene.rrd"
+    if not rrd.is_file():
+        raise InputError(f"no recording at {rrd}; build with --viz save (the default) first")
+    return subprocess.call([sys.executable, "-m", "rerun", str(rrd)])
+
+
+def _cmd_models(args: argparse.Namespace) -> int:
+    from perception.models import fetch_models, list_models
+
+    if args.models_command == "list":
+        for s in list_models(args.models_dir):
+            where = s.location if s.available else s.reason
+            print(f"{'✓' if s.available else '✗'} {s.name:<28} {s.task:<13} {s.license:<14} {s.repo_id}  {where}")
+        return 0
+    for path in fetch_models(tuple(args.names), args.models_dir):
+        print(path)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    parser = make_parser()
+    args = parser.parse_args(_normalise_argv(list(sys.argv[1:] if argv is None else argv)))
+    if args.command is None:
+        parser.print_help()
+        return 2
+    from scene_builder.errors import SceneBuilderError
+
+    handlers = {
+        "build": _cmd_build,
+        "demo": _cmd_demo,
+        "bench": _cmd_bench,
+        "check": _cmd_check,
+        "view": _cmd_view,
+        "models": _cmd_models,
+    }
+    try:
+        return handlers[args.command](args)
+    except SceneBuilderError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return err.exit_code
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

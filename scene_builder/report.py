@@ -1,0 +1,131 @@
+"""``report.json`` and ``scene.json``: what a build made, how long each stage took, which backend
+answered each task, and the physics verdict measured in MuJoCo."""
+
+from __future__ import annotations
+
+import json
+import platform
+from pathlib import Path
+
+import numpy as np
+
+from scene_builder import __version__
+from scene_builder.config import BuildConfig, InputSpec
+from scene_builder.frames import yaw_of
+from scene_builder.model import Fidelity, LayoutResult, Perception, PhysicsVerdict, Scene
+from scene_builder.serialize import scene_to_json
+
+REPORT_FORMAT = "scene-builder/report"
+
+
+def _r(x: float, nd: int = 6) -> float:
+    return float(round(float(x), nd))
+
+
+def build_report(
+    inputs: InputSpec,
+    config: BuildConfig,
+    perception: Perception,
+    layout: LayoutResult,
+    scene: Scene,
+    verdict: PhysicsVerdict,
+    fidelity: Fidelity | None,
+    timings_s: tuple[tuple[str, float], ...],
+) -> dict:
+    """The report as JSON-ready data (the file format; not passed between stages)."""
+    k = perception.observation.intrinsics
+    perceived = {o.name: o for o in perception.objects}
+    verdicts = {v.name: v for v in verdict.objects}
+    objects = []
+    for placed in scene.objects:
+        a = placed.asset
+        obs = perceived.get(a.name)
+        v = verdicts.get(a.name)
+        joints = [
+            {"part": p.name, "type": p.joint.type.value, "lower": _r(p.joint.lower), "upper": _r(p.joint.upper)}
+            for p in a.parts
+            if p.joint is not None
+        ]
+        objects.append(
+            {
+                "name": a.name,
+                "label": a.label,
+                "label_confidence": _r(obs.label_confidence, 3) if obs else None,
+                "kind": a.kind.value,
+                "fixed": a.is_fixed,
+                "size_m": [_r(s, 4) for s in a.size_m],
+                "mass_kg": _r(a.mass_kg, 4),
+                "position_m": [_r(x, 4) for x in placed.world_from_asset[:3, 3]],
+                "yaw_deg": _r(np.degrees(yaw_of(placed.world_from_asset[:3, :3])), 2),
+                "support": placed.support,
+                "parts": len(a.parts),
+                "collision_pieces": int(sum(len(p.collision) for p in a.parts)),
+                "materials": sorted({p.material.name for p in a.parts}),
+                "joints": joints,
+                "generator": a.backend,
+                "physics": None
+                if v is None
+                else {
+                    "start_penetration_m": _r(v.start_penetration_m),
+                    "drift_m": _r(v.drift_m),
+                    "rotation_deg": _r(v.rotation_deg, 3),
+                    "toppled": v.toppled,
+                },
+            }
+        )
+    timings = {name: _r(s, 3) for name, s in timings_s}
+    return {
+        "format": REPORT_FORMAT,
+        "version": __version__,
+        "input": {
+            "image": str(inputs.image_path),
+            "depth": None if inputs.depth_path is None else str(inputs.depth_path),
+            "depth_source": perception.observation.depth_source,
+            "image_size_px": [k.width_px, k.height_px],
+            "intrinsics": {"fx": _r(k.fx_px, 3), "fy": _r(k.fy_px, 3), "cx": _r(k.cx_px, 3), "cy": _r(k.cy_px, 3), "source": k.source},
+            "camera_height_m": _r(perception.camera.position_m[2], 4),
+        },
+        "seed": config.seed,
+        "backends": [{"task": b.task, "backend": b.backend, "reason": b.reason} for b in perception.backends]
+        + [{"task": "generation", "backend": b, "reason": "per object"} for b in sorted({o.asset.backend for o in scene.objects})],
+        "timings_s": timings,
+        "objects": objects,
+        "layout": {
+            "max_penetration_m": _r(verdict.max_penetration_m, 7),
+            "settle_max_drift_m": _r(verdict.settle_max_drift_m, 7),
+            "settle_max_rotation_deg": _r(verdict.settle_max_rotation_deg, 4),
+            "simulated_s": verdict.simulated_s,
+            "stable": verdict.stable,
+            "solver_iterations": layout.iterations,
+            "max_penetration_before_solver_m": _r(layout.max_penetration_before_m, 7),
+            "support": [{"child": e.child, "parent": e.parent} for e in layout.support],
+            "walls": len(scene.room.walls),
+        },
+        "fidelity": None
+        if fidelity is None
+        else {
+            "depth_absrel": _r(fidelity.depth_absrel, 5),
+            "mask_iou_mean": _r(fidelity.mask_iou_mean, 5),
+            "mask_iou": {name: _r(iou, 4) for name, iou in fidelity.mask_iou},
+        },
+        "machine": {"python": platform.python_version(), "platform": platform.platform()},
+    }
+
+
+def write_report(
+    out_dir: Path,
+    inputs: InputSpec,
+    config: BuildConfig,
+    perception: Perception,
+    layout: LayoutResult,
+    scene: Scene,
+    verdict: PhysicsVerdict,
+    fidelity: Fidelity | None,
+    timings_s: tuple[tuple[str, float], ...],
+) -> Path:
+    """Write ``scene.json`` and ``report.json`` into ``out_dir``; returns the report's path."""
+    (out_dir / "scene.json").write_text(scene_to_json(scene))
+    report = build_report(inputs, config, perception, layout, scene, verdict, fidelity, timings_s)
+    path = out_dir / "report.json"
+    path.write_text(json.dumps(report, indent=2) + "\n")
+    return path
