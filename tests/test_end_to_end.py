@@ -1,0 +1,56 @@
+"""End to end on real RGB-D photos: every output is written, MuJoCo loads and steps the MJCF, the
+USD validates, and the physics verdict meets the product's bar (issue 2's floor)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from .conftest import real_samples
+
+SAMPLES = real_samples(with_intrinsics=True)
+
+
+def _build(sample: Path, out: Path):
+    from scene_builder.config import BuildConfig, ExportConfig, InputSpec
+    from scene_builder.pipeline import build
+
+    cam = json.loads((sample / "camera.json").read_text())
+    rgb = sample / ("rgb.jpg" if (sample / "rgb.jpg").exists() else "rgb.png")
+    inputs = InputSpec(rgb, sample / "depth.png", 0.001, (cam["fx"], cam["fy"], cam["cx"], cam["cy"]))
+    return build(inputs, out, BuildConfig(export=ExportConfig(viz="off")))
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not SAMPLES, reason="no real RGB-D samples with intrinsics in ../shared/data/real")
+@pytest.mark.parametrize("sample", SAMPLES, ids=[s.name for s in SAMPLES])
+def test_real_sample_builds_a_valid_stable_scene(sample: Path, tmp_path: Path):
+    import mujoco
+    from pxr import Usd, UsdValidation
+
+    result = _build(sample, tmp_path / "out")
+    out = tmp_path / "out"
+    for name in ("scene.xml", "scene.usda", "scene.json", "report.json", "scene.urdf", "scene.glb"):
+        assert (out / name).is_file(), name
+    model = mujoco.MjModel.from_xml_path(str(out / "scene.xml"))
+    data = mujoco.MjData(model)
+    mujoco.mj_step(model, data, nstep=50)
+    assert np.all(np.isfinite(data.qpos))
+
+    stage = Usd.Stage.Open(str(out / "scene.usda"))
+    assert stage is not None
+    registry = UsdValidation.ValidationRegistry()
+    context = UsdValidation.ValidationContext(registry.GetOrLoadAllValidators())
+    errors = [e for e in context.Validate(stage) if e.GetType() == UsdValidation.ValidationErrorType.Error]
+    assert not errors, [e.GetMessage() for e in errors[:3]]
+
+    report = json.loads((out / "report.json").read_text())
+    assert report["objects"], "no objects"
+    assert report["layout"]["max_penetration_m"] < 0.005
+    assert report["layout"]["settle_max_drift_m"] < 0.02
+    assert result.verdict.max_penetration_m == pytest.approx(report["layout"]["max_penetration_m"], abs=1e-6)
+    for obj in report["objects"]:
+        assert obj["mass_kg"] > 0 and min(obj["size_m"]) > 0
