@@ -1,0 +1,348 @@
+"""MJCF export with ``mujoco.MjSpec``: floor, walls, camera and every object as bodies, joints,
+explicit inertials, a visual mesh and convex collision meshes (names: DEVELOPERS.md).
+
+Layout of a body tree: every part body's frame coincides with its asset frame (parts are
+modelled at rest pose in the asset frame), so a child body sits at the identity relative to its
+parent and its joint is placed at ``Joint.anchor_m`` along ``Joint.axis``. The root body carries
+``world_from_asset``. Geometry is written verbatim in the asset frame (one .obj per mesh under
+``meshes/``, relative paths).
+
+Deformables become a MuJoCo flex (volumetric grid of tetrahedra with linear elasticity from
+:class:`DeformableSettings`). MuJoCo 4.0 refuses flex elasticity under the implicit integrators
+("set integrator='discrete', or 'Euler'"), so a scene with a deformable is written with the
+``discrete`` integrator; every other scene uses ``implicitfast``. Both use a 2 ms timestep.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from exporters import names
+from scene_builder.errors import ExportError
+from scene_builder.frames import mujoco_camera, quat_wxyz_from_matrix, transform_points
+from scene_builder.model import AssetKind, JointType, ObjectAsset, Part, PlacedObject, Plane, Scene, TriangleMesh
+
+TIMESTEP_S = 0.002
+MESH_DIR = "meshes"
+VISUAL_GROUP = 1
+COLLISION_GROUP = 3
+WALL_GROUP = 2
+# Floor material: a sealed wood / vinyl floor. MuJoCo combines two geoms' friction by the
+# maximum, so an object's contact with the floor uses max(object, floor).
+FLOOR_DYNAMIC_FRICTION = 0.5
+# Contact parameters: time constant 10 ms (>= 2 timesteps, stiff enough for stacking, damping
+# ratio 1), impedance 0.95..0.99 over 1 mm. Torsional and rolling friction small but non-zero
+# (condim 4 adds torsional friction so boxes do not spin in place).
+SOLREF = (0.01, 1.0)
+SOLIMP = (0.95, 0.99, 0.001, 0.5, 2.0)
+CONDIM = 4
+TORSIONAL_FRICTION = 0.005
+ROLLING_FRICTION = 0.0001
+WALL_EXTENT_M = 6.0
+CHECK_STEPS = 100
+
+
+def write_mjcf(scene: Scene, out_dir: Path) -> Path:
+    """Write ``out_dir/scene.xml`` and ``out_dir/meshes/*.obj``; compile the written file, step it
+    ``CHECK_STEPS`` times and raise :class:`ExportError` naming the object MuJoCo rejects."""
+    out_dir = Path(out_dir)
+    (out_dir / MESH_DIR).mkdir(parents=True, exist_ok=True)
+    spec = build_spec(scene, out_dir)
+    xml = _to_xml(spec, scene, out_dir)
+    path = out_dir / "scene.xml"
+    path.write_text(xml)
+    validate_mjcf(path, scene)
+    return path
+
+
+def build_spec(scene: Scene, out_dir: Path, objects: tuple[PlacedObject, ...] | None = None):
+    """The ``mujoco.MjSpec`` of ``scene`` (or of a subset of its objects), writing the mesh files
+    under ``out_dir/meshes``."""
+    import mujoco
+
+    objects = scene.objects if objects is None else objects
+    spec = mujoco.MjSpec()
+    spec.modelname = "scene"
+    spec.compiler.degree = False
+    spec.compiler.autolimits = True
+    spec.meshdir = MESH_DIR
+    spec.modelfiledir = str(Path(out_dir).resolve())
+    spec.option.timestep = TIMESTEP_S
+    has_flex = any(o.asset.kind is AssetKind.DEFORMABLE for o in objects)
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_DISCRETE if has_flex else mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.option.gravity = [0.0, 0.0, -9.81]
+    spec.option.cone = mujoco.mjtCone.mjCONE_PYRAMIDAL
+    spec.visual.global_.offwidth = max(640, scene.camera.intrinsics.width_px)
+    spec.visual.global_.offheight = max(480, scene.camera.intrinsics.height_px)
+
+    world = spec.worldbody
+    world.add_light(name="sun", pos=[0.0, 0.0, 4.0], dir=[0.0, 0.0, -1.0], diffuse=[0.7, 0.7, 0.7], castshadow=False)
+    _add_floor(spec)
+    for i, wall in enumerate(scene.room.walls):
+        _add_wall(spec, i, wall)
+    _add_camera(spec, scene)
+    for placed in objects:
+        if placed.asset.kind is AssetKind.DEFORMABLE:
+            _add_flex(spec, placed)
+        else:
+            _add_object(spec, placed, Path(out_dir))
+    return spec
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+def _add_floor(spec) -> None:
+    import mujoco
+
+    spec.add_texture(
+        name="floor_grid", type=mujoco.mjtTexture.mjTEXTURE_2D, builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER,
+        rgb1=[0.55, 0.55, 0.55], rgb2=[0.45, 0.45, 0.45], width=256, height=256,
+    )
+    mat = spec.add_material(name="floor", texrepeat=[8.0, 8.0], reflectance=0.0)
+    mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "floor_grid"
+    spec.worldbody.add_geom(
+        name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[WALL_EXTENT_M, WALL_EXTENT_M, 0.05], material="floor",
+        friction=[FLOOR_DYNAMIC_FRICTION, TORSIONAL_FRICTION, ROLLING_FRICTION], condim=CONDIM,
+        solref=list(SOLREF), solimp=list(SOLIMP), group=0,
+    )
+
+
+def _plane_pose(plane: Plane) -> tuple[np.ndarray, np.ndarray]:
+    """Position (3,) on the plane at floor height closest to the origin and a (4,) wxyz quat whose
+    z axis is the plane normal and x axis horizontal."""
+    n = plane.normal
+    p = -plane.offset_m * n
+    x = np.cross([0.0, 0.0, 1.0], n)
+    x = x / np.linalg.norm(x) if np.linalg.norm(x) > 1e-9 else np.array([1.0, 0.0, 0.0])
+    y = np.cross(n, x)
+    return p, quat_wxyz_from_matrix(np.stack([x, y, n], axis=1))
+
+
+def _add_wall(spec, i: int, wall: Plane) -> None:
+    """A wall is a collision half-space (MuJoCo plane geom); drawn faintly, and planes are only
+    drawn from their front side, which faces into the room, so they never hide the scene."""
+    import mujoco
+
+    pos, quat = _plane_pose(wall)
+    pos = pos + np.array([0.0, 0.0, 0.0])
+    spec.worldbody.add_geom(
+        name=f"wall_{i}", type=mujoco.mjtGeom.mjGEOM_PLANE, pos=pos, quat=quat,
+        size=[WALL_EXTENT_M, WALL_EXTENT_M, 0.05], rgba=[0.85, 0.85, 0.8, 0.25], group=WALL_GROUP,
+        friction=[FLOOR_DYNAMIC_FRICTION, TORSIONAL_FRICTION, ROLLING_FRICTION], condim=CONDIM,
+        solref=list(SOLREF), solimp=list(SOLIMP),
+    )
+
+
+def _add_camera(spec, scene: Scene) -> None:
+    cam = mujoco_camera(scene.camera.world_from_camera, scene.camera.intrinsics)
+    c = spec.worldbody.add_camera(name="input_camera", pos=cam["pos"], quat=cam["quat"])
+    c.resolution = list(cam["resolution"])
+    c.sensor_size = list(cam["sensorsize"])
+    c.focal_pixel = list(cam["focalpixel"])
+    c.principal_pixel = list(cam["principalpixel"])
+
+
+def _write_obj(path: Path, mesh: TriangleMesh) -> None:
+    """Plain OBJ (positions and faces only, 1-based). Written by hand: it is three lines of
+    numpy, exact (repr-precision floats) and keeps vertex order, which exporters that merge or
+    reorder vertices do not guarantee."""
+    with open(path, "w") as f:
+        f.write(f"# {len(mesh.vertices_m)} vertices, {len(mesh.faces)} faces, metres\n")
+        np.savetxt(f, mesh.vertices_m, fmt="v %.9g %.9g %.9g")
+        np.savetxt(f, mesh.faces + 1, fmt="f %d %d %d")
+
+
+def mesh_files(asset: ObjectAsset, part: Part) -> tuple[str, tuple[str, ...]]:
+    """Relative (to ``meshes/``) file names of a part's visual mesh and collision pieces."""
+    vis = names.file_stem(asset.name, part.name, "visual") + ".obj"
+    col = tuple(names.file_stem(asset.name, part.name, f"collision_{k}") + ".obj" for k in range(len(part.collision)))
+    return vis, col
+
+
+def write_part_meshes(asset: ObjectAsset, out_dir: Path) -> None:
+    """Write every part's meshes of ``asset`` under ``out_dir/meshes`` (shared by MJCF and URDF)."""
+    mdir = Path(out_dir) / MESH_DIR
+    mdir.mkdir(parents=True, exist_ok=True)
+    for part in asset.parts:
+        vis, cols = mesh_files(asset, part)
+        _write_obj(mdir / vis, part.visual)
+        for fname, piece in zip(cols, part.collision):
+            _write_obj(mdir / fname, piece)
+
+
+def part_rgba(part: Part) -> list[float]:
+    """The part's colour: mean vertex colour when it has vertex colours (MuJoCo has no per-vertex
+    colour), else the material's."""
+    if part.visual.vertex_colors_rgba is not None:
+        return (part.visual.vertex_colors_rgba.astype(np.float64).mean(axis=0) / 255.0).tolist()
+    return list(part.material.rgba)
+
+
+def _children(asset: ObjectAsset) -> dict[str | None, list[Part]]:
+    kids: dict[str | None, list[Part]] = {}
+    for p in asset.parts:
+        kids.setdefault(p.parent, []).append(p)
+    return kids
+
+
+def _add_object(spec, placed: PlacedObject, out_dir: Path) -> None:
+    import mujoco
+
+    asset = placed.asset
+    write_part_meshes(asset, out_dir)
+    t = placed.world_from_asset
+    root = spec.worldbody.add_body(name=asset.name, pos=t[:3, 3], quat=quat_wxyz_from_matrix(t[:3, :3]))
+    if not asset.is_fixed:
+        root.add_freejoint(name=names.free_joint_name(asset))
+    kids = _children(asset)
+
+    def fill(body, part: Part) -> None:
+        _set_inertial(body, part)
+        vis, cols = mesh_files(asset, part)
+        bname = names.body_name(asset, part)
+        spec.add_mesh(name=f"{bname}/visual", file=vis)
+        body.add_geom(
+            name=f"{bname}/visual", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"{bname}/visual",
+            contype=0, conaffinity=0, group=VISUAL_GROUP, rgba=part_rgba(part), density=0.0,
+        )
+        mu = part.material.dynamic_friction
+        for k, fname in enumerate(cols):
+            mname = f"{bname}/collision_{k}"
+            spec.add_mesh(name=mname, file=fname)
+            body.add_geom(
+                name=mname, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=mname, group=COLLISION_GROUP,
+                friction=[mu, TORSIONAL_FRICTION, ROLLING_FRICTION], condim=CONDIM,
+                solref=list(SOLREF), solimp=list(SOLIMP), rgba=[0.9, 0.3, 0.3, 0.4], density=0.0,
+            )
+        for child in kids.get(part.name, []):
+            cbody = body.add_body(name=names.body_name(asset, child))
+            _add_joint(cbody, asset, child)
+            fill(cbody, child)
+
+    fill(root, asset.root)
+
+
+def _set_inertial(body, part: Part) -> None:
+    moments, axes = part.inertial.principal()
+    body.explicitinertial = True
+    body.mass = part.inertial.mass_kg
+    body.ipos = part.inertial.com_m
+    body.iquat = quat_wxyz_from_matrix(axes)
+    body.inertia = moments
+
+
+def _add_joint(body, asset: ObjectAsset, part: Part) -> None:
+    import mujoco
+
+    j = part.joint
+    assert j is not None
+    common = dict(pos=j.anchor_m, axis=j.axis, damping=j.damping, frictionloss=j.friction)
+    if j.effort_limit > 0:
+        common.update(actfrclimited=mujoco.mjtLimited.mjLIMITED_TRUE, actfrcrange=[-j.effort_limit, j.effort_limit])
+    hinge, slide = mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE
+    if j.type is JointType.FIXED:
+        return
+    if j.type is JointType.REVOLUTE:
+        body.add_joint(name=names.joint_name(asset, part), type=hinge, range=[j.lower, j.upper], **common)
+    elif j.type is JointType.PRISMATIC:
+        body.add_joint(name=names.joint_name(asset, part), type=slide, range=[j.lower, j.upper], **common)
+    elif j.type is JointType.REVOLUTE_PRISMATIC:
+        body.add_joint(name=names.joint_name(asset, part), type=hinge, range=[j.lower, j.upper], **common)
+        body.add_joint(name=names.joint_name(asset, part, "_slide"), type=slide, range=[j.lower2, j.upper2], **common)
+    elif j.type is JointType.BALL:
+        body.add_joint(name=names.joint_name(asset, part), type=mujoco.mjtJoint.mjJNT_BALL, pos=j.anchor_m,
+                       damping=j.damping, frictionloss=j.friction)
+    elif j.type is JointType.FREE:
+        raise ExportError(f"object {asset.name}: part {part.name} has a free joint; MuJoCo allows free joints only on top-level bodies, split it into its own object")
+
+
+def flex_grid(placed: PlacedObject) -> tuple[list[int], list[float], np.ndarray]:
+    """Node counts (3,), spacing (3,) and the world position of the grid centre of a deformable."""
+    asset = placed.asset
+    assert asset.deformable is not None
+    lo = np.min([p.visual.bounds_m[0] for p in asset.parts], axis=0)
+    hi = np.max([p.visual.bounds_m[1] for p in asset.parts], axis=0)
+    size = hi - lo
+    res = max(2, int(asset.deformable.resolution))
+    # Nodes per axis: ``resolution`` along the longest side, proportionally fewer elsewhere (>= 2).
+    count = [max(2, int(round(res * s / size.max()))) for s in size]
+    radius = flex_radius(placed)
+    # Node centres inset by the contact radius so the skin's bounding box matches the asset's.
+    spacing = [float(max(s - 2 * radius, 1e-3) / (c - 1)) for s, c in zip(size, count)]
+    centre = transform_points(placed.world_from_asset, ((lo + hi) / 2.0)[None])[0]
+    return count, spacing, centre
+
+
+def flex_radius(placed: PlacedObject) -> float:
+    size = placed.asset.size_m
+    return float(min(0.005, 0.1 * size.min()))
+
+
+def _add_flex(spec, placed: PlacedObject) -> None:
+    import mujoco
+
+    asset = placed.asset
+    s = asset.deformable
+    assert s is not None
+    count, spacing, centre = flex_grid(placed)
+    mat = asset.root.material
+    f = spec.worldbody.make_flex(
+        asset.name, type="grid", dim=3, count=count, spacing=spacing, radius=flex_radius(placed),
+        mass=asset.mass_kg, pos=centre, quat=quat_wxyz_from_matrix(placed.world_from_asset[:3, :3]),
+    )
+    f.young = s.youngs_modulus_pa
+    f.poisson = s.poisson_ratio
+    f.damping = s.damping
+    f.friction = [mat.dynamic_friction, TORSIONAL_FRICTION, ROLLING_FRICTION]
+    f.condim = 3
+    f.solref = list(SOLREF)
+    f.solimp = list(SOLIMP)
+    f.selfcollide = mujoco.mjtFlexSelf.mjFLEXSELF_NONE
+    f.rgba = list(mat.rgba)
+
+
+def _to_xml(spec, scene: Scene, out_dir: Path) -> str:
+    try:
+        spec.compile()
+        return spec.to_xml()
+    except ValueError as err:
+        raise ExportError(_culprit(scene, out_dir, err)) from err
+
+
+def _culprit(scene: Scene, out_dir: Path, err: Exception) -> str:
+    """Compile the objects one at a time to name the one MuJoCo rejects."""
+    for placed in scene.objects:
+        try:
+            build_spec(scene, out_dir, (placed,)).compile()
+        except ValueError as one:
+            first = str(one).strip().splitlines()[0]
+            return f"MuJoCo rejects object {placed.name}: {first}; check its meshes (watertight, non-degenerate) and inertial"
+    first = str(err).strip().splitlines()[0]
+    return f"MuJoCo rejects the scene (no single object fails alone): {first}"
+
+
+def validate_mjcf(path: Path, scene: Scene, steps: int = CHECK_STEPS) -> None:
+    """Load the written file as a consumer would, step it and check every value stays finite."""
+    import mujoco
+
+    try:
+        model = mujoco.MjModel.from_xml_path(str(path))
+    except ValueError as err:
+        raise ExportError(f"MuJoCo cannot load {path.name}: {str(err).strip().splitlines()[0]}") from err
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    for _ in range(steps):
+        mujoco.mj_step(model, data)
+    bad = []
+    for placed in scene.objects:
+        if placed.asset.kind is AssetKind.DEFORMABLE:
+            continue
+        bid = model.body(placed.name).id
+        if not (np.all(np.isfinite(data.xpos[bid])) and np.all(np.isfinite(data.cvel[bid]))):
+            bad.append(placed.name)
+    if bad or not np.all(np.isfinite(data.qpos)) or not np.all(np.isfinite(data.qvel)):
+        who = ", ".join(bad) if bad else "a deformable"
+        raise ExportError(f"MuJoCo simulation of {path.name} diverges (NaN) at object {who}; check its inertial and collision pieces")
