@@ -1,0 +1,779 @@
+"""The PhysX-Anything / PhysX-Omni overall-description text: parser, writer and frame conversion.
+
+The layout (README section G1 of ``shared/data/physx_protocol``)::
+
+    Name: <object name>
+    Category: <category>
+    Dimension: <A>*<B>*<C>                      (cm, along x, y, z of the PhysX grid)
+    Parts: 
+    l_<i>: <name>S<rank>S<material>S<density>S<young>S<poisson>S<description>
+    Group_info: 
+    group_0: ['l_<i>', ...]; Type: E; Param: N/A
+    group_<g>: ['l_<i>', ...]; Type: <T> relative to group_<p>; Param: <params>
+
+with ``S`` = ``", "`` (PhysX-Anything) or ``"| "`` (PhysX-Omni). Density is in g/cm^3, Young's
+modulus in GPa, joint positions and slide ranges in voxel units of the grid (32 or 64), revolute
+ranges in degrees. :func:`parse_description` reads every known variation, repairs what it can and
+lists each repair or drop in :class:`ParseReport`; values are stored in SI (kg/m^3, Pa), joints in
+the text's grid units (so that :func:`write_description` round-trips); :class:`GridFrame` and
+:func:`group_joint` convert joints to the asset frame in metres and radians.
+
+Frames: the PhysX grid frame is z up with the object's front towards -y (the PartNet-Mobility
+canonical front +z of the Y-up source becomes -y after the +90 degree turn about x, README G5; in the
+real cabinet the door is the part at the lowest y). Our asset frame has the front towards +x, so
+``asset_from_physx`` is a +90 degree turn about z. Upstream scales by the largest dimension only;
+:meth:`GridFrame.from_dimension` uses all three (the origin at the bottom centre of the box they
+define, and, when the voxels are known, one scale per axis fitted to them).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import re
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from scene_builder.errors import InputError
+from scene_builder.model import Joint, JointType
+
+__all__ = [
+    "ASSET_FROM_PHYSX",
+    "GridFrame",
+    "MovementType",
+    "ParseReport",
+    "PhysxDescription",
+    "PhysxGroup",
+    "PhysxPart",
+    "ProtocolError",
+    "description_from_basic_info",
+    "group_joint",
+    "parse_description",
+    "write_description",
+]
+
+#: (3, 3) rotation taking PhysX grid axes (front -y) to the asset frame (front +x): +90 deg about z.
+ASSET_FROM_PHYSX = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+ASSET_FROM_PHYSX.setflags(write=False)
+
+
+class ProtocolError(InputError, ValueError):
+    """An overall description that cannot be read at all (one-line message says why)."""
+
+
+class MovementType(str, enum.Enum):
+    """PhysX movement types of a group relative to its parent group."""
+
+    FREE = "A"
+    SLIDE = "B"
+    REVOLUTE = "C"
+    BALL = "D"
+    REVOLUTE_SLIDE = "CB"
+    FIXED = "E"
+
+
+@dataclass(frozen=True)
+class PhysxPart:
+    """One ``l_<label>`` line. density_kg_m3 / youngs_modulus_pa / poisson_ratio (unitless) are
+    None when the text had no usable number. affordance_rank: 1..10, 1 = most likely touched."""
+
+    label: int
+    name: str
+    affordance_rank: int
+    material: str
+    density_kg_m3: float | None
+    youngs_modulus_pa: float | None
+    poisson_ratio: float | None
+    description: str = ""
+
+
+@dataclass(frozen=True)
+class PhysxGroup:
+    """One ``group_<id>`` line: member part labels moving together, relative to ``parent``.
+
+    Joint parameters are kept in the text's units: directions unitless (PhysX grid axes),
+    positions in voxel units from the grid's minimum corner, revolute ranges in degrees, slide
+    ranges in voxel units. axis_* apply to REVOLUTE and REVOLUTE_SLIDE (axis_position_vox is the
+    hinge point for BALL); slide_* to SLIDE and REVOLUTE_SLIDE; all None where they do not apply.
+    """
+
+    group_id: int
+    members: tuple[int, ...]
+    movement: MovementType
+    parent: int | None = None
+    axis_direction: tuple[float, float, float] | None = None
+    axis_position_vox: tuple[float, float, float] | None = None
+    revolute_range_deg: tuple[float, float] | None = None
+    slide_direction: tuple[float, float, float] | None = None
+    slide_range_vox: tuple[float, float] | None = None
+
+
+@dataclass(frozen=True)
+class PhysxDescription:
+    """A parsed overall description. dimension_cm: extents along the PhysX grid's x, y, z (None
+    when the text gave no three numbers). grid: voxels per side of the geometry grid (32 / 64)."""
+
+    name: str
+    category: str
+    dimension_cm: tuple[float, float, float] | None
+    parts: tuple[PhysxPart, ...]
+    groups: tuple[PhysxGroup, ...]
+    grid: int = 32
+
+    def part(self, label: int) -> PhysxPart:
+        for p in self.parts:
+            if p.label == label:
+                return p
+        raise KeyError(label)
+
+
+@dataclass(frozen=True)
+class ParseReport:
+    """What the parser repaired or dropped, one line each (empty for a clean text)."""
+
+    warnings: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def clean(self) -> bool:
+        return not self.warnings
+
+
+# --------------------------------------------------------------------------------------------
+# Numbers and units
+# --------------------------------------------------------------------------------------------
+
+_NUM = r"(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][-+]?\d+)?(?:\s*[x×*]\s*10\s*\^\s*[-+]?\d+)?"
+_RANGE = re.compile(rf"({_NUM})\s*(?:-|–|—|~|to)\s*({_NUM})")
+_SIGNED = re.compile(rf"[-+]?{_NUM}")
+_CUBE = r"(?:\^\s*3|3|³)"
+_UNITS: dict[str, tuple[tuple[str, float], ...]] = {
+    "density": (
+        (rf"kg\s*/\s*m\s*{_CUBE}", 1.0),
+        (rf"t\s*/\s*m\s*{_CUBE}", 1000.0),
+        (rf"g\s*/\s*(?:cm\s*{_CUBE}|cc|ml)", 1000.0),
+    ),
+    "modulus": (("GPa", 1e9), ("MPa", 1e6), ("kPa", 1e3), (r"(?<![A-Za-z])Pa", 1.0), (r"N\s*/\s*m\s*\^?\s*2", 1.0)),
+    "ratio": (),
+}
+_DEFAULT_SCALE = {"density": 1000.0, "modulus": 1e9, "ratio": 1.0}  # g/cm^3, GPa, unitless
+_UNIT_NAME = {"density": "g/cm^3", "modulus": "GPa", "ratio": ""}
+
+
+def _sig(x: float) -> float:
+    """Round to 12 significant digits, so that unit conversions round-trip through text."""
+    return float(f"{x:.12g}")
+
+
+def _to_float(token: str) -> float:
+    m = re.match(r"^([-+]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][-+]?\d+)?)(?:\s*[x×*]\s*10\s*\^\s*([-+]?\d+))?$", token.strip())
+    if m is None:
+        raise ValueError(token)
+    value = float(m.group(1))
+    if m.group(2) is not None:
+        value *= 10.0 ** int(m.group(2))
+    return value
+
+
+def _quantity(text: str, kind: str, what: str, warnings: list[str]) -> float | None:
+    """SI value of a density ('density'), Young's modulus ('modulus') or Poisson ratio ('ratio')
+    field: units recognised and removed, ranges -> midpoint, several values -> mean."""
+    raw = text.strip()
+    if not raw or raw.upper() in ("N/A", "NA", "NONE", "NULL", "-"):
+        warnings.append(f"{what}: no value ({raw!r})")
+        return None
+    scale, unit_seen = _DEFAULT_SCALE[kind], False
+    rest = raw
+    for pattern, s in _UNITS[kind]:
+        if re.search(pattern, rest, flags=re.IGNORECASE if kind == "density" else 0):
+            scale, unit_seen = s, True
+            rest = re.sub(pattern, " ", rest, flags=re.IGNORECASE if kind == "density" else 0)
+            break
+    values: list[float] = []
+    for a, b in _RANGE.findall(rest):
+        values.append((_to_float(a) + _to_float(b)) / 2.0)
+        warnings.append(f"{what}: range {a}-{b} read as its midpoint")
+    rest = _RANGE.sub(" ", rest)
+    values += [_to_float(t) for t in _SIGNED.findall(rest)]
+    if not values:
+        warnings.append(f"{what}: no number in {raw!r}")
+        return None
+    if len(values) > 1:
+        warnings.append(f"{what}: {len(values)} values in {raw!r}, using their mean")
+    value = sum(values) / len(values)
+    if not unit_seen and kind == "density" and value > 30.0:
+        warnings.append(f"{what}: {value:g} is no density in g/cm^3, read as kg/m^3")
+        scale = 1.0
+    if not unit_seen and kind == "modulus" and value > 1e5:
+        warnings.append(f"{what}: {value:g} is no modulus in GPa, read as Pa")
+        scale = 1.0
+    value *= scale
+    if kind == "ratio" and not 0.0 <= value < 0.5:
+        clamped = min(max(value, 0.0), 0.49)
+        warnings.append(f"{what}: Poisson ratio {value:g} outside [0, 0.5), clamped to {clamped:g}")
+        value = clamped
+    if kind != "ratio" and value <= 0.0:
+        warnings.append(f"{what}: non-positive value {value:g} dropped")
+        return None
+    return _sig(value)
+
+
+def _fmt_decimal(x: float) -> str:
+    """Like the targets: '0.7', '10.0', '0.35' (always a decimal point unless exponent form)."""
+    s = f"{_sig(x):.12g}"
+    return s if ("." in s or "e" in s or "inf" in s or "nan" in s) else s + ".0"
+
+
+def _fmt_bracket(x: float) -> str:
+    """Like the targets: integers without a decimal point, others as short decimals."""
+    if abs(x - round(x)) < 1e-9:
+        return str(int(round(x)))
+    return f"{x:.12g}"
+
+
+# --------------------------------------------------------------------------------------------
+# Parser
+# --------------------------------------------------------------------------------------------
+
+_HEADER = re.compile(r"^\s*(name|category|dimensions?|parts|group_info|group info|groups)\s*:\s*(.*)$", re.IGNORECASE)
+_PART = re.compile(r"^\s*l_(\d+)\s*:\s*(.*)$")
+_GROUP = re.compile(r"^\s*group_(\d+)\s*:\s*(.*)$", re.IGNORECASE)
+_INT = re.compile(r"[-+]?\d+")
+_TYPE_WORDS = {
+    "FIXED": MovementType.FIXED,
+    "FREE": MovementType.FREE,
+    "SLIDE": MovementType.SLIDE,
+    "PRISMATIC": MovementType.SLIDE,
+    "REVOLUTE": MovementType.REVOLUTE,
+    "ROTATE": MovementType.REVOLUTE,
+    "HINGE": MovementType.REVOLUTE,
+    "BALL": MovementType.BALL,
+    "SPHERICAL": MovementType.BALL,
+}
+
+
+def _parse_dimension(text: str, warnings: list[str]) -> tuple[float, float, float] | None:
+    nums = [float(t) for t in re.findall(r"\d+(?:\.\d+)?|\.\d+", text)]
+    if len(nums) != 3 or min(nums, default=0.0) <= 0.0:
+        warnings.append(f"Dimension: expected three positive numbers A*B*C in cm, got {text.strip()[:40]!r}")
+        return None
+    low = text.lower()
+    scale = 1.0
+    if re.search(r"\bmm\b", low):
+        scale = 0.1
+        warnings.append("Dimension: given in mm, converted to cm")
+    elif re.search(r"(?<![cm])\bm\b|\bmeters?\b|\bmetres?\b", low):
+        scale = 100.0
+        warnings.append("Dimension: given in m, converted to cm")
+    return (_sig(nums[0] * scale), _sig(nums[1] * scale), _sig(nums[2] * scale))
+
+
+def _split_part_fields(body: str, where: str, warnings: list[str]) -> list[str]:
+    """Seven fields: name, rank, material, density, young, poisson, description."""
+    if "|" in body:
+        fields = [f.strip() for f in body.split("|")]
+        return fields[:6] + ["| ".join(fields[6:])] if len(fields) > 7 else fields
+    pieces = [p.strip() for p in body.split(",")]
+    # The name may itself contain commas: the rank is the first later field that is an integer.
+    for i in range(1, len(pieces)):
+        if re.fullmatch(r"[-+]?\d+", pieces[i]):
+            if i > 1:
+                warnings.append(f"{where}: name contains {i - 1} comma(s), kept whole")
+            return [", ".join(pieces[:i])] + pieces[i : i + 5] + [", ".join(pieces[i + 5 :])]
+    return pieces[:6] + [", ".join(pieces[6:])] if len(pieces) > 7 else pieces
+
+
+def _parse_part(label: int, body: str, warnings: list[str]) -> PhysxPart:
+    where = f"l_{label}"
+    fields = _split_part_fields(body, where, warnings)
+    if len(fields) < 7:
+        warnings.append(f"{where}: {len(fields)} of 7 fields, the missing ones left empty")
+        fields += [""] * (7 - len(fields))
+    name, rank_s, material, dens_s, young_s, pois_s, desc = fields
+    m = _INT.search(rank_s)
+    if m is None:
+        warnings.append(f"{where}: no affordance rank in {rank_s!r}, using 5")
+        rank = 5
+    else:
+        rank = int(m.group())
+        if not 1 <= rank <= 10:
+            warnings.append(f"{where}: affordance rank {rank} clamped to 1..10")
+            rank = min(max(rank, 1), 10)
+    return PhysxPart(
+        label=label,
+        name=name.strip(),
+        affordance_rank=rank,
+        material=material.strip(),
+        density_kg_m3=_quantity(dens_s, "density", f"{where} density", warnings),
+        youngs_modulus_pa=_quantity(young_s, "modulus", f"{where} Young's modulus", warnings),
+        poisson_ratio=_quantity(pois_s, "ratio", f"{where} Poisson's ratio", warnings),
+        description=desc.strip(),
+    )
+
+
+def _bracket(line: str, key: str, n: int, where: str, warnings: list[str]) -> tuple[float, ...] | None:
+    m = re.search(rf"{key}[^:\[]*:\s*\[([^\]]*)\]", line, flags=re.IGNORECASE)
+    if m is None:
+        warnings.append(f"{where}: no '{key}: [...]'")
+        return None
+    out: list[float] = []
+    for item in m.group(1).split(","):
+        try:
+            out.append(_to_float(item.strip().strip("'\"")))
+        except ValueError:
+            warnings.append(f"{where}: {key} item {item.strip()[:15]!r} is not a number, read as 0")
+            out.append(0.0)
+    if len(out) != n:
+        warnings.append(f"{where}: {key} has {len(out)} values, expected {n}")
+        out = (out + [0.0] * n)[:n]
+    return tuple(out)
+
+
+def _movement(line: str, where: str, warnings: list[str]) -> MovementType | None:
+    m = re.search(r"Type\s*:\s*([A-Za-z]+)", line, flags=re.IGNORECASE)
+    if m is None:
+        return None
+    word = m.group(1).upper()
+    if word.startswith("CB"):
+        return MovementType.REVOLUTE_SLIDE
+    for key, mt in _TYPE_WORDS.items():
+        if word.startswith(key):
+            warnings.append(f"{where}: movement type {m.group(1)!r} read as {mt.value}")
+            return mt
+    try:
+        return MovementType(word[0])
+    except ValueError:
+        return None
+
+
+def _parse_group(gid: int, body: str, warnings: list[str]) -> PhysxGroup | None:
+    where = f"group_{gid}"
+    bm = re.search(r"\[([^\]]*)\]", body)
+    member_text = bm.group(1) if bm else re.split(r"[;(]", body, maxsplit=1)[0]
+    members = tuple(int(x) for x in re.findall(r"l_(\d+)", member_text))
+    if not members:
+        warnings.append(f"{where}: no member parts, group dropped")
+        return None
+    movement = _movement(body, where, warnings)
+    parents = re.findall(r"relative\s+to\s+group_(\d+)", body, flags=re.IGNORECASE)
+    parent = int(parents[-1]) if parents else None
+    if movement is None:
+        movement = MovementType.FIXED
+        warnings.append(f"{where}: no readable movement type, made fixed")
+    kw: dict = {}
+    if movement is MovementType.SLIDE:
+        kw["slide_direction"] = _bracket(body, "direction", 3, where, warnings)
+        kw["slide_range_vox"] = _bracket(body, "range", 2, where, warnings)
+    elif movement is MovementType.REVOLUTE:
+        kw["axis_direction"] = _bracket(body, "direction", 3, where, warnings)
+        kw["axis_position_vox"] = _bracket(body, "position", 3, where, warnings)
+        kw["revolute_range_deg"] = _bracket(body, "range", 2, where, warnings)
+    elif movement is MovementType.BALL:
+        kw["axis_position_vox"] = _bracket(body, "position", 3, where, warnings)
+    elif movement is MovementType.REVOLUTE_SLIDE:
+        kw["axis_direction"] = _bracket(body, "axis direction", 3, where, warnings)
+        kw["axis_position_vox"] = _bracket(body, "axis position", 3, where, warnings)
+        kw["revolute_range_deg"] = _bracket(body, "revolute range", 2, where, warnings)
+        kw["slide_direction"] = _bracket(body, "slide direction", 3, where, warnings)
+        kw["slide_range_vox"] = _bracket(body, "slide range", 2, where, warnings)
+    for key in ("revolute_range_deg", "slide_range_vox"):
+        r = kw.get(key)
+        if r is not None and r[0] > r[1]:
+            warnings.append(f"{where}: {key} given as [max, min], re-sorted")
+            kw[key] = (r[1], r[0])
+    for key in ("axis_direction", "slide_direction"):
+        d = kw.get(key)
+        if d is not None and not any(abs(c) > 1e-9 for c in d):
+            warnings.append(f"{where}: zero {key}, joint made fixed")
+            return PhysxGroup(gid, members, MovementType.FIXED, parent)
+    if any(v is None for v in kw.values()):
+        warnings.append(f"{where}: missing joint parameters, joint made fixed")
+        return PhysxGroup(gid, members, MovementType.FIXED, parent)
+    return PhysxGroup(gid, members, movement, parent, **kw)
+
+
+def _repair_groups(groups: list[PhysxGroup], labels: list[int], warnings: list[str]) -> tuple[PhysxGroup, ...]:
+    """One base group 0, every part in exactly one group, parents that exist and form a tree."""
+    label_set = set(labels)
+    seen: set[int] = set()
+    out: list[PhysxGroup] = []
+    for g in sorted(groups, key=lambda g: g.group_id):
+        members = []
+        for m in g.members:
+            if m not in label_set:
+                warnings.append(f"group_{g.group_id}: unknown part l_{m} dropped")
+            elif m in seen:
+                warnings.append(f"group_{g.group_id}: part l_{m} already in an earlier group, dropped here")
+            else:
+                members.append(m)
+                seen.add(m)
+        if not members:
+            warnings.append(f"group_{g.group_id}: no parts left, group dropped")
+            continue
+        out.append(replace(g, members=tuple(members)))
+    if not out or out[0].group_id != 0:
+        if out and out[0].parent is None:
+            warnings.append(f"no group_0: group_{out[0].group_id} taken as the base")
+            out[0] = replace(out[0], group_id=0, movement=MovementType.FIXED)
+        else:
+            warnings.append("no group_0: an empty base group added")
+            out.insert(0, PhysxGroup(0, (), MovementType.FIXED))
+    base = out[0]
+    if base.movement is not MovementType.FIXED or base.parent is not None:
+        warnings.append("group_0: the base is fixed (Type E) with no parent; repaired")
+        base = PhysxGroup(0, base.members, MovementType.FIXED, None)
+    ids = {g.group_id for g in out}
+    fixed: list[PhysxGroup] = [base]
+    for g in out[1:]:
+        if g.parent is None or g.parent not in ids or g.parent == g.group_id:
+            warnings.append(f"group_{g.group_id}: parent group {g.parent} does not exist, attached to group_0")
+            g = replace(g, parent=0)
+        fixed.append(g)
+    # break cycles: walk up from every group; a walk that never reaches 0 is re-attached to 0
+    parent_of = {g.group_id: g.parent for g in fixed}
+    for i, g in enumerate(fixed[1:], start=1):
+        walk, cur = set(), g.group_id
+        while cur != 0 and cur not in walk:
+            walk.add(cur)
+            cur = parent_of[cur]
+        if cur != 0:
+            warnings.append(f"group_{g.group_id}: parent chain has a cycle, attached to group_0")
+            parent_of[g.group_id] = 0
+            fixed[i] = replace(g, parent=0)
+    orphans = [lab for lab in labels if lab not in seen]
+    if orphans:
+        warnings.append(f"parts {', '.join(f'l_{o}' for o in orphans)} in no group, fixed to group_0")
+        fixed[0] = replace(fixed[0], members=fixed[0].members + tuple(orphans))
+    if not fixed[0].members:
+        raise ProtocolError("no part can be the base: group_0 is empty and no other group is fixed to the world")
+    return tuple(fixed)
+
+
+def parse_description(text: str, grid: int = 32) -> tuple[PhysxDescription, ParseReport]:
+    """Parse an overall description (either separator, ``Param:``/``Params:``, quoted or bare
+    member lists, blank lines, missing trailing spaces). Values in SI; joints in grid units.
+
+    Raises ProtocolError when no part line can be read at all.
+    """
+    warnings: list[str] = []
+    header: dict[str, str] = {}
+    parts: dict[int, PhysxPart] = {}
+    groups: list[PhysxGroup] = []
+    for n, raw in enumerate(text.replace("\r\n", "\n").split("\n"), start=1):
+        line = raw.strip().strip("`")
+        if not line:
+            continue
+        pm = _PART.match(line)
+        if pm is not None:
+            label = int(pm.group(1))
+            if label in parts:
+                warnings.append(f"line {n}: second l_{label} line dropped")
+                continue
+            parts[label] = _parse_part(label, pm.group(2), warnings)
+            continue
+        gm = _GROUP.match(line)
+        if gm is not None:
+            gid = int(gm.group(1))
+            if any(g.group_id == gid for g in groups):
+                warnings.append(f"line {n}: second group_{gid} line dropped")
+                continue
+            g = _parse_group(gid, gm.group(2), warnings)
+            if g is not None:
+                groups.append(g)
+            continue
+        hm = _HEADER.match(line)
+        if hm is not None:
+            key = hm.group(1).lower().replace(" ", "_")
+            key = {"dimensions": "dimension", "groups": "group_info"}.get(key, key)
+            header.setdefault(key, hm.group(2).strip())
+            continue
+        warnings.append(f"line {n}: unreadable line dropped: {line[:40]!r}")
+    if not parts:
+        raise ProtocolError("no part line 'l_<i>: ...' in the description; the model output is not a PhysX description")
+    labels = sorted(parts)
+    if labels != list(range(len(labels))):
+        warnings.append(f"part labels {labels} are not 0..{len(labels) - 1}")
+    for key in ("name", "category", "dimension"):
+        if key not in header:
+            warnings.append(f"no '{key.capitalize()}:' line")
+    dimension = _parse_dimension(header["dimension"], warnings) if "dimension" in header else None
+    desc = PhysxDescription(
+        name=header.get("name", ""),
+        category=header.get("category", ""),
+        dimension_cm=dimension,
+        parts=tuple(parts[k] for k in labels),
+        groups=_repair_groups(groups, labels, warnings),
+        grid=grid,
+    )
+    return desc, ParseReport(tuple(warnings))
+
+
+# --------------------------------------------------------------------------------------------
+# Writer
+# --------------------------------------------------------------------------------------------
+
+
+def _fmt_list(values) -> str:
+    return "[" + ", ".join(_fmt_bracket(v) for v in values) + "]"
+
+
+def _fmt_quantity(value: float | None, scale: float, unit: str) -> str:
+    if value is None:
+        return "N/A"
+    return _fmt_decimal(value / scale) + (f" {unit}" if unit else "")
+
+
+def _group_params(g: PhysxGroup) -> str:
+    mt = g.movement
+    if mt is MovementType.SLIDE:
+        return f"direction: {_fmt_list(g.slide_direction)}, slide range (in voxel grid): {_fmt_list(g.slide_range_vox)}"
+    if mt is MovementType.REVOLUTE:
+        return (
+            f"direction: {_fmt_list(g.axis_direction)}, axis position (in voxel grid): {_fmt_list(g.axis_position_vox)}, "
+            f"revolute range (degree): {_fmt_list(g.revolute_range_deg)}"
+        )
+    if mt is MovementType.BALL:
+        return f"hinge position (in voxel grid): {_fmt_list(g.axis_position_vox)}"
+    if mt is MovementType.REVOLUTE_SLIDE:
+        return (
+            f"axis direction: {_fmt_list(g.axis_direction)}, axis position (in voxel grid): {_fmt_list(g.axis_position_vox)}, "
+            f"revolute range (degree): {_fmt_list(g.revolute_range_deg)}, slide direction: {_fmt_list(g.slide_direction)}, "
+            f"slide range (in voxel grid): {_fmt_list(g.slide_range_vox)}"
+        )
+    return "N/A"
+
+
+def write_description(desc: PhysxDescription, separator: str | None = None) -> str:
+    """The training-target layout (G1): ``", "`` separators for grid 32 (PhysX-Anything),
+    ``"| "`` for grid 64 (PhysX-Omni) unless ``separator`` says otherwise; no trailing newline."""
+    sep = separator if separator is not None else (", " if desc.grid == 32 else "| ")
+    lines = [f"Name: {desc.name}", f"Category: {desc.category}"]
+    if desc.dimension_cm is not None:
+        lines.append("Dimension: " + "*".join(_fmt_bracket(v) for v in desc.dimension_cm))
+    lines.append("Parts: ")
+    for p in desc.parts:
+        fields = [
+            p.name,
+            str(p.affordance_rank),
+            p.material,
+            _fmt_quantity(p.density_kg_m3, 1000.0, "g/cm^3"),
+            _fmt_quantity(p.youngs_modulus_pa, 1e9, ""),
+            _fmt_quantity(p.poisson_ratio, 1.0, ""),
+            p.description,
+        ]
+        lines.append(f"l_{p.label}: " + sep.join(fields))
+    lines.append("Group_info: ")
+    for g in desc.groups:
+        members = "[" + ", ".join(f"'l_{m}'" for m in g.members) + "]"
+        rel = "" if g.parent is None else f" relative to group_{g.parent}"
+        lines.append(f"group_{g.group_id}: {members}; Type: {g.movement.value}{rel}; Param: {_group_params(g)}")
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------------------------
+# basic_info.json (the upstream parsers' output / the annotation schema)
+# --------------------------------------------------------------------------------------------
+
+
+def description_from_basic_info(data: dict, grid: int) -> tuple[PhysxDescription, ParseReport]:
+    """Load an upstream ``basic_info.json`` (PhysX-Anything strings or PhysX-Omni floats, README
+    G6) into the same dataclasses. Normalised params are turned back into the text's grid units."""
+    warnings: list[str] = []
+    parts: list[PhysxPart] = []
+    for entry in data.get("parts", []):
+        label = int(entry["label"])
+        where = f"l_{label}"
+
+        def q(key: str, kind: str) -> float | None:
+            v = entry.get(key)
+            if v is None:
+                warnings.append(f"{where}: {key} is null")
+                return None
+            if isinstance(v, (int, float)):
+                return _sig(float(v) * _DEFAULT_SCALE[kind])
+            return _quantity(str(v), kind, f"{where} {key}", warnings)
+
+        rank = int(entry.get("priority_rank", 5))
+        parts.append(
+            PhysxPart(
+                label=label,
+                name=str(entry.get("name", "")),
+                affordance_rank=min(max(rank, 1), 10),
+                material=str(entry.get("material", "")),
+                density_kg_m3=q("density", "density"),
+                youngs_modulus_pa=q("Young's Modulus (GPa)", "modulus"),
+                poisson_ratio=q("Poisson's Ratio", "ratio"),
+                description=str(entry.get("Basic_description", "")),
+            )
+        )
+    groups: list[PhysxGroup] = []
+    for key, value in sorted(data.get("group_info", {}).items(), key=lambda kv: int(kv[0])):
+        gid = int(key)
+        if gid == 0:
+            groups.append(PhysxGroup(0, tuple(int(v) for v in value), MovementType.FIXED))
+            continue
+        members, parent_s, params, type_s = value
+        parent = int(parent_s) if str(parent_s).isdigit() else None
+        mt = MovementType(str(type_s).upper())
+        p = [float(v) for v in params]
+
+        def pos(v: list[float]) -> tuple[float, float, float]:
+            return tuple(_sig((c + 0.5) * grid) for c in v)  # type: ignore[return-value]
+
+        kw: dict = {}
+        if mt is MovementType.SLIDE:
+            kw = {"slide_direction": tuple(p[0:3]), "slide_range_vox": (_sig(p[6] * grid), _sig(p[7] * grid))}
+        elif mt is MovementType.REVOLUTE:
+            kw = {
+                "axis_direction": tuple(p[0:3]),
+                "axis_position_vox": pos(p[3:6]),
+                "revolute_range_deg": (_sig(p[6] * 180.0), _sig(p[7] * 180.0)),
+            }
+        elif mt is MovementType.BALL:
+            kw = {"axis_position_vox": pos(p[3:6])}
+        elif mt is MovementType.REVOLUTE_SLIDE:
+            kw = {
+                "axis_direction": tuple(p[0:3]),
+                "axis_position_vox": pos(p[3:6]),
+                "revolute_range_deg": (_sig(p[6] * 180.0), _sig(p[7] * 180.0)),
+                "slide_direction": tuple(p[8:11]),
+                "slide_range_vox": (_sig(p[14] * grid), _sig(p[15] * grid)),
+            }
+        groups.append(PhysxGroup(gid, tuple(int(m) for m in members), mt, parent, **kw))
+    labels = [p.label for p in parts]
+    if not parts:
+        raise ProtocolError("basic_info has no parts")
+    dimension = _parse_dimension(str(data.get("dimension", "")), warnings)
+    desc = PhysxDescription(
+        name=str(data.get("object_name", "")),
+        category=str(data.get("category", "")),
+        dimension_cm=dimension,
+        parts=tuple(sorted(parts, key=lambda p: p.label)),
+        groups=_repair_groups(groups, sorted(labels), warnings),
+        grid=grid,
+    )
+    return desc, ParseReport(tuple(warnings))
+
+
+# --------------------------------------------------------------------------------------------
+# Grid frame -> asset frame
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class GridFrame:
+    """Maps continuous PhysX grid coordinates (voxel units; voxel i covers [i, i+1)) to the asset
+    frame in metres: ``p_asset = ASSET_FROM_PHYSX @ (metres_per_voxel * (p_vox - origin_vox))``.
+
+    metres_per_voxel: (3,) along the grid's x, y, z. origin_vox: (3,) the grid point that becomes
+    the asset origin (bottom centre of the object's box).
+    """
+
+    grid: int
+    metres_per_voxel: np.ndarray
+    origin_vox: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name in ("metres_per_voxel", "origin_vox"):
+            arr = np.array(getattr(self, name), dtype=np.float64)
+            if arr.shape != (3,):
+                raise ValueError(f"GridFrame.{name} must have shape (3,)")
+            arr.setflags(write=False)
+            object.__setattr__(self, name, arr)
+
+    @classmethod
+    def from_dimension(
+        cls,
+        dimension_cm: tuple[float, float, float],
+        grid: int,
+        occupied_lo_hi_vox: tuple[np.ndarray, np.ndarray] | None = None,
+        max_anisotropy: float = 0.25,
+    ) -> tuple["GridFrame", tuple[str, ...]]:
+        """Frame from the stated size along x, y, z (all three used). Without voxels: the object
+        box is centred in the grid with extents ``G * D / max(D)`` (README G5) and the scale is
+        ``max(D) / G``. With ``occupied_lo_hi_vox`` (inclusive min / max occupied voxel indices of
+        all parts): the origin is that box's bottom centre and each axis gets its own scale
+        ``D_i / n_i``, unless it differs from ``max(D) / G`` by more than ``max_anisotropy``
+        (then the model's size and voxels disagree on that axis: the isotropic scale is kept)."""
+        d_m = np.asarray(dimension_cm, dtype=np.float64) / 100.0
+        iso = float(d_m.max()) / grid
+        warnings: list[str] = []
+        if occupied_lo_hi_vox is None:
+            half = grid * d_m / d_m.max() / 2.0
+            origin = np.array([grid / 2.0, grid / 2.0, grid / 2.0 - half[2]])
+            return cls(grid, np.full(3, iso), origin), ()
+        lo, hi = (np.asarray(a, dtype=np.float64) for a in occupied_lo_hi_vox)
+        n = hi - lo + 1.0
+        scale = d_m / n
+        for i in range(3):
+            if abs(scale[i] / iso - 1.0) > max_anisotropy:
+                warnings.append(
+                    f"axis {'xyz'[i]}: stated size {d_m[i] * 100:g} cm over {n[i]:g} voxels disagrees with "
+                    f"the largest size's scale by {abs(scale[i] / iso - 1) * 100:.0f}%; isotropic scale kept"
+                )
+                scale[i] = iso
+        origin = np.array([(lo[0] + hi[0] + 1.0) / 2.0, (lo[1] + hi[1] + 1.0) / 2.0, lo[2]])
+        return cls(grid, scale, origin), tuple(warnings)
+
+    def to_asset(self, points_vox: np.ndarray) -> np.ndarray:
+        """(N, 3) grid coordinates -> (N, 3) asset-frame metres."""
+        p = np.atleast_2d(np.asarray(points_vox, dtype=np.float64))
+        return ((p - self.origin_vox) * self.metres_per_voxel) @ ASSET_FROM_PHYSX.T
+
+    def direction_to_asset(self, direction: np.ndarray) -> tuple[np.ndarray, float]:
+        """Unit asset-frame direction of a grid direction and the metres per voxel along it
+        (a line stays a line under the per-axis scale)."""
+        d = np.asarray(direction, dtype=np.float64)
+        d = d / np.linalg.norm(d)
+        v = d * self.metres_per_voxel
+        length = float(np.linalg.norm(v))
+        return ASSET_FROM_PHYSX @ (v / length), length
+
+
+def _axis_position(g: PhysxGroup, direction, centre_vox: np.ndarray) -> np.ndarray:
+    """Hinge point in grid coordinates; for an axis-aligned direction the text writes 0 along the
+    axis (no information): we put the child's centre there instead of the grid's corner."""
+    p = np.array(g.axis_position_vox, dtype=np.float64)
+    if direction is not None:
+        d = np.asarray(direction, dtype=np.float64)
+        ones = np.flatnonzero(np.isclose(d, 1.0))
+        if len(ones) == 1 and np.allclose(np.delete(d, ones[0]), 0.0):
+            p[ones[0]] = centre_vox[ones[0]]
+    return p
+
+
+def group_joint(g: PhysxGroup, frame: GridFrame, child_centre_vox: np.ndarray) -> tuple[Joint, tuple[str, ...]]:
+    """The asset-frame joint (metres, radians) of a non-base group relative to its parent group.
+
+    child_centre_vox: (3,) centre of the group's voxels in grid coordinates (anchor for joints
+    without a position, and the value along the axis of axis-aligned hinges)."""
+    warnings: list[str] = []
+    centre = np.asarray(child_centre_vox, dtype=np.float64)
+    anchor_centre = frame.to_asset(centre)[0]
+    z_axis = np.array([0.0, 0.0, 1.0])
+    mt = g.movement
+    if mt is MovementType.FIXED:
+        return Joint(JointType.FIXED, z_axis, anchor_centre), ()
+    if mt is MovementType.FREE:
+        return Joint(JointType.FREE, z_axis, anchor_centre), ()
+    if mt is MovementType.BALL:
+        anchor = frame.to_asset(np.array(g.axis_position_vox))[0]
+        return Joint(JointType.BALL, z_axis, anchor), ()
+    if mt is MovementType.SLIDE:
+        axis, m_per_vox = frame.direction_to_asset(np.array(g.slide_direction))
+        lo, hi = (v * m_per_vox for v in g.slide_range_vox)
+        return Joint(JointType.PRISMATIC, axis, anchor_centre, lower=lo, upper=hi), ()
+    axis, _ = frame.direction_to_asset(np.array(g.axis_direction))
+    anchor = frame.to_asset(_axis_position(g, g.axis_direction, centre))[0]
+    lo, hi = (math.radians(v) for v in g.revolute_range_deg)
+    if hi - lo >= 2.0 * math.pi - 1e-9:
+        warnings.append(f"group_{g.group_id}: unlimited revolute range kept as [-pi, pi]")
+        lo, hi = -math.pi, math.pi
+    if mt is MovementType.REVOLUTE:
+        return Joint(JointType.REVOLUTE, axis, anchor, lower=lo, upper=hi), tuple(warnings)
+    slide_axis, m_per_vox = frame.direction_to_asset(np.array(g.slide_direction))
+    cos = float(axis @ slide_axis)
+    if abs(cos) < 0.99:
+        warnings.append(f"group_{g.group_id}: slide direction is not along the hinge axis; only its component along the axis kept")
+    lo2, hi2 = sorted(v * m_per_vox * cos for v in g.slide_range_vox)
+    return Joint(JointType.REVOLUTE_PRISMATIC, axis, anchor, lower=lo, upper=hi, lower2=lo2, upper2=hi2), tuple(warnings)
