@@ -296,7 +296,8 @@ def _offline_reason(endpoint_timeout_s: float) -> str | None:
 
     from huggingface_hub import constants
 
-    if constants.is_offline_mode():
+    env = os.environ.get("HF_HUB_OFFLINE", "").strip().lower()
+    if constants.is_offline_mode() or env in ("1", "true", "yes", "on"):
         return "HF_HUB_OFFLINE is set"
     url = urlparse(constants.ENDPOINT)
     host, port = url.hostname or "huggingface.co", url.port or (443 if url.scheme == "https" else 80)

@@ -20,9 +20,7 @@ def register_backends(depth: Registry, segmentation: Registry, naming: Registry,
     depth: ``"depth-anything-v2"`` (priority 100, when its weights resolve locally) and
     ``"single-view-geometry"`` (priority 0, always available, no weights).
     segmentation: ``"sam2"`` (priority 100, when its weights resolve locally).
-    naming: ``"ssd-mobilenet-oid"`` (priority 60, when the TFLite detector is in the models dir and
-    ai-edge-litert imports) and ``"efficientnet-lite0"`` (priority 50, when its package and
-    weights file exist).
+    naming: ``"efficientnet-lite0"`` (priority 50, when its package and weights file exist).
     """
     from perception import models
 
@@ -39,7 +37,6 @@ def register_backends(depth: Registry, segmentation: Registry, naming: Registry,
     da_name = models.default_model("depth").name
     sam_name = models.default_model("segmentation").name
     eff_name = models.default_model("naming").name
-    ssd_name = models.default_model("detection").name
 
     def make_depth_anything():
         from perception.learned.depth_anything import DepthAnythingV2Estimator
@@ -61,23 +58,8 @@ def register_backends(depth: Registry, segmentation: Registry, naming: Registry,
 
         return EfficientNetNamer(weights(eff_name))
 
-    def make_ssd():
-        from perception.learned.naming import SsdDetectorNamer
-
-        return SsdDetectorNamer(weights(ssd_name), fallback=make_efficientnet() if _eff_ok() is None else None)
-
     def _eff_ok() -> str | None:
         return models.unavailable_reason(eff_name, models_dir)
-
-    def _ssd_ok() -> str | None:
-        why = models.unavailable_reason(ssd_name, models_dir)
-        if why is not None:
-            return why
-        import importlib.util
-
-        if importlib.util.find_spec("ai_edge_litert") is None:
-            return "the ai-edge-litert package is not installed (pip install ai-edge-litert)"
-        return None
 
     depth.register(
         "depth-anything-v2",
@@ -98,13 +80,6 @@ def register_backends(depth: Registry, segmentation: Registry, naming: Registry,
         priority=100,
         available=lambda: models.unavailable_reason(sam_name, models_dir),
         description=f"SAM 2 automatic masks ({sam_name}, transformers)",
-    )
-    naming.register(
-        "ssd-mobilenet-oid",
-        make_ssd,
-        priority=60,
-        available=_ssd_ok,
-        description="SSD MobileNetV2 Open Images detector (TFLite), EfficientNet-Lite0 for the rest",
     )
     naming.register(
         "efficientnet-lite0",
