@@ -1,0 +1,173 @@
+"""``check_output``: re-open an output folder the way its consumers would and list the problems.
+
+Checks: ``scene.xml`` compiles and steps stably for 1 s (finite state, no MuJoCo warnings, no
+free body faster than ``MAX_SPEED_M_S``); ``scene.usda`` passes every registered UsdValidation
+validator; every file referenced by the MJCF, URDF and USD exists inside the folder;
+``scene.glb`` loads; ``report.json`` (when present) has ``timings_s``, ``objects``,
+``layout.max_penetration_m`` and ``layout.settle_max_drift_m`` and names the same objects as the
+scene.
+"""
+
+from __future__ import annotations
+
+import json
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+CHECK_SECONDS = 1.0
+# A settled scene has bodies at rest; anything faster than this after 1 s is exploding.
+MAX_SPEED_M_S = 5.0
+
+
+def check_output(out_dir: Path) -> tuple[str, ...]:
+    """Problems found in ``out_dir`` (one line each); empty when everything is fine."""
+    out_dir = Path(out_dir)
+    if not out_dir.is_dir():
+        return (f"{out_dir} is not a folder",)
+    problems: list[str] = []
+    names = None
+    if (out_dir / "scene.xml").exists():
+        names = _check_mjcf(out_dir / "scene.xml", problems)
+    else:
+        problems.append("scene.xml is missing")
+    if (out_dir / "scene.usda").exists():
+        _check_usd(out_dir / "scene.usda", problems)
+    if (out_dir / "scene.urdf").exists():
+        _check_urdf(out_dir / "scene.urdf", problems)
+    if (out_dir / "scene.glb").exists():
+        _check_glb(out_dir / "scene.glb", problems)
+    if (out_dir / "scene.json").exists():
+        names = _check_scene_json(out_dir / "scene.json", names, problems)
+    if (out_dir / "report.json").exists():
+        _check_report(out_dir / "report.json", names, problems)
+    return tuple(problems)
+
+
+def _inside(out_dir: Path, ref: Path, what: str, problems: list[str]) -> None:
+    try:
+        resolved = ref.resolve()
+        resolved.relative_to(out_dir.resolve())
+    except ValueError:
+        problems.append(f"{what} references {ref}, which is outside the output folder")
+        return
+    if not resolved.is_file():
+        problems.append(f"{what} references {ref.relative_to(out_dir) if ref.is_relative_to(out_dir) else ref}, which does not exist")
+
+
+def _check_mjcf(path: Path, problems: list[str]) -> list[str] | None:
+    import mujoco
+
+    root = ET.parse(path).getroot()
+    compiler = root.find("compiler")
+    meshdir = compiler.get("meshdir", "") if compiler is not None else ""
+    for tag in ("mesh", "texture", "hfield", "skin"):
+        for el in root.iter(tag):
+            if el.get("file"):
+                _inside(path.parent, path.parent / meshdir / el.get("file"), path.name, problems)
+    if problems:
+        return None
+    try:
+        model = mujoco.MjModel.from_xml_path(str(path))
+    except ValueError as err:
+        problems.append(f"{path.name} does not compile: {str(err).strip().splitlines()[0]}")
+        return None
+    data = mujoco.MjData(model)
+    steps = int(round(CHECK_SECONDS / model.opt.timestep))
+    for _ in range(steps):
+        mujoco.mj_step(model, data)
+    if not (np.all(np.isfinite(data.qpos)) and np.all(np.isfinite(data.qvel))):
+        problems.append(f"{path.name}: simulation state is not finite after {CHECK_SECONDS:g} s")
+    for w in (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL):
+        if data.warning[w].number > 0:
+            problems.append(f"{path.name}: MuJoCo warning {w.name} after {CHECK_SECONDS:g} s of simulation")
+    top = [model.body(i).name for i in range(1, model.nbody) if model.body_parentid[i] == 0]
+    fast = []
+    for i in range(model.njnt):
+        if model.jnt_type[i] == mujoco.mjtJoint.mjJNT_FREE:
+            speed = float(np.linalg.norm(data.cvel[model.jnt_bodyid[i], 3:]))
+            if not speed <= MAX_SPEED_M_S:
+                fast.append(f"{model.body(model.jnt_bodyid[i]).name} ({speed:.2g} m/s)")
+    if fast:
+        problems.append(f"{path.name}: bodies still moving fast after {CHECK_SECONDS:g} s: {', '.join(fast)}")
+    flex = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_FLEX, i) for i in range(model.nflex)]
+    # Flex nodes are top-level bodies named after their flex: report objects, not nodes.
+    return sorted([n for n in top if not any(n.startswith(f + "_") for f in flex)] + flex)
+
+
+def _check_usd(path: Path, problems: list[str]) -> None:
+    from pxr import Usd, UsdUtils
+
+    from exporters.usd import validate_stage
+
+    try:
+        stage = Usd.Stage.Open(str(path))
+    except Exception as err:  # pxr raises Tf.ErrorException; report it as a problem line
+        problems.append(f"{path.name} does not open: {str(err).strip().splitlines()[0]}")
+        return
+    for msg in validate_stage(stage):
+        problems.append(f"{path.name}: {msg}")
+    layers, assets, unresolved = UsdUtils.ComputeAllDependencies(str(path))
+    for a in list(assets) + [Path(u) for u in unresolved]:
+        _inside(path.parent, path.parent / a, path.name, problems)
+    if stage.GetDefaultPrim() is None or not stage.GetDefaultPrim().IsValid():
+        problems.append(f"{path.name}: no default prim")
+
+
+def _check_urdf(path: Path, problems: list[str]) -> None:
+    root = ET.parse(path).getroot()
+    for el in root.iter("mesh"):
+        name = el.get("filename", "")
+        if name.startswith("package://") or name.startswith("file://"):
+            problems.append(f"{path.name} references {name}: use paths relative to the folder")
+            continue
+        _inside(path.parent, path.parent / name, path.name, problems)
+
+
+def _check_glb(path: Path, problems: list[str]) -> None:
+    import trimesh
+
+    try:
+        scene = trimesh.load(str(path), force="scene")
+    except Exception as err:  # any loader failure is a problem to report, not to raise
+        problems.append(f"{path.name} does not load: {err}")
+        return
+    if not scene.graph.nodes_geometry:
+        problems.append(f"{path.name} has no geometry")
+
+
+def _check_scene_json(path: Path, names: list[str] | None, problems: list[str]) -> list[str] | None:
+    try:
+        data = json.loads(path.read_text())
+        scene_names = sorted(o["asset"]["name"] for o in data["objects"])
+    except (ValueError, KeyError, TypeError) as err:
+        problems.append(f"{path.name} is not a readable scene: {err!r}")
+        return names
+    if names is not None and scene_names != names:
+        problems.append(f"{path.name} objects {scene_names} differ from scene.xml objects {names}")
+    return scene_names
+
+
+def _check_report(path: Path, names: list[str] | None, problems: list[str]) -> None:
+    try:
+        report = json.loads(path.read_text())
+    except ValueError as err:
+        problems.append(f"{path.name} is not JSON: {err}")
+        return
+    for key in ("timings_s", "objects", "layout"):
+        if key not in report:
+            problems.append(f"{path.name} has no '{key}'")
+    layout = report.get("layout") or {}
+    for key in ("max_penetration_m", "settle_max_drift_m"):
+        v = layout.get(key)
+        if not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
+            problems.append(f"{path.name}: layout.{key} is missing or not a non-negative number ({v!r})")
+    timings = report.get("timings_s")
+    if isinstance(timings, dict) and any(not isinstance(t, (int, float)) or t < 0 for t in timings.values()):
+        problems.append(f"{path.name}: timings_s has negative or non-numeric entries")
+    objects = report.get("objects")
+    if isinstance(objects, list) and names is not None:
+        rnames = sorted(str(o.get("name")) for o in objects if isinstance(o, dict))
+        if rnames != names:
+            problems.append(f"{path.name} objects {rnames} differ from the scene's {names}")

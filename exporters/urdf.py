@@ -1,0 +1,158 @@
+"""URDF export: ``scene.urdf`` with one tree rooted at a ``world`` link.
+
+* Every object's root part is a link named ``NAME`` attached to ``world`` by a ``floating``
+  joint ``NAME/free`` (free objects) or a ``fixed`` joint ``NAME/fixed`` (fixed furniture), at
+  ``world_from_asset``. Other parts are links ``NAME/PART`` under their parent by
+  ``revolute`` / ``prismatic`` / ``fixed`` / ``floating`` joints named ``NAME/PART/joint``.
+* URDF rotates a revolute joint about an axis through the joint frame's origin, so a part's
+  link frame sits at its joint anchor (asset-frame axes); visual, collision and inertial origins
+  are offset by minus the anchor. A revolute-prismatic joint has no URDF equivalent: it becomes
+  a revolute joint plus a prismatic joint through a massless intermediate link, as URDF users do.
+  Ball joints become ``floating`` would be wrong, so they are refused.
+* Inertials: mass, origin at the centre of mass, full inertia tensor in link axes.
+* Meshes: the same .obj files as the MJCF (``meshes/``, relative paths). A ``<mujoco>`` extension
+  element tells MuJoCo's URDF importer to keep the relative paths and the visual geoms.
+
+Validated by parsing with MuJoCo's URDF importer and with yourdfpy (tests).
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+from exporters import names
+from exporters.mjcf import MESH_DIR, mesh_files, part_rgba, write_part_meshes
+from scene_builder.errors import ExportError
+from scene_builder.model import AssetKind, JointType, ObjectAsset, Part, PlacedObject, Scene
+
+
+def _fmt(values) -> str:
+    return " ".join(f"{float(v):.9g}" for v in np.atleast_1d(values))
+
+
+def rpy_from_matrix(r: np.ndarray) -> np.ndarray:
+    """URDF roll-pitch-yaw (fixed axes X, Y, Z: ``R = Rz(yaw) Ry(pitch) Rx(roll)``) of a rotation."""
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_matrix(r).as_euler("xyz")
+
+
+def write_urdf(scene: Scene, out_dir: Path) -> Path:
+    """Write ``out_dir/scene.urdf`` (meshes under ``out_dir/meshes``), load it with MuJoCo's URDF
+    importer and raise :class:`ExportError` naming the object when it is rejected."""
+    out_dir = Path(out_dir)
+    robot = ET.Element("robot", name="scene")
+    mj = ET.SubElement(robot, "mujoco")
+    ET.SubElement(mj, "compiler", discardvisual="false", strippath="false", fusestatic="false", balanceinertia="false")
+    ET.SubElement(robot, "link", name="world")
+    for placed in scene.objects:
+        if placed.asset.kind is AssetKind.DEFORMABLE:
+            # URDF has no soft bodies: the deformable is exported as its rigid shape.
+            pass
+        write_part_meshes(placed.asset, out_dir)
+        _add_object(robot, placed)
+    ET.indent(robot)
+    path = out_dir / "scene.urdf"
+    path.write_text('<?xml version="1.0"?>\n' + ET.tostring(robot, encoding="unicode") + "\n")
+    validate_urdf(path, scene)
+    return path
+
+
+def _origin(parent: ET.Element, xyz, rpy=(0.0, 0.0, 0.0)) -> None:
+    ET.SubElement(parent, "origin", xyz=_fmt(xyz), rpy=_fmt(rpy))
+
+
+def _link(robot: ET.Element, asset: ObjectAsset, part: Part, frame_m: np.ndarray) -> None:
+    """A link whose frame is at ``frame_m`` (asset frame point) with asset-frame axes."""
+    link = ET.SubElement(robot, "link", name=names.body_name(asset, part))
+    inertial = ET.SubElement(link, "inertial")
+    _origin(inertial, part.inertial.com_m - frame_m)
+    ET.SubElement(inertial, "mass", value=f"{part.inertial.mass_kg:.9g}")
+    i = part.inertial.inertia_kg_m2
+    ET.SubElement(inertial, "inertia", ixx=f"{i[0, 0]:.9g}", ixy=f"{i[0, 1]:.9g}", ixz=f"{i[0, 2]:.9g}",
+                  iyy=f"{i[1, 1]:.9g}", iyz=f"{i[1, 2]:.9g}", izz=f"{i[2, 2]:.9g}")
+    vis_file, col_files = mesh_files(asset, part)
+    visual = ET.SubElement(link, "visual", name=f"{names.body_name(asset, part)}/visual")
+    _origin(visual, -frame_m)
+    ET.SubElement(ET.SubElement(visual, "geometry"), "mesh", filename=f"{MESH_DIR}/{vis_file}")
+    mat = ET.SubElement(visual, "material", name=f"{asset.name}/{part.name}/{part.material.name}")
+    ET.SubElement(mat, "color", rgba=_fmt(part_rgba(part)))
+    for k, fname in enumerate(col_files):
+        col = ET.SubElement(link, "collision", name=f"{names.body_name(asset, part)}/collision_{k}")
+        _origin(col, -frame_m)
+        ET.SubElement(ET.SubElement(col, "geometry"), "mesh", filename=f"{MESH_DIR}/{fname}")
+
+
+def _add_object(robot: ET.Element, placed: PlacedObject) -> None:
+    asset = placed.asset
+    t = placed.world_from_asset
+    frames = {p.name: (np.zeros(3) if p.joint is None else p.joint.anchor_m) for p in asset.parts}
+    _link(robot, asset, asset.root, frames[asset.root.name])
+    kind = "fixed" if asset.is_fixed else "floating"
+    jname = f"{asset.name}/fixed" if asset.is_fixed else names.free_joint_name(asset)
+    j = ET.SubElement(robot, "joint", name=jname, type=kind)
+    _origin(j, t[:3, 3], rpy_from_matrix(t[:3, :3]))
+    ET.SubElement(j, "parent", link="world")
+    ET.SubElement(j, "child", link=asset.name)
+    for part in asset.parts:
+        if part.joint is None:
+            continue
+        _link(robot, asset, part, frames[part.name])
+        _add_joint(robot, asset, part, frames[part.parent] if part.parent else np.zeros(3))
+
+
+def _add_joint(robot: ET.Element, asset: ObjectAsset, part: Part, parent_frame: np.ndarray) -> None:
+    jt = part.joint
+    assert jt is not None and part.parent is not None
+    parent = names.body_name(asset, next(p for p in asset.parts if p.name == part.parent))
+    child = names.body_name(asset, part)
+    offset = jt.anchor_m - parent_frame
+
+    def joint(name: str, kind: str, parent_link: str, child_link: str, xyz, lo: float, hi: float) -> None:
+        j = ET.SubElement(robot, "joint", name=name, type=kind)
+        _origin(j, xyz)
+        ET.SubElement(j, "parent", link=parent_link)
+        ET.SubElement(j, "child", link=child_link)
+        if kind in ("revolute", "prismatic"):
+            ET.SubElement(j, "axis", xyz=_fmt(jt.axis))
+            ET.SubElement(j, "limit", lower=f"{lo:.9g}", upper=f"{hi:.9g}", effort=f"{jt.effort_limit:.9g}", velocity="10")
+            ET.SubElement(j, "dynamics", damping=f"{jt.damping:.9g}", friction=f"{jt.friction:.9g}")
+
+    if jt.type is JointType.REVOLUTE:
+        joint(names.joint_name(asset, part), "revolute", parent, child, offset, jt.lower, jt.upper)
+    elif jt.type is JointType.PRISMATIC:
+        joint(names.joint_name(asset, part), "prismatic", parent, child, offset, jt.lower, jt.upper)
+    elif jt.type is JointType.FIXED:
+        joint(names.joint_name(asset, part), "fixed", parent, child, offset, 0.0, 0.0)
+    elif jt.type is JointType.REVOLUTE_PRISMATIC:
+        mid = f"{child}/slide"
+        link = ET.SubElement(robot, "link", name=mid)
+        inertial = ET.SubElement(link, "inertial")
+        _origin(inertial, (0.0, 0.0, 0.0))
+        # MuJoCo and most URDF consumers reject a zero mass on a moving link: 1 g, 1e-9 inertia.
+        ET.SubElement(inertial, "mass", value="0.001")
+        ET.SubElement(inertial, "inertia", ixx="1e-9", ixy="0", ixz="0", iyy="1e-9", iyz="0", izz="1e-9")
+        joint(names.joint_name(asset, part, "_slide"), "prismatic", parent, mid, offset, jt.lower2, jt.upper2)
+        joint(names.joint_name(asset, part), "revolute", mid, child, np.zeros(3), jt.lower, jt.upper)
+    else:
+        raise ExportError(f"object {asset.name}: part {part.name} has a {jt.type.value} joint, which URDF cannot express; make it a separate object")
+
+
+def validate_urdf(path: Path, scene: Scene) -> None:
+    """Load the URDF with MuJoCo's importer (which resolves every mesh) and check that every
+    object's links are there."""
+    import mujoco
+
+    try:
+        model = mujoco.MjModel.from_xml_path(str(path))
+    except ValueError as err:
+        msg = str(err).strip().splitlines()[0]
+        who = next((o.name for o in scene.objects if o.name in str(err)), None)
+        raise ExportError(f"MuJoCo's URDF importer rejects {path.name}" + (f" at object {who}" if who else "") + f": {msg}") from err
+    for placed in scene.objects:
+        for part in placed.asset.parts:
+            if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, names.body_name(placed.asset, part)) < 0:
+                raise ExportError(f"URDF of object {placed.name}: link {names.body_name(placed.asset, part)} is missing after import")

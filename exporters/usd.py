@@ -1,0 +1,431 @@
+"""USD export with UsdPhysics (usd-core 26.11): ``scene.usda``, Z up, metres, kilograms.
+
+Prim layout::
+
+    /World                          defaultPrim, Xform
+      PhysicsScene                  UsdPhysics.Scene, gravity -Z 9.81 m/s^2
+      Looks/<mat>                   UsdPreviewSurface material per part material (visual)
+      PhysicsMaterials/<mat>        UsdPhysics.MaterialAPI (friction, restitution, density)
+      Room/Floor, Room/Wall_i       static colliders (UsdGeom.Plane, purpose guide)
+      InputCamera                   UsdGeom.Camera reproducing the photo's pinhole camera
+      Objects/<obj>                 Xform at world_from_asset, displayName = original name
+        one rigid part:             RigidBodyAPI + MassAPI on <obj>; children Visual, Collision/piece_k
+        articulated:                ArticulationRootAPI on <obj>; one Xform per part (identity
+                                    transform: parts live in the asset frame) with RigidBodyAPI +
+                                    MassAPI; joints under <obj>/Joints
+
+Choices (the validators and Newton accept these):
+
+* Fixed rigid furniture is a static collider: no RigidBodyAPI (UsdPhysics' way of saying
+  "does not move"); its mass is kept as the custom attribute ``sceneBuilder:massKg``. Fixed
+  articulated furniture keeps rigid bodies and welds its root part to the world with a
+  FixedJoint (body0 empty).
+* Collision pieces are convex, so ``convexHull`` approximation is exact. They have purpose
+  ``guide`` (not rendered) and bind the physics material with purpose ``physics``.
+* Joint frames: every part frame is the asset frame, so localPos0 = localPos1 = anchor; the
+  joint axis token is X and localRot0 = localRot1 rotates X onto ``Joint.axis``. Revolute
+  limits are degrees (UsdPhysics), prismatic metres. Joint damping goes to a DriveAPI with zero
+  stiffness; dry friction and effort limit are kept as ``sceneBuilder:`` attributes (the drive's
+  maxForce too).
+* usd-core 26.11 has no UsdPhysics deformable schema: deformables are exported as rigid bodies
+  (rigid fallback) carrying ``sceneBuilder:deformable:*`` attributes (Young's modulus, Poisson
+  ratio, damping, resolution) so that a soft-body importer can pick them up.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from exporters import names
+from scene_builder.errors import ExportError
+from scene_builder.frames import CV_FROM_GL, quat_wxyz_from_matrix
+from scene_builder.model import JointType, ObjectAsset, Part, PlacedObject, Plane, Scene, TriangleMesh
+
+FLOOR_STATIC_FRICTION = 0.6
+FLOOR_DYNAMIC_FRICTION = 0.5  # same floor as the MJCF (exporters.mjcf.FLOOR_DYNAMIC_FRICTION)
+ROOM_EXTENT_M = 12.0
+# USD camera film: horizontal aperture in "tenths of a scene unit" (millimetres by convention).
+FILM_WIDTH_MM = 36.0
+
+
+def write_usd(scene: Scene, out_dir: Path) -> Path:
+    """Write ``out_dir/scene.usda``, validate it with every registered ``UsdValidation``
+    validator and raise :class:`ExportError` (naming the object) on any error."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / "scene.usda"
+    stage = build_stage(scene, path)
+    stage.GetRootLayer().Save()
+    problems = validate_stage(stage)
+    if problems:
+        raise ExportError(f"USD validation failed for {path.name}: {problems[0]} ({len(problems)} problem(s))")
+    return path
+
+
+def build_stage(scene: Scene, path: Path | None = None):
+    """The ``Usd.Stage`` of ``scene`` (in memory when ``path`` is None)."""
+    from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics
+
+    stage = Usd.Stage.CreateNew(str(path)) if path is not None else Usd.Stage.CreateInMemory()
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    UsdPhysics.SetStageKilogramsPerUnit(stage, 1.0)
+    world = UsdGeom.Xform.Define(stage, "/World")
+    stage.SetDefaultPrim(world.GetPrim())
+
+    ps = UsdPhysics.Scene.Define(stage, "/World/PhysicsScene")
+    ps.CreateGravityDirectionAttr(Gf.Vec3f(0.0, 0.0, -1.0))
+    ps.CreateGravityMagnitudeAttr(9.81)
+
+    ctx = _Context(stage)
+    UsdGeom.Scope.Define(stage, "/World/Looks")
+    UsdGeom.Scope.Define(stage, "/World/PhysicsMaterials")
+    _add_room(ctx, scene)
+    _add_camera(stage, scene)
+    UsdGeom.Scope.Define(stage, "/World/Objects")
+    prim_names = names.UniqueNames()
+    for placed in scene.objects:
+        prim_path = Sdf.Path("/World/Objects").AppendChild(prim_names(placed.name))
+        try:
+            _add_object(ctx, placed, prim_path)
+        except ExportError:
+            raise
+        except Exception as err:  # pxr raises Tf.ErrorException; name the object, keep the cause
+            raise ExportError(f"USD export failed at object {placed.name}: {err}") from err
+    return stage
+
+
+class _Context:
+    """Stage plus the materials already written (one visual and one physics material per distinct
+    Material, deduplicated by value)."""
+
+    def __init__(self, stage) -> None:
+        self.stage = stage
+        self.looks: dict[tuple, str] = {}
+        self.physics: dict[tuple, str] = {}
+        self.look_names = names.UniqueNames()
+        self.phys_names = names.UniqueNames()
+
+    def look(self, name: str, rgba) -> "object":
+        from pxr import Gf, Sdf, UsdShade
+
+        key = (name, tuple(round(float(c), 6) for c in rgba))
+        if key not in self.looks:
+            path = f"/World/Looks/{self.look_names(name)}"
+            mat = UsdShade.Material.Define(self.stage, path)
+            shader = UsdShade.Shader.Define(self.stage, f"{path}/PreviewSurface")
+            shader.CreateIdAttr("UsdPreviewSurface")
+            shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*[float(c) for c in rgba[:3]]))
+            shader.CreateInput("opacity", Sdf.ValueTypeNames.Float).Set(float(rgba[3]))
+            shader.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(0.7)
+            mat.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+            self.looks[key] = path
+        return UsdShade.Material.Get(self.stage, self.looks[key])
+
+    def physics_material(self, name: str, static: float, dynamic: float, restitution: float, density: float | None):
+        from pxr import UsdPhysics, UsdShade
+
+        key = (name, static, dynamic, restitution, density)
+        if key not in self.physics:
+            path = f"/World/PhysicsMaterials/{self.phys_names(name)}"
+            mat = UsdShade.Material.Define(self.stage, path)
+            api = UsdPhysics.MaterialAPI.Apply(mat.GetPrim())
+            api.CreateStaticFrictionAttr(float(static))
+            api.CreateDynamicFrictionAttr(float(dynamic))
+            api.CreateRestitutionAttr(float(restitution))
+            if density is not None:
+                api.CreateDensityAttr(float(density))
+            self.physics[key] = path
+        return UsdShade.Material.Get(self.stage, self.physics[key])
+
+
+def _bind(prim, material, purpose: str | None = None) -> None:
+    from pxr import UsdShade
+
+    api = UsdShade.MaterialBindingAPI.Apply(prim)
+    if purpose is None:
+        api.Bind(material)
+    else:
+        api.Bind(material, UsdShade.Tokens.weakerThanDescendants, purpose)
+
+
+def _set_transform(xformable, t: np.ndarray) -> None:
+    from pxr import Gf
+
+    q = quat_wxyz_from_matrix(t[:3, :3])
+    xformable.AddTranslateOp().Set(Gf.Vec3d(*t[:3, 3].tolist()))
+    xformable.AddOrientOp().Set(Gf.Quatf(float(q[0]), Gf.Vec3f(*q[1:].tolist())))
+
+
+def _add_room(ctx: _Context, scene: Scene) -> None:
+    from pxr import UsdGeom, UsdPhysics
+
+    stage = ctx.stage
+    UsdGeom.Xform.Define(stage, "/World/Room")
+    floor_mat = ctx.physics_material("floor", FLOOR_STATIC_FRICTION, FLOOR_DYNAMIC_FRICTION, 0.2, None)
+    planes: list[tuple[str, np.ndarray]] = [("Floor", np.eye(4))]
+    for i, wall in enumerate(scene.room.walls):
+        planes.append((f"Wall_{i}", _plane_transform(wall)))
+    for name, t in planes:
+        plane = UsdGeom.Plane.Define(stage, f"/World/Room/{name}")
+        plane.CreateAxisAttr(UsdGeom.Tokens.z)
+        plane.CreateWidthAttr(ROOM_EXTENT_M)
+        plane.CreateLengthAttr(ROOM_EXTENT_M)
+        plane.CreatePurposeAttr(UsdGeom.Tokens.guide if name != "Floor" else UsdGeom.Tokens.default_)
+        _set_transform(plane, t)
+        UsdPhysics.CollisionAPI.Apply(plane.GetPrim())
+        _bind(plane.GetPrim(), floor_mat, "physics")
+
+
+def _plane_transform(plane: Plane) -> np.ndarray:
+    """(4, 4) transform whose Z axis is the plane normal, origin on the plane at floor height."""
+    n = plane.normal
+    x = np.cross([0.0, 0.0, 1.0], n)
+    x = x / np.linalg.norm(x) if np.linalg.norm(x) > 1e-9 else np.array([1.0, 0.0, 0.0])
+    t = np.eye(4)
+    t[:3, :3] = np.stack([x, np.cross(n, x), n], axis=1)
+    t[:3, 3] = -plane.offset_m * n
+    return t
+
+
+def camera_film(scene: Scene) -> dict[str, float]:
+    """UsdGeom.Camera film attributes reproducing the OpenCV intrinsics (same length unit for
+    focal length and apertures; a pixel is ``FILM_WIDTH_MM / width`` wide)."""
+    k = scene.camera.intrinsics
+    px = FILM_WIDTH_MM / k.width_px
+    focal = k.fx_px * px
+    return {
+        "focalLength": focal,
+        "horizontalAperture": k.width_px * px,
+        # fy may differ from fx: scale the vertical film so that focal / (pixel height) = fy.
+        "verticalAperture": k.height_px * focal / k.fy_px,
+        # USD shifts the film window by the offset; the principal point moves the other way.
+        "horizontalApertureOffset": ((k.width_px - 1) / 2.0 - k.cx_px) * px * -1.0,
+        "verticalApertureOffset": (k.cy_px - (k.height_px - 1) / 2.0) * focal / k.fy_px,
+    }
+
+
+def _add_camera(stage, scene: Scene) -> None:
+    from pxr import Gf, UsdGeom
+
+    cam = UsdGeom.Camera.Define(stage, "/World/InputCamera")
+    film = camera_film(scene)
+    cam.CreateFocalLengthAttr(film["focalLength"])
+    cam.CreateHorizontalApertureAttr(film["horizontalAperture"])
+    cam.CreateVerticalApertureAttr(film["verticalAperture"])
+    cam.CreateHorizontalApertureOffsetAttr(film["horizontalApertureOffset"])
+    cam.CreateVerticalApertureOffsetAttr(film["verticalApertureOffset"])
+    cam.CreateClippingRangeAttr(Gf.Vec2f(0.01, 100.0))
+    t = scene.camera.world_from_camera.copy()
+    t[:3, :3] = t[:3, :3] @ CV_FROM_GL  # USD cameras look down -Z with +Y up (OpenGL)
+    _set_transform(cam, t)
+
+
+def _mesh(stage, path, mesh: TriangleMesh, rgba=None):
+    from pxr import Gf, UsdGeom, Vt
+
+    m = UsdGeom.Mesh.Define(stage, path)
+    m.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(mesh.vertices_m.astype(np.float32)))
+    m.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(mesh.faces), 3, dtype=np.int32)))
+    m.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(mesh.faces.reshape(-1).astype(np.int32)))
+    m.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    m.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
+    lo, hi = mesh.bounds_m
+    m.CreateExtentAttr([Gf.Vec3f(*lo.tolist()), Gf.Vec3f(*hi.tolist())])
+    if rgba is not None:
+        if mesh.vertex_colors_rgba is not None:
+            c = mesh.vertex_colors_rgba.astype(np.float32) / 255.0
+            pv = m.CreateDisplayColorPrimvar(UsdGeom.Tokens.vertex)
+            pv.Set(Vt.Vec3fArray.FromNumpy(c[:, :3].copy()))
+        else:
+            m.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set([Gf.Vec3f(*[float(v) for v in rgba[:3]])])
+    return m
+
+
+def _add_part_geometry(ctx: _Context, parent_path, part: Part, asset: ObjectAsset) -> None:
+    from pxr import UsdGeom, UsdPhysics
+
+    stage = ctx.stage
+    vis = _mesh(stage, parent_path.AppendChild("Visual"), part.visual, part.material.rgba)
+    _bind(vis.GetPrim(), ctx.look(part.material.name, part.material.rgba))
+    UsdGeom.Scope.Define(stage, parent_path.AppendChild("Collision"))
+    m = part.material
+    phys = ctx.physics_material(m.name, m.static_friction, m.dynamic_friction, m.restitution, m.density_kg_m3)
+    for k, piece in enumerate(part.collision):
+        col = _mesh(stage, parent_path.AppendChild("Collision").AppendChild(f"piece_{k}"), piece)
+        col.CreatePurposeAttr(UsdGeom.Tokens.guide)
+        UsdPhysics.CollisionAPI.Apply(col.GetPrim())
+        UsdPhysics.MeshCollisionAPI.Apply(col.GetPrim()).CreateApproximationAttr(UsdPhysics.Tokens.convexHull)
+        _bind(col.GetPrim(), phys, "physics")
+
+
+def _mass(prim, part: Part) -> None:
+    from pxr import Gf, UsdPhysics
+
+    moments, axes = part.inertial.principal()
+    q = quat_wxyz_from_matrix(axes)
+    api = UsdPhysics.MassAPI.Apply(prim)
+    api.CreateMassAttr(float(part.inertial.mass_kg))
+    api.CreateCenterOfMassAttr(Gf.Vec3f(*part.inertial.com_m.tolist()))
+    api.CreateDiagonalInertiaAttr(Gf.Vec3f(*moments.tolist()))
+    api.CreatePrincipalAxesAttr(Gf.Quatf(float(q[0]), Gf.Vec3f(*q[1:].tolist())))
+
+
+def _custom(prim, name: str, value: float) -> None:
+    from pxr import Sdf
+
+    prim.CreateAttribute(f"sceneBuilder:{name}", Sdf.ValueTypeNames.Double, custom=True).Set(float(value))
+
+
+def _add_object(ctx: _Context, placed: PlacedObject, path) -> None:
+    from pxr import UsdGeom, UsdPhysics
+
+    stage = ctx.stage
+    asset = placed.asset
+    xf = UsdGeom.Xform.Define(stage, path)
+    prim = xf.GetPrim()
+    prim.SetDisplayName(asset.name)
+    prim.CreateAttribute("sceneBuilder:name", _sdf_string()).Set(asset.name)
+    prim.CreateAttribute("sceneBuilder:label", _sdf_string()).Set(asset.label)
+    _set_transform(xf, placed.world_from_asset)
+
+    if len(asset.parts) == 1:
+        part = asset.root
+        if asset.is_fixed:
+            _custom(prim, "massKg", part.inertial.mass_kg)
+        else:
+            UsdPhysics.RigidBodyAPI.Apply(prim)
+            _mass(prim, part)
+        _add_part_geometry(ctx, path, part, asset)
+        if asset.deformable is not None:
+            d = asset.deformable
+            _custom(prim, "deformable:youngsModulusPa", d.youngs_modulus_pa)
+            _custom(prim, "deformable:poissonRatio", d.poisson_ratio)
+            _custom(prim, "deformable:damping", d.damping)
+            _custom(prim, "deformable:thicknessM", d.thickness_m)
+            _custom(prim, "deformable:resolution", d.resolution)
+        return
+
+    UsdPhysics.ArticulationRootAPI.Apply(prim)
+    part_names = names.UniqueNames()
+    part_paths = {p.name: path.AppendChild(part_names(p.name)) for p in asset.parts}
+    for part in asset.parts:
+        pxf = UsdGeom.Xform.Define(stage, part_paths[part.name])
+        pxf.GetPrim().SetDisplayName(part.name)
+        UsdPhysics.RigidBodyAPI.Apply(pxf.GetPrim())
+        _mass(pxf.GetPrim(), part)
+        _add_part_geometry(ctx, part_paths[part.name], part, asset)
+    joints = path.AppendChild("Joints")
+    UsdGeom.Scope.Define(stage, joints)
+    if asset.is_fixed:
+        fj = UsdPhysics.FixedJoint.Define(stage, joints.AppendChild("world_weld"))
+        fj.CreateBody1Rel().SetTargets([part_paths[asset.root.name]])
+        _set_joint_frames(fj, placed.world_from_asset[:3, 3], placed.world_from_asset[:3, :3], np.zeros(3), np.eye(3))
+    for part in asset.parts:
+        if part.joint is None:
+            continue
+        _add_joint(stage, joints.AppendChild(names.valid_identifier(part.name + "_joint")), asset, part,
+                   part_paths[part.parent], part_paths[part.name])
+
+
+def _sdf_string():
+    from pxr import Sdf
+
+    return Sdf.ValueTypeNames.String
+
+
+def _rotation_x_to(axis: np.ndarray) -> np.ndarray:
+    """(3, 3) proper rotation mapping +X onto ``axis`` (unit)."""
+    x = np.asarray(axis, dtype=np.float64)
+    helper = np.array([0.0, 0.0, 1.0]) if abs(x[2]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    y = np.cross(helper, x)
+    y /= np.linalg.norm(y)
+    return np.stack([x, y, np.cross(x, y)], axis=1)
+
+
+def _set_joint_frames(joint, pos0, rot0, pos1, rot1) -> None:
+    from pxr import Gf
+
+    q0, q1 = quat_wxyz_from_matrix(rot0), quat_wxyz_from_matrix(rot1)
+    joint.CreateLocalPos0Attr(Gf.Vec3f(*np.asarray(pos0, float).tolist()))
+    joint.CreateLocalRot0Attr(Gf.Quatf(float(q0[0]), Gf.Vec3f(*q0[1:].tolist())))
+    joint.CreateLocalPos1Attr(Gf.Vec3f(*np.asarray(pos1, float).tolist()))
+    joint.CreateLocalRot1Attr(Gf.Quatf(float(q1[0]), Gf.Vec3f(*q1[1:].tolist())))
+
+
+def _add_joint(stage, jpath, asset: ObjectAsset, part: Part, body0, body1) -> None:
+    from pxr import UsdPhysics
+
+    j = part.joint
+    assert j is not None
+    rot = _rotation_x_to(j.axis)
+    if j.type is JointType.REVOLUTE:
+        joint = UsdPhysics.RevoluteJoint.Define(stage, jpath)
+        joint.CreateAxisAttr(UsdPhysics.Tokens.x)
+        joint.CreateLowerLimitAttr(float(np.degrees(j.lower)))
+        joint.CreateUpperLimitAttr(float(np.degrees(j.upper)))
+        drive_kind = "angular"
+    elif j.type is JointType.PRISMATIC:
+        joint = UsdPhysics.PrismaticJoint.Define(stage, jpath)
+        joint.CreateAxisAttr(UsdPhysics.Tokens.x)
+        joint.CreateLowerLimitAttr(float(j.lower))
+        joint.CreateUpperLimitAttr(float(j.upper))
+        drive_kind = "linear"
+    elif j.type is JointType.FIXED:
+        joint = UsdPhysics.FixedJoint.Define(stage, jpath)
+        drive_kind = None
+    elif j.type is JointType.BALL:
+        joint = UsdPhysics.SphericalJoint.Define(stage, jpath)
+        drive_kind = None
+    elif j.type is JointType.REVOLUTE_PRISMATIC:
+        # A generic D6 joint: translation and rotation along local X free within limits, the other
+        # four degrees of freedom locked with LimitAPI (low > high means locked).
+        joint = UsdPhysics.Joint.Define(stage, jpath)
+        for dof, (lo, hi) in {
+            "transX": (j.lower2, j.upper2), "rotX": (np.degrees(j.lower), np.degrees(j.upper)),
+            "transY": (1.0, -1.0), "transZ": (1.0, -1.0), "rotY": (1.0, -1.0), "rotZ": (1.0, -1.0),
+        }.items():
+            lim = UsdPhysics.LimitAPI.Apply(joint.GetPrim(), dof)
+            lim.CreateLowAttr(float(lo))
+            lim.CreateHighAttr(float(hi))
+        drive_kind = None
+    else:
+        raise ExportError(f"object {asset.name}: part {part.name} has a {j.type.value} joint, which USD export does not support; make it a separate object")
+    joint.CreateBody0Rel().SetTargets([body0])
+    joint.CreateBody1Rel().SetTargets([body1])
+    _set_joint_frames(joint, j.anchor_m, rot, j.anchor_m, rot)
+    prim = joint.GetPrim()
+    prim.SetDisplayName(names.joint_name(asset, part))
+    if drive_kind is not None and (j.damping > 0 or j.effort_limit > 0):
+        drive = UsdPhysics.DriveAPI.Apply(prim, drive_kind)
+        drive.CreateTypeAttr("force")
+        drive.CreateStiffnessAttr(0.0)
+        drive.CreateDampingAttr(float(np.radians(j.damping)) if drive_kind == "angular" else float(j.damping))
+        drive.CreateTargetVelocityAttr(0.0)
+        if j.effort_limit > 0:
+            drive.CreateMaxForceAttr(float(j.effort_limit))
+    _custom(prim, "frictionLoss", j.friction)
+    _custom(prim, "effortLimit", j.effort_limit)
+    _custom(prim, "damping", j.damping)
+
+
+def validate_stage(stage) -> list[str]:
+    """Run every registered ``UsdValidation`` validator (about 30 in usd-core 26.11, including the
+    UsdPhysics rigid body, collider, joint and articulation checkers) on ``stage``. Returns the
+    error messages (warnings are ignored). The usdz package validators are skipped: they check
+    .usdz packaging, which a .usda is not."""
+    from pxr import UsdValidation
+
+    reg = UsdValidation.ValidationRegistry()
+    metas = [m for m in reg.GetAllValidatorMetadata() if "Package" not in m.name and "Usdz" not in m.name]
+    validators = reg.GetOrLoadValidatorsByName([m.name for m in metas])
+    ctx = UsdValidation.ValidationContext(validators)
+    errors = ctx.Validate(stage)
+    out = []
+    for e in errors:
+        if e.GetType() == UsdValidation.ValidationErrorType.Error:
+            sites = ", ".join(str(s.GetPrim().GetPath()) for s in e.GetSites() if s.IsPrim())
+            out.append(f"{e.GetValidator().GetMetadata().name if e.GetValidator() else ''}: {e.GetMessage()} [{sites}]")
+    return out
