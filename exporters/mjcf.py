@@ -304,12 +304,44 @@ def _add_flex(spec, placed: PlacedObject) -> None:
     f.rgba = list(mat.rgba)
 
 
+XML_DIGITS = 12
+
+
+def _xml_precision(digits: int | None) -> int | None:
+    """Set MuJoCo's XML writer precision (significant digits), returning the previous value.
+
+    MuJoCo writes 6 significant digits by default, which moves joint limits by up to 4e-6 rad and
+    inertias by 2e-6 relative. The setter is exported by libmujoco but not by the Python
+    bindings, so it is reached with ctypes; when a MuJoCo build lacks it, the default stays."""
+    import ctypes
+    import glob
+    import os
+
+    import mujoco
+
+    libs = sorted(glob.glob(os.path.join(os.path.dirname(mujoco.__file__), "libmujoco.so*")))
+    if not libs:
+        return None
+    lib = ctypes.CDLL(libs[0])
+    if not hasattr(lib, "_mjPRIVATE__set_xml_precision") or not hasattr(lib, "_mjPRIVATE__get_xml_precision"):
+        return None
+    previous = int(lib._mjPRIVATE__get_xml_precision())
+    if digits is not None:
+        lib._mjPRIVATE__set_xml_precision(int(digits))
+    return previous
+
+
 def _to_xml(spec, scene: Scene, out_dir: Path) -> str:
     try:
         spec.compile()
-        return spec.to_xml()
     except ValueError as err:
         raise ExportError(_culprit(scene, out_dir, err)) from err
+    previous = _xml_precision(XML_DIGITS)
+    try:
+        return spec.to_xml()
+    finally:
+        if previous is not None:
+            _xml_precision(previous)
 
 
 def _culprit(scene: Scene, out_dir: Path, err: Exception) -> str:
