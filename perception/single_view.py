@@ -1,0 +1,451 @@
+"""Metric depth from one photo with no learned weights (backend ``"single-view-geometry"``).
+
+The chain, each step a classical single-view-metrology result:
+
+1. **Line segments**: Canny edges and the probabilistic Hough transform (scikit-image).
+2. **Vanishing points** (RANSAC over segment-pair intersections, consistency measured as the angle
+   between a segment and the line from its midpoint to the candidate point, which works for finite
+   and infinite points alike): first the vertical one (among near-vertical segments), then the
+   strongest horizontal one.
+3. **Camera**: gravity in the camera frame is the direction of the vertical vanishing point, which
+   gives pitch and roll. Without known intrinsics, two orthogonal finite vanishing points v1, v2
+   give the focal length, f^2 = -(v1 - c).(v2 - c) (principal point c at the image centre).
+4. **Floor plane**: the camera-height prior puts the floor 1.4 m below the camera (the eye height
+   of a standing photographer holding a phone at chest to eye level; also the height of
+   the NYU / SUN RGB-D capture rigs within about 0.3 m). Every pixel below the horizon then has a
+   floor depth ``z = h / (g . K^-1 [u, v, 1])``.
+5. **Floor region**: Felzenszwalb superpixels connected to the bottom of the image, below the
+   horizon, and of floor-like colour are grown into the floor; per column, the top of the floor
+   run that starts at the bottom is the floor-wall / floor-object boundary (median-filtered across
+   columns).
+6. **Vertical surfaces**: everything above the boundary is a vertical surface standing on the
+   floor at the boundary point of its column (walls, furniture fronts: "extruded vertically");
+   superpixels narrower than a third of the image stand at the depth of their own floor contact
+   (their lowest pixel). Above ``ceiling_height_m`` the ceiling plane takes over.
+
+It is coarse (a room made of floor, ceiling and vertical billboards) but metric, deterministic and
+real. The scale comes entirely from the camera-height prior.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from perception.protocols import DepthEstimate
+from scene_builder.errors import InputError
+from scene_builder.model import CameraIntrinsics
+
+__all__ = [
+    "CAMERA_HEIGHT_M",
+    "SingleViewDepth",
+    "SingleViewGeometry",
+    "detect_segments",
+    "estimate_geometry",
+    "focal_from_orthogonal_vps",
+    "gravity_pitch_roll_deg",
+    "vanishing_point_ransac",
+]
+
+CAMERA_HEIGHT_M = 1.4
+"""Prior height of the camera above the floor (a standing photographer); sets the metric scale."""
+
+
+@dataclass(frozen=True, eq=False)
+class SingleViewGeometry:
+    """What the vanishing-point analysis found.
+
+    gravity_cam: (3,) unit vector, the direction of gravity (down) in the OpenCV camera frame.
+    pitch_deg: angle of the optical axis below the horizon (positive = looking down).
+    roll_deg: rotation of the image about the optical axis (positive = clockwise horizon).
+    focal_px: focal length used (estimated when ``focal_source == "vanishing-points"``).
+    vertical_vp: (3,) homogeneous pixel coordinates of the vertical vanishing point, or None.
+    horizontal_vp: (3,) homogeneous pixel coordinates of the strongest horizontal one, or None.
+    horizon_v_px: row of the horizon at the principal point's column.
+    segments: (N, 4) float64 line segments (u0, v0, u1, v1).
+    """
+
+    gravity_cam: np.ndarray
+    pitch_deg: float
+    roll_deg: float
+    focal_px: float
+    focal_source: str
+    vertical_vp: np.ndarray | None
+    horizontal_vp: np.ndarray | None
+    horizon_v_px: float
+    segments: np.ndarray
+
+
+# --------------------------------------------------------------------------------------------
+# Segments and vanishing points
+# --------------------------------------------------------------------------------------------
+
+
+def detect_segments(rgb: np.ndarray, seed: int = 0, min_length_frac: float = 0.04) -> np.ndarray:
+    """(N, 4) float64 line segments (u0, v0, u1, v1) of an (H, W, 3) uint8 image.
+
+    Canny (sigma 2 px on a 480-px-high scale) then scikit-image's probabilistic Hough transform,
+    seeded so the result is deterministic. Segments shorter than ``min_length_frac`` of the image
+    diagonal are dropped.
+    """
+    from skimage.color import rgb2gray
+    from skimage.feature import canny
+    from skimage.transform import probabilistic_hough_line
+
+    gray = rgb2gray(np.asarray(rgb))
+    h, w = gray.shape
+    scale = max(h, w) / 640.0
+    edges = canny(gray, sigma=2.0 * scale)
+    min_len = max(8, int(min_length_frac * np.hypot(h, w)))
+    lines = probabilistic_hough_line(edges, threshold=10, line_length=min_len, line_gap=max(2, int(3 * scale)), rng=seed)
+    if not lines:
+        return np.zeros((0, 4), dtype=np.float64)
+    segs = np.array([[p0[0], p0[1], p1[0], p1[1]] for p0, p1 in lines], dtype=np.float64)
+    # Sort for determinism independent of the Hough transform's internal order.
+    return segs[np.lexsort(segs.T[::-1])]
+
+
+def _consistency_deg(segs: np.ndarray, vp: np.ndarray) -> np.ndarray:
+    """(N,) angle in degrees between each segment and the line from its midpoint to the
+    homogeneous point ``vp`` (finite or at infinity)."""
+    mid = 0.5 * (segs[:, :2] + segs[:, 2:])
+    d_seg = segs[:, 2:] - segs[:, :2]
+    d_vp = vp[:2][None, :] - vp[2] * mid
+    cross = np.abs(d_seg[:, 0] * d_vp[:, 1] - d_seg[:, 1] * d_vp[:, 0])
+    dot = np.abs(np.sum(d_seg * d_vp, axis=1))
+    return np.degrees(np.arctan2(cross, dot))
+
+
+def _lines(segs: np.ndarray, norm: float) -> np.ndarray:
+    """Homogeneous lines (N, 3) through the segments, in coordinates scaled by 1 / norm."""
+    p0 = np.column_stack([segs[:, :2] / norm, np.ones(len(segs))])
+    p1 = np.column_stack([segs[:, 2:] / norm, np.ones(len(segs))])
+    ln = np.cross(p0, p1)
+    return ln / np.linalg.norm(ln[:, :2], axis=1, keepdims=True)
+
+
+def vanishing_point_ransac(
+    segs: np.ndarray,
+    norm: float,
+    iterations: int = 400,
+    inlier_deg: float = 2.0,
+    seed: int = 0,
+    accept=None,
+) -> tuple[np.ndarray | None, np.ndarray]:
+    """The vanishing point best supported by ``segs`` (N, 4), by length-weighted RANSAC.
+
+    norm: coordinate scale (e.g. the image size) for numerically stable intersections.
+    accept: optional callable(vp (3,) homogeneous pixel coords) -> bool to reject candidates.
+    Returns (vp (3,) homogeneous in pixels, unit norm, or None; (N,) bool inliers). The winner is
+    refined by least squares over its inliers (the null vector of their stacked lines).
+    """
+    n = len(segs)
+    if n < 2:
+        return None, np.zeros(n, dtype=np.bool_)
+    rng = np.random.default_rng(seed)
+    lengths = np.hypot(*(segs[:, 2:] - segs[:, :2]).T)
+    lines = _lines(segs, norm)
+    prob = lengths / lengths.sum()
+    best_score, best_vp = -1.0, None
+    to_px = np.diag([norm, norm, 1.0])
+    for _ in range(iterations):
+        i, j = rng.choice(n, size=2, replace=False, p=prob)
+        vp = np.cross(lines[i], lines[j])
+        if not np.any(vp):
+            continue
+        vp = to_px @ vp
+        vp /= np.linalg.norm(vp)
+        if accept is not None and not accept(vp):
+            continue
+        inl = _consistency_deg(segs, vp) < inlier_deg
+        score = float(lengths[inl].sum())
+        if score > best_score:
+            best_score, best_vp = score, vp
+    if best_vp is None:
+        return None, np.zeros(n, dtype=np.bool_)
+    inl = _consistency_deg(segs, best_vp) < inlier_deg
+    if inl.sum() >= 2:
+        a = lines[inl] * lengths[inl, None]
+        _, _, vt = np.linalg.svd(a)
+        refined = to_px @ vt[-1]
+        refined /= np.linalg.norm(refined)
+        if accept is None or accept(refined):
+            r_inl = _consistency_deg(segs, refined) < inlier_deg
+            if lengths[r_inl].sum() >= lengths[inl].sum():
+                best_vp, inl = refined, r_inl
+    return best_vp, inl
+
+
+def focal_from_orthogonal_vps(v1: np.ndarray, v2: np.ndarray, cx: float, cy: float) -> float | None:
+    """Focal length (px) from two vanishing points of orthogonal directions, both finite:
+    f^2 = -(v1 - c) . (v2 - c). None when either is (near) infinite or the product is not negative."""
+    if abs(v1[2]) < 1e-9 or abs(v2[2]) < 1e-9:
+        return None
+    p1 = v1[:2] / v1[2] - (cx, cy)
+    p2 = v2[:2] / v2[2] - (cx, cy)
+    f2 = -float(p1 @ p2)
+    return float(np.sqrt(f2)) if f2 > 0 else None
+
+
+def gravity_pitch_roll_deg(gravity_cam: np.ndarray) -> tuple[float, float]:
+    """(pitch, roll) in degrees of a camera whose frame sees gravity along ``gravity_cam``.
+
+    pitch > 0: looking down (gravity has a negative z component... the optical axis points below
+    the horizon). roll > 0: the camera is rotated clockwise about its optical axis.
+    """
+    g = np.asarray(gravity_cam, dtype=np.float64)
+    g = g / np.linalg.norm(g)
+    pitch = float(np.degrees(np.arcsin(np.clip(-g[2], -1.0, 1.0))))
+    roll = float(np.degrees(np.arctan2(-g[0], g[1])))
+    return -pitch, roll
+
+
+def estimate_geometry(
+    rgb: np.ndarray,
+    intrinsics: CameraIntrinsics | None,
+    default_fov_deg: float = 60.0,
+    seed: int = 0,
+) -> SingleViewGeometry:
+    """Gravity, pitch/roll and focal length of one photo from its vanishing points.
+
+    intrinsics: used as given when not None; else the focal length comes from two orthogonal
+    finite vanishing points when they exist (and give a horizontal field of view in 30..110 deg),
+    else from ``default_fov_deg``. Falls back to a level camera when no vertical vanishing point
+    is found.
+    """
+    h, w = rgb.shape[:2]
+    if intrinsics is not None:
+        fx, fy, cx, cy = intrinsics.fx_px, intrinsics.fy_px, intrinsics.cx_px, intrinsics.cy_px
+        focal_source = intrinsics.source
+    else:
+        fx = fy = (w / 2.0) / np.tan(np.radians(default_fov_deg) / 2.0)
+        cx, cy = (w - 1) / 2.0, (h - 1) / 2.0
+        focal_source = "default-fov"
+    segs = detect_segments(rgb, seed=seed)
+    norm = float(max(h, w))
+    vert_vp = horiz_vp = None
+    if len(segs):
+        d = segs[:, 2:] - segs[:, :2]
+        ang_from_vertical = np.degrees(np.arctan2(np.abs(d[:, 0]), np.abs(d[:, 1])))
+        near_vertical = ang_from_vertical < 25.0
+
+        def is_vertical(vp: np.ndarray) -> bool:
+            # Direction within 35 deg of the image's vertical axis (camera roughly upright).
+            ray = np.array([(vp[0] - cx * vp[2]) / fx, (vp[1] - cy * vp[2]) / fy, vp[2]])
+            return abs(ray[1]) / max(np.linalg.norm(ray), 1e-12) > np.cos(np.radians(35.0))
+
+        if near_vertical.sum() >= 2:
+            vert_vp, _ = vanishing_point_ransac(segs[near_vertical], norm, seed=seed, accept=is_vertical)
+        if vert_vp is not None:
+            rest = ~near_vertical & (_consistency_deg(segs, vert_vp) > 4.0)
+        else:
+            rest = ~near_vertical
+
+        def is_horizontal(vp: np.ndarray) -> bool:
+            ray = np.array([(vp[0] - cx * vp[2]) / fx, (vp[1] - cy * vp[2]) / fy, vp[2]])
+            return abs(ray[1]) / max(np.linalg.norm(ray), 1e-12) < np.sin(np.radians(30.0))
+
+        if rest.sum() >= 2:
+            horiz_vp, _ = vanishing_point_ransac(segs[rest], norm, seed=seed + 1, accept=is_horizontal)
+    if intrinsics is None and vert_vp is not None and horiz_vp is not None:
+        f = focal_from_orthogonal_vps(vert_vp, horiz_vp, cx, cy)
+        if f is not None:
+            fov = float(np.degrees(2.0 * np.arctan2(w / 2.0, f)))
+            if 30.0 <= fov <= 110.0:
+                fx = fy = f
+                focal_source = "vanishing-points"
+    if vert_vp is not None:
+        g = np.array([(vert_vp[0] - cx * vert_vp[2]) / fx, (vert_vp[1] - cy * vert_vp[2]) / fy, vert_vp[2]])
+        g /= np.linalg.norm(g)
+        if g[1] < 0:
+            g = -g
+    else:
+        g = np.array([0.0, 1.0, 0.0])
+    pitch, roll = gravity_pitch_roll_deg(g)
+    # Horizon: image points whose ray is orthogonal to gravity; row at column cx.
+    # g . [(u - cx)/fx, (v - cy)/fy, 1] = 0 at u = cx  ->  v = cy - fy * g_z / g_y.
+    horizon_v = float(cy - fy * g[2] / g[1])
+    return SingleViewGeometry(
+        gravity_cam=g,
+        pitch_deg=pitch,
+        roll_deg=roll,
+        focal_px=float(fx),
+        focal_source=focal_source,
+        vertical_vp=vert_vp,
+        horizontal_vp=horiz_vp,
+        horizon_v_px=horizon_v,
+        segments=segs,
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# Depth from the geometry
+# --------------------------------------------------------------------------------------------
+
+
+class SingleViewDepth:
+    """A ``DepthEstimator`` that needs no weights (see the module docstring for the chain).
+
+    camera_height_m: the height prior that fixes the metric scale. ceiling_height_m: where the
+    ceiling plane takes over from vertical surfaces. max_depth_m: depth cap (the far wall).
+    """
+
+    def __init__(
+        self,
+        camera_height_m: float = CAMERA_HEIGHT_M,
+        ceiling_height_m: float = 2.6,
+        max_depth_m: float = 10.0,
+        default_fov_deg: float = 60.0,
+        seed: int = 0,
+    ) -> None:
+        if not (camera_height_m > 0 and ceiling_height_m > camera_height_m and max_depth_m > 0):
+            raise InputError("single-view depth: need 0 < camera height < ceiling height and a positive max depth")
+        self.camera_height_m = camera_height_m
+        self.ceiling_height_m = ceiling_height_m
+        self.max_depth_m = max_depth_m
+        self.default_fov_deg = default_fov_deg
+        self.seed = seed
+        self.last_geometry: SingleViewGeometry | None = None
+
+    def estimate(self, rgb: np.ndarray, intrinsics: CameraIntrinsics | None = None) -> DepthEstimate:
+        """rgb: (H, W, 3) uint8. Returns (H, W) float32 metric depth; focal_px is set when the
+        focal length was estimated from vanishing points."""
+        arr = np.asarray(rgb)
+        if arr.ndim != 3 or arr.shape[2] != 3 or arr.dtype != np.uint8:
+            raise InputError(f"expected an (H, W, 3) uint8 RGB image, got {arr.shape} {arr.dtype}")
+        geo = estimate_geometry(arr, intrinsics, self.default_fov_deg, self.seed)
+        self.last_geometry = geo
+        h, w = arr.shape[:2]
+        if intrinsics is not None:
+            fx, fy, cx, cy = intrinsics.fx_px, intrinsics.fy_px, intrinsics.cx_px, intrinsics.cy_px
+        else:
+            fx = fy = geo.focal_px
+            cx, cy = (w - 1) / 2.0, (h - 1) / 2.0
+        depth = self._depth(arr, geo.gravity_cam, fx, fy, cx, cy)
+        focal = geo.focal_px if geo.focal_source == "vanishing-points" else None
+        return DepthEstimate(depth_m=depth.astype(np.float32), focal_px=focal)
+
+    # -- internals ---------------------------------------------------------------------------
+
+    def _depth(self, rgb: np.ndarray, g: np.ndarray, fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
+        h, w = rgb.shape[:2]
+        u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+        rays = np.stack([(u - cx) / fx, (v - cy) / fy, np.ones_like(u)], axis=-1)  # (H, W, 3), z = 1
+        down = rays @ g  # (H, W): height drop per unit depth along each ray
+        # Depth where the ray meets the floor (below the horizon) and the ceiling (above it).
+        floor_z = np.where(down > 1e-6, self.camera_height_m / np.maximum(down, 1e-6), np.inf)
+        up = self.ceiling_height_m - self.camera_height_m
+        ceil_z = np.where(down < -1e-6, up / np.maximum(-down, 1e-6), np.inf)
+
+        labels = self._superpixels(rgb)
+        floor = self._floor_mask(rgb, labels, down)
+        boundary = self._boundary_rows(floor)  # (W,) int: top row of the bottom floor run
+
+        # Contact point of each column's vertical surface: the floor point at the boundary row
+        # (clamped below the horizon so it stays on the floor).
+        cols = np.arange(w)
+        b_rows = boundary.astype(np.int64)
+        contact_z = floor_z[b_rows, cols]
+        contact_z = np.minimum(contact_z, self.max_depth_m)
+        contact = rays[b_rows, cols] * contact_z[:, None]  # (W, 3) camera-frame contact points
+
+        # Superpixels narrower than a third of the image stand at their own lowest pixel's contact.
+        col_contact = np.broadcast_to(contact[None], (h, w, 3)).copy()
+        n_lab = labels.max() + 1
+        lowest_row = np.full(n_lab, -1, dtype=np.int64)
+        np.maximum.at(lowest_row, labels.ravel(), v.astype(np.int64).ravel())
+        umin = np.full(n_lab, w, dtype=np.int64)
+        umax = np.full(n_lab, -1, dtype=np.int64)
+        np.minimum.at(umin, labels.ravel(), u.astype(np.int64).ravel())
+        np.maximum.at(umax, labels.ravel(), u.astype(np.int64).ravel())
+        narrow = (umax - umin + 1) < w / 3.0
+        on_floor_lab = np.bincount(labels[floor].ravel(), minlength=n_lab) > 0
+        for lab in np.flatnonzero(narrow & ~on_floor_lab):
+            sel = labels == lab
+            rows, cs = np.nonzero(sel)
+            k = int(np.argmax(rows))
+            r_low, c_low = rows[k], cs[k]
+            # Its contact: its lowest pixel if that is on the floor side of the boundary, else the
+            # boundary of that column (an object standing on something taller).
+            r_c = max(r_low, int(boundary[c_low]))
+            z = min(floor_z[r_c, c_low], self.max_depth_m)
+            if np.isfinite(z):
+                col_contact[sel] = rays[r_c, c_low] * z
+
+        # Vertical surface through the contact point: the point of each ray closest to the
+        # vertical line through its contact, i.e. solve s * r = X_c + t * g in least squares.
+        rr = np.sum(rays * rays, axis=-1)
+        rg = down
+        rc = np.sum(rays * col_contact, axis=-1)
+        gc = col_contact @ g
+        det = rr - rg * rg  # |r|^2 |g|^2 - (r.g)^2 with |g| = 1
+        s = (rc - rg * gc) / np.maximum(det, 1e-9)
+        vert_z = s  # rays have z = 1, so s is the depth
+        # Height above the floor of that point: camera height minus its drop along gravity.
+        height = self.camera_height_m - s * down
+        vert_z = np.where(height > self.ceiling_height_m, ceil_z, vert_z)
+
+        depth = np.where(floor, floor_z, vert_z)
+        depth = np.where(np.isfinite(depth) & (depth > 0), depth, self.max_depth_m)
+        return np.clip(depth, 0.1, self.max_depth_m)
+
+    def _superpixels(self, rgb: np.ndarray) -> np.ndarray:
+        """(H, W) int64 Felzenszwalb superpixel labels 0..K-1 (scale grows with image size)."""
+        from skimage.segmentation import felzenszwalb
+
+        h, w = rgb.shape[:2]
+        scale = 200.0 * (h * w) / (640 * 480)
+        return felzenszwalb(rgb, scale=scale, sigma=0.8, min_size=int(max(50, 0.0005 * h * w))).astype(np.int64)
+
+    def _floor_mask(self, rgb: np.ndarray, labels: np.ndarray, down: np.ndarray) -> np.ndarray:
+        """(H, W) bool floor pixels: superpixels grown from the bottom rows, below the horizon,
+        close in colour (Lab) to the bottom-centre seed."""
+        from skimage.color import rgb2lab
+
+        h, w = labels.shape
+        n_lab = labels.max() + 1
+        lab_img = rgb2lab(rgb).reshape(-1, 3)
+        counts = np.bincount(labels.ravel(), minlength=n_lab).astype(np.float64)
+        mean_lab = np.stack([np.bincount(labels.ravel(), weights=lab_img[:, k], minlength=n_lab) for k in range(3)], 1)
+        mean_lab /= np.maximum(counts, 1)[:, None]
+        below = np.bincount(labels.ravel(), weights=(down > 0.02).ravel().astype(np.float64), minlength=n_lab)
+        below_frac = below / np.maximum(counts, 1)
+        bottom_rows = labels[int(h * 0.9) :, :]
+        seed_labels, seed_counts = np.unique(bottom_rows, return_counts=True)
+        # Seed: the superpixels covering the bottom band, weighted by their share of it.
+        seed_colour = (mean_lab[seed_labels] * seed_counts[:, None]).sum(0) / seed_counts.sum()
+        dist = np.linalg.norm(mean_lab - seed_colour, axis=1)
+        candidate = (below_frac > 0.95) & (dist < 25.0)
+        # Grow through 4-neighbour adjacency from the bottom-touching candidates.
+        adj_a = np.concatenate([labels[:, :-1].ravel(), labels[:-1, :].ravel()])
+        adj_b = np.concatenate([labels[:, 1:].ravel(), labels[1:, :].ravel()])
+        diff = adj_a != adj_b
+        pairs = np.unique(np.stack([adj_a[diff], adj_b[diff]], 1), axis=0)
+        in_floor = np.zeros(n_lab, dtype=np.bool_)
+        in_floor[np.unique(labels[-1, :])] = True
+        in_floor &= candidate
+        changed = True
+        while changed:
+            grow = (in_floor[pairs[:, 0]] & candidate[pairs[:, 1]] & ~in_floor[pairs[:, 1]]) | (
+                in_floor[pairs[:, 1]] & candidate[pairs[:, 0]] & ~in_floor[pairs[:, 0]]
+            )
+            new = np.unique(np.concatenate([pairs[grow, 0], pairs[grow, 1]]))
+            new = new[candidate[new] & ~in_floor[new]]
+            changed = len(new) > 0
+            in_floor[new] = True
+        return in_floor[labels] & (down > 1e-3)
+
+    def _boundary_rows(self, floor: np.ndarray) -> np.ndarray:
+        """(W,) float64: per column, the top row of the floor run that starts at the bottom edge
+        (the bottom row itself when the column has no floor), median-filtered across columns."""
+        from scipy.ndimage import median_filter
+
+        h, w = floor.shape
+        # Row index of the first non-floor pixel scanning upwards from the bottom.
+        rev = ~floor[::-1, :]
+        first_non = np.where(rev.any(axis=0), np.argmax(rev, axis=0), h)
+        top = (h - first_non).astype(np.float64)  # top row of the bottom run (h when no floor)
+        top = np.clip(top, 0, h - 1)
+        k = max(3, (w // 40) | 1)
+        return median_filter(top, size=k, mode="nearest")
