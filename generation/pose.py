@@ -1,0 +1,118 @@
+"""Initial pose of an object: a gravity-aligned oriented box around its observed points.
+
+The box's yaw is the minimum-area rectangle of the points projected on the floor (convex hull +
+rotating calipers: the optimal rectangle has a side collinear with a hull edge), after trimming
+the 2 % outliers. Its +X (the asset's front) is the side face whose outward normal points most
+toward the camera. Objects whose bottom is within ``floor_snap_m`` of the floor stand on it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from scene_builder.frames import pose, rot_z, transform_points
+
+__all__ = ["BoxFit", "extend_depth", "fit_box", "min_area_rectangle"]
+
+
+@dataclass(frozen=True, eq=False)
+class BoxFit:
+    """world_from_box: (4, 4) rotation about Z, origin at the bottom-centre of the box.
+    size_m: (3,) extents along the box's x (front-back depth), y (width), z (height).
+    on_floor: the bottom was snapped to z = 0. observed_depth_m: the x extent the points
+    themselves span (before any completion to a prior depth)."""
+
+    world_from_box: np.ndarray
+    size_m: np.ndarray
+    on_floor: bool
+    observed_depth_m: float
+
+
+def min_area_rectangle(xy: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """Minimum-area enclosing rectangle of (N, 2) points by rotating calipers over hull edges.
+
+    Returns (angle_rad of the rectangle's first axis, (2,) min corner, (2,) max corner) with the
+    corners expressed in the rectangle's own axes ``[cos a, sin a]`` and ``[-sin a, cos a]``.
+    """
+    from scipy.spatial import ConvexHull, QhullError
+
+    pts = np.asarray(xy, dtype=np.float64)
+    try:
+        hull = pts[ConvexHull(pts).vertices]
+    except (QhullError, ValueError):
+        # collinear or too few points: the principal axis is the rectangle's axis
+        c = pts - pts.mean(axis=0)
+        _, _, vt = np.linalg.svd(c, full_matrices=False)
+        angles = np.array([np.arctan2(vt[0, 1], vt[0, 0])])
+        hull = pts
+    else:
+        edges = np.diff(np.vstack([hull, hull[:1]]), axis=0)
+        angles = np.mod(np.arctan2(edges[:, 1], edges[:, 0]), np.pi / 2)
+        angles = np.unique(np.round(angles, 12))
+    c, s = np.cos(angles), np.sin(angles)
+    # project the hull on both axes of every candidate: (A, H)
+    u = hull[None, :, 0] * c[:, None] + hull[None, :, 1] * s[:, None]
+    v = -hull[None, :, 0] * s[:, None] + hull[None, :, 1] * c[:, None]
+    area = (u.max(1) - u.min(1)) * (v.max(1) - v.min(1))
+    best = int(np.argmin(area))
+    return float(angles[best]), np.array([u[best].min(), v[best].min()]), np.array([u[best].max(), v[best].max()])
+
+
+def fit_box(
+    points_world_m: np.ndarray,
+    camera_position_m: np.ndarray,
+    *,
+    trim_fraction: float = 0.02,
+    floor_snap_m: float = 0.05,
+    min_size_m: float = 0.01,
+) -> BoxFit:
+    """Gravity-aligned box around observed points (world frame, Z up, floor z = 0).
+
+    points_world_m: (N, 3). camera_position_m: (3,). ``trim_fraction`` of the points farthest
+    from the median (in plan) are ignored for the yaw, and extents use the
+    ``trim_fraction / 2`` and ``1 - trim_fraction / 2`` quantiles along each box axis.
+    """
+    pts = np.asarray(points_world_m, dtype=np.float64)
+    if len(pts) < 3:
+        raise ValueError(f"fit_box: need at least 3 observed points, got {len(pts)}")
+    xy = pts[:, :2]
+    r = np.linalg.norm(xy - np.median(xy, axis=0), axis=1)
+    keep = r <= np.quantile(r, 1.0 - trim_fraction)
+    angle, _, _ = min_area_rectangle(xy[keep])
+    axes = np.array([[np.cos(angle), np.sin(angle)], [-np.sin(angle), np.cos(angle)]])  # rows: box axes in plan
+    uv = xy @ axes.T
+    q = trim_fraction / 2.0
+    lo = np.quantile(uv, q, axis=0)
+    hi = np.quantile(uv, 1.0 - q, axis=0)
+    z_lo, z_hi = np.quantile(pts[:, 2], [q, 1.0 - q])
+    on_floor = bool(z_lo <= floor_snap_m)
+    z_bottom = 0.0 if on_floor else float(z_lo)
+    centre_uv = 0.5 * (lo + hi)
+    centre_xy = centre_uv @ axes
+    # front: the side face whose outward normal points most toward the camera
+    to_cam = np.asarray(camera_position_m, dtype=np.float64)[:2] - centre_xy
+    normals = np.vstack([axes, -axes])  # +u, +v, -u, -v
+    front = int(np.argmax(normals @ to_cam))
+    x_axis = normals[front]
+    yaw = float(np.arctan2(x_axis[1], x_axis[0]))
+    ext_uv = hi - lo
+    depth, width = (ext_uv[0], ext_uv[1]) if front in (0, 2) else (ext_uv[1], ext_uv[0])
+    size = np.maximum(np.array([depth, width, float(z_hi) - z_bottom]), min_size_m)
+    world_from_box = pose(rot_z(yaw), [centre_xy[0], centre_xy[1], z_bottom])
+    return BoxFit(world_from_box, size, on_floor, float(depth))
+
+
+def extend_depth(fit: BoxFit, depth_m: float) -> BoxFit:
+    """The same box made ``depth_m`` deep by growing it away from the camera (the observed
+    front face stays where it was)."""
+    if depth_m <= fit.size_m[0]:
+        return fit
+    grow = depth_m - float(fit.size_m[0])
+    shift = transform_points(fit.world_from_box, np.array([[-grow / 2.0, 0.0, 0.0]]))[0]
+    world_from_box = fit.world_from_box.copy()
+    world_from_box[:3, 3] = shift
+    size = fit.size_m.copy()
+    size[0] = depth_m
+    return BoxFit(world_from_box, size, fit.on_floor, fit.observed_depth_m)
