@@ -237,14 +237,16 @@ def physx_object(
     # group leads: the first member with voxels; groups with none hand their children up
     groups = {g.group_id: g for g in description.groups}
     lead: dict[int, int | None] = {gid: next((m for m in g.members if m in grids), None) for gid, g in groups.items()}
-    if lead[0] is None:
-        raise ProtocolError(f"PhysX object {description.name!r}: the base group_0 has no voxels")
+    base_gid = 0
+    if lead[0] is None:  # the base has no voxels: the first group that has some becomes the base
+        base_gid = next(gid for gid in sorted(groups) if lead[gid] is not None)
+        warnings.append(f"group_0 has no voxels: group_{base_gid} becomes the base (its joint dropped)")
 
     def effective_parent(gid: int) -> int:
         cur = groups[gid].parent
         while cur is not None and lead.get(cur) is None:
             cur = groups[cur].parent
-        return 0 if cur is None else cur
+        return base_gid if cur is None else cur
 
     specs: list[PhysxPartSpec] = []
     parts_by_label = {p.label: p for p in description.parts}
@@ -263,7 +265,7 @@ def physx_object(
         centre_vox = (gidx.min(axis=0) + gidx.max(axis=0) + 1.0) / 2.0
         for m in members:
             p = parts_by_label[m]
-            if gid == 0 and m == lead_label:
+            if gid == base_gid and m == lead_label:
                 parent, joint = None, None
             elif m == lead_label:
                 parent = names[lead[effective_parent(gid)]]
@@ -305,11 +307,52 @@ def physx_object(
     )
 
 
-def to_object_asset(obj: PhysxObject, name: str, label: str, backend: str = "physx-anything-vlm") -> ObjectAsset:
-    """Mesh, decompose and weigh the parts with the generator's ``assemble_asset``."""
-    try:
-        from generation.assemble import assemble_asset  # the generator's half of generation/
-    except ImportError as err:  # pragma: no cover - depends on the other half of generation/
-        raise InputError(f"generation.assemble.assemble_asset is not available ({err}); update the checkout") from err
-    return assemble_asset(obj, name=name, label=label, backend=backend)  # pragma: no cover
+def _part_geometry(spec: PhysxPartSpec, config):
+    """Isotropic voxels go to the generator as a VoxelGeometry; per-axis voxel sizes are meshed in
+    voxel units and scaled per axis here (a scaled watertight mesh stays watertight)."""
+    from generation.assembly import VoxelGeometry
+    from generation.meshing import mesh_from_occupancy, to_model_mesh
 
+    size = spec.voxel_size_m
+    if np.allclose(size, size[0], rtol=1e-9):
+        return VoxelGeometry(spec.occupancy, float(size[0]), spec.origin_m)
+    tm = mesh_from_occupancy(spec.occupancy, 1.0, np.zeros(3), max_faces=config.max_visual_faces)
+    tm.vertices = tm.vertices * size + spec.origin_m
+    return to_model_mesh(tm)
+
+
+def to_object_asset(
+    obj: PhysxObject,
+    name: str,
+    label: str,
+    config=None,
+    seed: int = 0,
+    backend: str = "physx-anything-vlm",
+) -> ObjectAsset:
+    """Mesh, weigh and decompose the parts with the generator's ``assemble_asset`` (marching
+    cubes, mass and inertia by integration over the watertight mesh, convex collision pieces).
+    The PhysX texts give no friction; joints get the generator's derived damping and friction."""
+    from scene_builder.config import GenerationConfig
+
+    from generation.assembly import JointSpec, PartSpec, assemble_asset
+
+    cfg = config if config is not None else GenerationConfig()
+    specs = []
+    for p in obj.parts:
+        joint = None
+        if p.joint is not None:
+            j = p.joint
+            joint = JointSpec(j.type, j.axis, j.anchor_m, lower=j.lower, upper=j.upper, lower2=j.lower2, upper2=j.upper2)
+        specs.append(
+            PartSpec(
+                name=p.name,
+                parent=p.parent,
+                geometry=_part_geometry(p, cfg),
+                material=p.material,
+                joint=joint,
+                affordance_rank=p.affordance_rank,
+                description=p.description,
+            )
+        )
+    text = f"{obj.name} ({obj.category})" if obj.category else obj.name
+    return assemble_asset(name, label, specs, config=cfg, seed=seed, description=text, backend=backend, recenter=False)
