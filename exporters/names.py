@@ -38,7 +38,8 @@ def valid_identifier(name: str) -> str:
     with ``Tf.MakeValidIdentifier``."""
     if not name:
         return "_"
-    out = re.sub(r"[^A-Za-z0-9_]", "_", name)
+    # Tf works on UTF-8 bytes: every byte that is not [A-Za-z0-9_] becomes one "_".
+    out = "".join(chr(b) if chr(b).isascii() and (chr(b).isalnum() or b == 0x5F) else "_" for b in name.encode("utf-8"))
     if out[0].isdigit():
         out = "_" + out[1:]
     return out

@@ -201,8 +201,9 @@ def camera_film(scene: Scene) -> dict[str, float]:
         "horizontalAperture": k.width_px * px,
         # fy may differ from fx: scale the vertical film so that focal / (pixel height) = fy.
         "verticalAperture": k.height_px * focal / k.fy_px,
-        # USD shifts the film window by the offset; the principal point moves the other way.
-        "horizontalApertureOffset": ((k.width_px - 1) / 2.0 - k.cx_px) * px * -1.0,
+        # Offset of the film window's centre from the optical axis (a principal point right of
+        # the image centre shifts the window left); USD's film y is up, image v is down.
+        "horizontalApertureOffset": ((k.width_px - 1) / 2.0 - k.cx_px) * px,
         "verticalApertureOffset": (k.cy_px - (k.height_px - 1) / 2.0) * focal / k.fy_px,
     }
 
