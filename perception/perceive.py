@@ -1,0 +1,147 @@
+"""The perception stage: photo (and optional depth) in, gravity-aligned camera, room and objects out."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from perception.backends import build_registries
+from perception.inputs import check_depth, load_input
+from perception.protocols import InstanceMasks
+from perception.room import estimate_room, place_floor_under
+from scene_builder.config import InputSpec, PerceptionConfig
+from scene_builder.errors import EmptySceneError, InputError
+from scene_builder.frames import transform_points
+from scene_builder.model import BackendUse, Camera, CameraIntrinsics, Observation, PerceivedObject, Perception
+
+__all__ = ["MAX_OBJECT_HEIGHT_M", "MIN_OBJECT_HEIGHT_M", "gravity_aligned_size", "perceive"]
+
+#: Clusters lower than this (a rug, a stain of noise on the floor) or taller are not objects.
+MIN_OBJECT_HEIGHT_M = 0.03
+MAX_OBJECT_HEIGHT_M = 4.0
+
+
+def gravity_aligned_size(points_world_m: np.ndarray) -> tuple[float, float, float]:
+    """(length, width, height) in metres of (N, 3) world points, length >= width.
+
+    The footprint is the smallest-area yaw-rotated rectangle over 2-degree steps, on the 2nd-98th
+    percentiles (robust to stray depth). The height runs from the floor when the object's lowest
+    points are within 10 cm of it (a table's legs are often hidden), else from its lowest point.
+    """
+    p = np.asarray(points_world_m, dtype=np.float64)
+    xy = p[:, :2] - p[:, :2].mean(axis=0)
+    best = None
+    for a in np.radians(np.arange(0.0, 90.0, 2.0)):
+        c, s = np.cos(a), np.sin(a)
+        u, v = xy @ [c, s], xy @ [-s, c]
+        eu = float(np.subtract(*np.percentile(u, [98, 2])))
+        ev = float(np.subtract(*np.percentile(v, [98, 2])))
+        if best is None or eu * ev < best[0] * best[1]:
+            best = (eu, ev)
+    lo, hi = np.percentile(p[:, 2], [2, 98])
+    bottom = 0.0 if lo < 0.1 else float(lo)
+    return max(best), min(best), float(hi - bottom)
+
+
+def _resolve_depth(loaded, registries, config: PerceptionConfig) -> tuple[np.ndarray, CameraIntrinsics, str, list[BackendUse]]:
+    k = loaded.intrinsics
+    uses = []
+    if loaded.depth_m is not None:
+        return loaded.depth_m, k, "sensor", [BackendUse("depth", "sensor", "sensor depth given")]
+    estimator, use = registries.depth.resolve(config.depth_backend)
+    uses.append(use)
+    known = None if k.source == "default-fov" else k
+    est = estimator.estimate(loaded.rgb, known)
+    depth = np.asarray(est.depth_m, dtype=np.float32)
+    if depth.shape != loaded.rgb.shape[:2]:
+        raise InputError(f"depth backend '{use.backend}' returned {depth.shape[1]}x{depth.shape[0]} depth for a {k.width_px}x{k.height_px} image; choose another --depth-backend")
+    depth = np.where(np.isfinite(depth) & (depth > 0), depth, 0.0).astype(np.float32)
+    check_depth(depth, f"depth estimated by '{use.backend}'")
+    if known is None and est.focal_px is not None and np.isfinite(est.focal_px) and est.focal_px > 0:
+        k = CameraIntrinsics(float(est.focal_px), float(est.focal_px), k.cx_px, k.cy_px, k.width_px, k.height_px, "depth-model")
+    return depth, k, use.backend, uses
+
+
+def _crop(rgb: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+    return rgb[r0:r1, c0:c1], mask[r0:r1, c0:c1]
+
+
+def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perception:
+    """Load and check the input, find gravity, floor, walls and the objects.
+
+    Raises InputError for unusable input and EmptySceneError when no object is found.
+    """
+    loaded = load_input(inputs, config)
+    registries = build_registries(config)
+    depth_m, k, depth_source, backends = _resolve_depth(loaded, registries, config)
+    backends.insert(0, BackendUse("intrinsics", k.source, f"{k.fx_px:.1f} px focal length ({k.width_px}x{k.height_px})"))
+    observation = Observation(str(loaded.image_path), loaded.rgb, depth_m, k, depth_source)
+
+    points_cam = k.unproject(depth_m)
+    valid = (depth_m > 0) & (depth_m < config.max_depth_m)
+    frame = estimate_room(points_cam, valid, seed)
+    backends.append(frame.gravity)
+
+    segmenter, seg_use = registries.segmentation.resolve(config.segmentation_backend)
+    backends.append(seg_use)
+    if getattr(segmenter, "accepts_gravity", False):
+        masks: InstanceMasks = segmenter.segment(loaded.rgb, depth_m, k, frame.background, up_cam=frame.up_cam)
+    else:
+        masks = segmenter.segment(loaded.rgb, depth_m, k, frame.background)
+    labels = np.asarray(masks.labels)
+    if labels.shape != depth_m.shape:
+        raise InputError(f"segmentation backend '{seg_use.backend}' returned masks of shape {labels.shape} for a {depth_m.shape} image; choose another --segmentation-backend")
+
+    # Instances with enough observed points and a plausible height, largest first.
+    kept: list[tuple[np.ndarray, np.ndarray]] = []
+    for inst in range(1, int(labels.max(initial=0)) + 1):
+        mask = labels == inst
+        pix = mask & valid
+        if pix.sum() < config.min_object_points:
+            continue
+        z = (points_cam[pix] @ frame.up_cam)
+        extent = float(np.subtract(*np.percentile(z, [98, 2])))
+        if not MIN_OBJECT_HEIGHT_M <= extent <= MAX_OBJECT_HEIGHT_M:
+            continue
+        kept.append((mask, pix))
+    kept.sort(key=lambda mp: -int(mp[1].sum()))
+    kept = kept[: config.max_objects]
+    if not kept:
+        raise EmptySceneError(
+            f"no objects found in {loaded.image_path}: nothing stands out from the floor and walls; "
+            "photograph the objects from 1-4 m with the floor in view, or pass a depth map with --depth"
+        )
+    if not frame.floor_found:
+        lowest = min(float(np.quantile(transform_points(frame.world_from_camera, points_cam[pix])[:, 2], 0.01)) for _, pix in kept)
+        frame = place_floor_under(frame, lowest)
+
+    namer, name_use = registries.naming.resolve(config.naming_backend)
+    backends.append(name_use)
+    # Left to right (mask centroid column, then row) for a stable, readable numbering.
+    def centroid(mp):
+        rr, cc = np.nonzero(mp[0])
+        return (float(cc.mean()), float(rr.mean()))
+
+    kept.sort(key=centroid)
+    per_label: dict[str, int] = {}
+    objects = []
+    for object_id, (mask, pix) in enumerate(kept, start=1):
+        points_w = transform_points(frame.world_from_camera, points_cam[pix])
+        crop_rgb, crop_mask = _crop(loaded.rgb, mask)
+        label, conf = namer.name(crop_rgb, crop_mask, gravity_aligned_size(points_w))
+        per_label[label] = per_label.get(label, 0) + 1
+        objects.append(
+            PerceivedObject(
+                object_id=object_id,
+                name=f"{label}_{per_label[label]}",
+                label=label,
+                label_confidence=float(np.clip(conf, 0.0, 1.0)),
+                mask=mask,
+                points_world_m=points_w,
+                colors_rgb=loaded.rgb[pix],
+            )
+        )
+    camera = Camera(k, frame.world_from_camera)
+    return Perception(observation, camera, frame.room, tuple(objects), tuple(backends))
+

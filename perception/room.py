@@ -1,0 +1,372 @@
+"""Gravity, floor, walls and ceiling from a depth map: the world frame of the scene.
+
+The floor is found by RANSAC (open3d ``segment_plane``) on a seeded subsample of the point cloud:
+planes are peeled off one after the other, the ones whose normal lies within
+:data:`FLOOR_MAX_TILT_DEG` of the camera's image-up direction (-y of the OpenCV camera) and that
+are large enough are floor candidates, and the lowest of them wins; it is refined by least squares
+on all of its inliers. Up is the floor normal. Vertical planes with enough inliers and little seen
+behind them are walls; a horizontal plane above the camera is the ceiling.
+
+The world frame (see :mod:`scene_builder.model`): Z up, floor ``z = 0``, the camera above the
+origin, X the horizontal projection of the optical axis, snapped to the nearest dominant wall
+direction when walls were found (Manhattan frame).
+
+Without a visible floor (a close-up of a cabinet), gravity comes from two non-parallel vertical
+planes when there are, else from the camera's -y axis tilted by a typical
+:data:`TYPICAL_PITCH_DEG` downward pitch; the floor then goes under the lowest object point
+(:func:`place_floor_under`). The choice is recorded in ``RoomFrame.gravity``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from scene_builder.frames import pose
+from scene_builder.model import BackendUse, Plane, Room
+
+__all__ = [
+    "FLOOR_MAX_TILT_DEG",
+    "TYPICAL_PITCH_DEG",
+    "CameraPlane",
+    "RoomFrame",
+    "estimate_room",
+    "inlier_threshold_m",
+    "place_floor_under",
+    "world_from_camera_for",
+]
+
+#: A floor candidate's normal lies within this angle of the camera's image-up direction.
+FLOOR_MAX_TILT_DEG = 30.0
+#: A wall's normal is perpendicular to up within this angle.
+WALL_MAX_TILT_DEG = 6.0
+#: Downward pitch assumed when nothing in the image tells where gravity points.
+TYPICAL_PITCH_DEG = 10.0
+#: Points sampled for RANSAC (seeded); planes are refined on all points afterwards.
+RANSAC_SAMPLES = 40_000
+_RANSAC_THRESHOLD_M = 0.025
+_MAX_PLANES = 10
+#: A plane must hold this fraction of the sampled points to count (floor, wall, ceiling).
+_MIN_PLANE_FRACTION = 0.03
+
+
+def inlier_threshold_m(depth_m: np.ndarray) -> np.ndarray:
+    """Distance within which a point at planar depth ``depth_m`` counts as on a plane.
+
+    1 cm plus 2.5 sigma of the structured-light depth noise model sigma = 1.425e-3 z^2 m
+    (Khoshelham and Elberink 2012): 2 cm at 1.5 m, 4.2 cm at 3 m, 9.9 cm at 5 m.
+    """
+    z = np.asarray(depth_m, dtype=np.float64)
+    return 0.01 + 2.5 * 1.425e-3 * z * z
+
+
+@dataclass(frozen=True, eq=False)
+class CameraPlane:
+    """A plane ``normal . p + offset_m = 0`` in the camera frame, normal towards the camera
+    (so ``offset_m`` > 0 is the camera's distance to it). inliers: (H, W) bool."""
+
+    normal: np.ndarray
+    offset_m: float
+    kind: str
+    inliers: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class RoomFrame:
+    """The gravity-aligned world frame and the room's planes.
+
+    world_from_camera: (4, 4) float64 rigid transform; the camera is at (0, 0, height).
+    up_cam: (3,) unit up vector in the camera frame.
+    room: walls in the world frame, normals into the room.
+    background: (H, W) bool, pixels explained by the floor, walls or ceiling (or below the floor).
+    floor_found: False when gravity and the floor height come from a fallback.
+    gravity: how up was found (recorded in ``Perception.backends``).
+    planes: the floor, walls and ceiling in the camera frame.
+    """
+
+    world_from_camera: np.ndarray
+    up_cam: np.ndarray
+    room: Room
+    background: np.ndarray
+    floor_found: bool
+    gravity: BackendUse
+    planes: tuple[CameraPlane, ...] = ()
+
+    @property
+    def camera_height_m(self) -> float:
+        return float(self.world_from_camera[2, 3])
+
+    @property
+    def tilt_deg(self) -> float:
+        """Angle between the camera's image-up direction (-y) and true up, degrees."""
+        return float(np.degrees(np.arccos(np.clip(-self.up_cam[1], -1.0, 1.0))))
+
+    @property
+    def floor_mask(self) -> np.ndarray:
+        """(H, W) bool inliers of the floor plane (all False without a floor)."""
+        for p in self.planes:
+            if p.kind == "floor":
+                return p.inliers
+        return np.zeros_like(self.background)
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v)
+
+
+def _fit_plane(points: np.ndarray) -> tuple[np.ndarray, float]:
+    """Least-squares plane through (N, 3) points: unit normal and offset (n . p + d = 0)."""
+    c = points.mean(axis=0)
+    _, _, vt = np.linalg.svd(points - c, full_matrices=False)
+    n = vt[2]
+    return n, float(-n @ c)
+
+
+def _towards_camera(n: np.ndarray, d: float) -> tuple[np.ndarray, float]:
+    return (n, d) if d >= 0 else (-n, -d)
+
+
+def _ransac_planes(points: np.ndarray, seed: int) -> list[tuple[np.ndarray, float, int]]:
+    """Peel planes off (N, 3) points with open3d RANSAC; returns (normal, offset, inlier count)."""
+    import open3d as o3d
+
+    o3d.utility.random.seed(int(seed))
+    remaining = points
+    min_inliers = max(200, int(_MIN_PLANE_FRACTION * len(points)))
+    planes = []
+    for _ in range(_MAX_PLANES):
+        if len(remaining) < min_inliers:
+            break
+        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(remaining))
+        model, inliers = pcd.segment_plane(distance_threshold=_RANSAC_THRESHOLD_M, ransac_n=3, num_iterations=400)
+        if len(inliers) < min_inliers:
+            break
+        n, d = _towards_camera(np.asarray(model[:3], dtype=np.float64), float(model[3]))
+        scale = np.linalg.norm(n)
+        planes.append((n / scale, d / scale, len(inliers)))
+        keep = np.ones(len(remaining), dtype=bool)
+        keep[np.asarray(inliers, dtype=np.int64)] = False
+        remaining = remaining[keep]
+    return planes
+
+
+def _refine(
+    points: np.ndarray, thr: np.ndarray, n: np.ndarray, d: float, seed: int, iterations: int = 3
+) -> tuple[np.ndarray, float, np.ndarray]:
+    """Refit a RANSAC plane on all (N, 3) points; returns normal, offset and the inlier mask
+    (within ``thr``, (N,) metres).
+
+    A RANSAC plane from a subsample at a loose threshold can be a few degrees off on a small
+    patch (a strip of carpet at the bottom of the photo), so first a tight RANSAC runs on the
+    points within 8 cm of it, then least squares on its inliers (capped at 3 cm so that far,
+    noisy points and the feet of furniture do not tilt the fit).
+    """
+    import open3d as o3d
+
+    near = np.flatnonzero(np.abs(points @ n + d) < 0.08)
+    if len(near) >= 3:
+        if len(near) > 20_000:
+            near = near[np.sort(np.random.default_rng(seed).choice(len(near), 20_000, replace=False))]
+        o3d.utility.random.seed(int(seed))
+        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[near]))
+        model, _ = pcd.segment_plane(distance_threshold=0.012, ransac_n=3, num_iterations=300)
+        n_new = np.asarray(model[:3], dtype=np.float64)
+        scale = np.linalg.norm(n_new)
+        n_new, d_new = n_new / scale, float(model[3]) / scale
+        if n_new @ n < 0:
+            n_new, d_new = -n_new, -d_new
+        n, d = n_new, d_new
+    fit_thr = np.minimum(thr, 0.03)
+    for _ in range(iterations):
+        inl = np.abs(points @ n + d) < fit_thr
+        if inl.sum() < 3:
+            break
+        n_new, d_new = _fit_plane(points[inl])
+        if n_new @ n < 0:
+            n_new, d_new = -n_new, -d_new
+        n, d = n_new, d_new
+    return n, d, np.abs(points @ n + d) < thr
+
+
+def _manhattan_up(planes: list[tuple[np.ndarray, float, int]], image_up: np.ndarray, cos_max: float) -> np.ndarray | None:
+    """Up from the near-horizontal RANSAC plane that most of the other planes agree with.
+
+    Each near-horizontal plane's normal is a hypothesis; it scores the inliers of every plane
+    parallel or perpendicular to it within 6 degrees (rooms are Manhattan: floors, table tops,
+    beds and the ceiling are parallel, walls and cabinet fronts perpendicular). A small, sloppy
+    floor patch that disagrees with the walls then loses to a bed top that agrees.
+    """
+    hyps = []
+    for n, _, count in planes:
+        c = float(n @ image_up)
+        if abs(c) > cos_max:
+            hyps.append((n if c > 0 else -n, count))
+    if not hyps:
+        return None
+    tol = np.sin(np.radians(6.0))
+
+    def score(u: np.ndarray) -> int:
+        return sum(cnt for m, _, cnt in planes if abs(m @ u) < tol or np.linalg.norm(np.cross(m, u)) < tol)
+
+    best = max(hyps, key=lambda h: (score(h[0]), h[1]))[0]
+    # Average the agreeing horizontal normals (weighted by support) for a steadier estimate.
+    agree = [(h if h @ best > 0 else -h) * cnt for h, cnt in hyps if np.linalg.norm(np.cross(h, best)) < tol]
+    return _unit(np.sum(agree, axis=0))
+
+
+def _lowest_surface(points: np.ndarray, up: np.ndarray, min_count: int) -> float | None:
+    """Offset (distance below the camera along ``up``) of the lowest horizontal layer of (N, 3)
+    points holding at least ``min_count`` of them within +-3 cm, or None."""
+    depth_below = -(points @ up)
+    bins = np.arange(np.floor(depth_below.min() / 0.02) * 0.02, depth_below.max() + 0.04, 0.02)
+    if len(bins) < 2:
+        return None
+    hist, edges = np.histogram(depth_below, bins=bins)
+    window = np.convolve(hist, np.ones(3, dtype=np.int64), mode="same")
+    ok = np.flatnonzero((window >= min_count) & (edges[:-1] > 0.2))  # at least 20 cm below the camera
+    if not len(ok):
+        return None
+    k = ok[-1]
+    # The local maximum of the layer that starts at the lowest qualifying bin.
+    while k > 0 and window[k - 1] > window[k]:
+        k -= 1
+    sel = np.abs(depth_below - (edges[k] + 0.01)) < 0.03
+    return float(np.median(depth_below[sel]))
+
+
+def world_from_camera_for(up_cam: np.ndarray, height_m: float, wall_normals_cam: list[np.ndarray] = ()) -> np.ndarray:
+    """(4, 4) world_from_camera for a camera whose up vector is ``up_cam`` at ``height_m`` above
+    the floor; X is the horizontal optical axis snapped to the nearest wall direction.
+
+    wall_normals_cam: horizontal wall normals in the camera frame, most supported first.
+    """
+    up = _unit(np.asarray(up_cam, dtype=np.float64))
+    fwd = np.array([0.0, 0.0, 1.0]) - up[2] * up
+    if np.linalg.norm(fwd) < 1e-6:  # looking straight down: image-up is forward
+        fwd = np.array([0.0, -1.0, 0.0]) - (-up[1]) * up
+    x = _unit(fwd)
+    if len(wall_normals_cam):
+        w = _unit(np.asarray(wall_normals_cam[0]) - (wall_normals_cam[0] @ up) * up)
+        candidates = [w, -w, np.cross(up, w), -np.cross(up, w)]
+        x = max(candidates, key=lambda c: float(c @ x))
+    y = np.cross(up, x)
+    rot = np.stack([x, y, up])  # rows: world axes in camera coordinates
+    return pose(rot, [0.0, 0.0, float(height_m)])
+
+
+def _world_walls(world_from_camera: np.ndarray, planes: list[CameraPlane]) -> tuple[Plane, ...]:
+    rot = world_from_camera[:3, :3]
+    walls = []
+    for p in planes:
+        if p.kind != "wall":
+            continue
+        n_w = rot @ p.normal
+        n_w[2] = 0.0
+        n_w = _unit(n_w)
+        # Vertical planes: the camera's height does not change the offset (n_w . t = 0).
+        walls.append(Plane(n_w, float(p.offset_m - n_w @ world_from_camera[:3, 3]), "wall", int(p.inliers.sum())))
+    return tuple(walls)
+
+
+def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0) -> RoomFrame:
+    """Find gravity, floor, walls and ceiling.
+
+    points_cam: (H, W, 3) float64 camera-frame points (from ``CameraIntrinsics.unproject``).
+    valid: (H, W) bool, pixels with usable depth.
+    """
+    h, w = valid.shape
+    flat_valid = valid.reshape(-1)
+    idx = np.flatnonzero(flat_valid)
+    pts = points_cam.reshape(-1, 3)[idx]
+    rng = np.random.default_rng(seed)
+    sample = pts if len(pts) <= RANSAC_SAMPLES else pts[np.sort(rng.choice(len(pts), RANSAC_SAMPLES, replace=False))]
+    planes = _ransac_planes(sample, seed)
+    thr = inlier_threshold_m(pts[:, 2])
+    image_up = np.array([0.0, -1.0, 0.0])
+    cos_floor = np.cos(np.radians(FLOOR_MAX_TILT_DEG))
+
+    def to_image(mask_flat: np.ndarray) -> np.ndarray:
+        out = np.zeros(h * w, dtype=bool)
+        out[idx[mask_flat]] = True
+        return out.reshape(h, w)
+
+    cam_planes: list[CameraPlane] = []
+    up0 = _manhattan_up(planes, image_up, cos_floor)
+    floor_d = None if up0 is None else _lowest_surface(sample, up0, max(200, int(_MIN_PLANE_FRACTION * len(sample))))
+    floor_found = floor_d is not None
+    if floor_found:
+        n, d, inl = _refine(pts, thr, up0, floor_d, seed)
+        n, d = _towards_camera(n, d)
+        if n @ up0 < np.cos(np.radians(8.0)):  # the patch was too small to tilt the consensus
+            n, d = up0, float(np.median(-(pts[inl] @ up0)))
+            inl = np.abs(pts @ n + d) < thr
+        up = n
+        height = d
+        below = (pts @ n + d) < -thr  # under the floor: reflections and noise, never objects
+        cam_planes.append(CameraPlane(n, d, "floor", to_image(inl | below)))
+        tilt = np.degrees(np.arccos(np.clip(up @ image_up, -1, 1)))
+        gravity = BackendUse("gravity", "floor-plane", f"floor plane from RANSAC, {int(inl.sum())} inliers, camera {tilt:.1f} deg from upright, {height:.2f} m high")
+    else:
+        verticals = [p for p in planes if abs(p[0] @ image_up) < np.sin(np.radians(FLOOR_MAX_TILT_DEG))]
+        pair = next(
+            ((a, b) for i, a in enumerate(verticals) for b in verticals[i + 1 :] if np.linalg.norm(np.cross(a[0], b[0])) > np.sin(np.radians(30.0))),
+            None,
+        )
+        if pair is not None:
+            up = _unit(np.cross(pair[0][0], pair[1][0]))
+            up = up if up @ image_up > 0 else -up
+            gravity = BackendUse("gravity", "vertical-planes", "no floor visible; up from the intersection of two vertical planes, floor put under the lowest object point")
+        else:
+            t = np.radians(TYPICAL_PITCH_DEG)
+            up = np.array([0.0, -np.cos(t), -np.sin(t)])
+            gravity = BackendUse(
+                "gravity", "camera-prior", f"no floor or vertical structure found; assumed the camera upright with a {TYPICAL_PITCH_DEG:.0f} deg downward pitch, floor under the lowest object point"
+            )
+        height = float(-np.quantile(pts @ up, 0.005))
+
+    # Walls (vertical, little seen behind them) and the ceiling (horizontal, above the camera).
+    sin_wall = np.sin(np.radians(WALL_MAX_TILT_DEG))
+    for n0, d0, count in sorted(planes, key=lambda p: -p[2]):
+        if abs(n0 @ up) < sin_wall:
+            n = _unit(n0 - (n0 @ up) * up)
+            _, _, inl = _refine(pts, thr, n, d0, seed, iterations=1)
+            if inl.sum() < 3:
+                continue
+            d = float(np.median(-(pts[inl] @ n)))
+            n, d = _towards_camera(n, d)
+            dist = pts @ n + d
+            inl = np.abs(dist) < thr
+            behind = int((dist < -3.0 * thr).sum())
+            if behind > 0.5 * inl.sum():  # a piece of furniture in front of the real wall
+                continue
+            if any(p.kind == "wall" and abs(p.normal @ n) > np.cos(np.radians(5.0)) and abs(p.offset_m - d) < 0.1 for p in cam_planes):
+                continue
+            cam_planes.append(CameraPlane(n, d, "wall", to_image(inl)))
+        elif floor_found and -(n0 @ up) > cos_floor and (n0 @ up) * d0 < 0:
+            # A horizontal plane whose normal points down at the camera: the ceiling.
+            n, d, inl = _refine(pts, thr, n0, d0, seed, iterations=1)
+            above = (pts @ n + d) < -thr
+            cam_planes.append(CameraPlane(n, d, "ceiling", to_image(inl | above)))
+
+    walls_cam = [p.normal for p in sorted((p for p in cam_planes if p.kind == "wall"), key=lambda p: -int(p.inliers.sum()))]
+    world_from_camera = world_from_camera_for(up, height, walls_cam)
+    background = np.zeros((h, w), dtype=bool)
+    for p in cam_planes:
+        background |= p.inliers
+    return RoomFrame(
+        world_from_camera=world_from_camera,
+        up_cam=up,
+        room=Room(walls=_world_walls(world_from_camera, cam_planes)),
+        background=background,
+        floor_found=floor_found,
+        gravity=gravity,
+        planes=tuple(cam_planes),
+    )
+
+
+def place_floor_under(frame: RoomFrame, lowest_z_m: float) -> RoomFrame:
+    """The same frame with the floor moved to ``lowest_z_m`` (world z of the lowest object point)."""
+    t = frame.world_from_camera.copy()
+    t[2, 3] -= lowest_z_m
+    return replace(frame, world_from_camera=t, room=Room(walls=_world_walls(t, list(frame.planes))))
