@@ -168,3 +168,24 @@ def test_register_backends_reports_missing_weights(tmp_path, monkeypatch):
     assert "geometry_question.txt" in entry.available()
     (tmp_path / "physx-anything" / "geometry_question.txt").write_text("q")
     assert entry.available() is None
+
+
+@pytest.mark.slow
+def test_canned_answers_become_an_articulated_asset_with_computed_mass():
+    pytest.importorskip("generation.assembly", reason="the generator's assemble_asset is not in this checkout")
+    from generation.physx.convert import to_object_asset
+    from scene_builder.config import GenerationConfig
+    from scene_builder.model import AssetKind
+
+    conv = run_conversation(CannedCabinet(), np.zeros((32, 32, 3), np.uint8), _prompts())
+    obj, _ = physx_from_conversation(conv)
+    cfg = GenerationConfig(coacd_threshold=0.3, max_visual_faces=1000, max_collision_pieces=4)
+    asset = to_object_asset(obj, "cabinet_1", "cabinet", config=cfg)
+    assert asset.kind is AssetKind.ARTICULATED
+    door = next(p for p in asset.parts if p.name == "cabinet_door")
+    assert door.parent == "cabinet_frame" and door.joint.type is JointType.REVOLUTE
+    # mass from the meshes agrees with density x voxel volume (marching cubes at level 0.5)
+    assert asset.mass_kg == pytest.approx(obj.voxel_mass_kg, rel=0.15)
+    for p in asset.parts:
+        assert p.inertial.mass_kg == pytest.approx(700.0 * obj.part(p.name).volume_m3, rel=0.2)
+    assert np.allclose(asset.size_m, [0.40, 1.00, 0.80], atol=0.02)
