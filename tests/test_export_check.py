@@ -1,0 +1,79 @@
+"""``check_output`` passes a good export and names what is wrong in a broken one."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+
+from exporters import check_output, export_scene
+from scene_builder.config import ExportConfig
+from tests.fixtures_scenes import mixed_scene, pillow_scene
+
+
+@pytest.fixture(scope="module")
+def good(tmp_path_factory):
+    scene = mixed_scene()
+    out = tmp_path_factory.mktemp("good")
+    files = export_scene(scene, out, ExportConfig(viz="off"))
+    assert all(p is not None and p.is_file() for p in (files.mjcf, files.usd, files.urdf, files.gltf))
+    report = {
+        "timings_s": {"export": 0.5},
+        "objects": [{"name": o.name} for o in scene.objects],
+        "layout": {"max_penetration_m": 0.0, "settle_max_drift_m": 0.0004},
+    }
+    (out / "report.json").write_text(json.dumps(report))
+    return scene, out
+
+
+def _copy(src, dst):
+    shutil.copytree(src, dst)
+    return dst
+
+
+def test_good_export_passes(good):
+    assert check_output(good[1]) == ()
+
+
+def test_deformable_export_passes(tmp_path):
+    export_scene(pillow_scene(), tmp_path, ExportConfig(viz="off"))
+    assert check_output(tmp_path) == ()
+
+
+def test_missing_mesh_is_reported(good, tmp_path):
+    out = _copy(good[1], tmp_path / "o")
+    (out / "meshes" / "cabinet__door__collision_0.obj").unlink()
+    problems = check_output(out)
+    assert any("cabinet__door__collision_0.obj" in p and "scene.xml" in p for p in problems)
+    assert any("cabinet__door__collision_0.obj" in p and "scene.urdf" in p for p in problems)
+
+
+def test_mesh_outside_the_folder_is_reported(good, tmp_path):
+    out = _copy(good[1], tmp_path / "o")
+    xml = (out / "scene.urdf").read_text().replace('filename="meshes/box_a__body__visual.obj"', f'filename="{good[1]}/meshes/box_a__body__visual.obj"')
+    (out / "scene.urdf").write_text(xml)
+    assert any("outside the output folder" in p for p in check_output(out))
+
+
+def test_report_inconsistencies_are_reported(good, tmp_path):
+    out = _copy(good[1], tmp_path / "o")
+    report = json.loads((out / "report.json").read_text())
+    report["objects"] = report["objects"][:-1]
+    del report["layout"]["settle_max_drift_m"]
+    (out / "report.json").write_text(json.dumps(report))
+    problems = check_output(out)
+    assert any("settle_max_drift_m" in p for p in problems)
+    assert any("differ" in p and "box_on_cabinet" in p for p in problems)
+
+
+def test_invalid_usd_and_unstable_mjcf_are_reported(good, tmp_path):
+    out = _copy(good[1], tmp_path / "o")
+    usda = (out / "scene.usda").read_text().replace("</World/Objects/cabinet/door>", "</World/Objects/cabinet/nowhere>")
+    (out / "scene.usda").write_text(usda)
+    # Drop box_b 5 cm into box_a: the contact solver throws it out violently.
+    xml = (out / "scene.xml").read_text().replace('name="box_b" pos="0.4 -0.6 0.3"', 'name="box_b" pos="0.4 -0.6 0.1"')
+    (out / "scene.xml").write_text(xml)
+    problems = check_output(out)
+    assert any("scene.usda" in p and "door_joint" in p for p in problems)
+    assert any("scene.xml" in p and "box_b" in p for p in problems)
