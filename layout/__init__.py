@@ -1,0 +1,27 @@
+"""Layout: poses in the world (initial poses, Manhattan yaw snapping, support graph,
+penetration-free solver) and the physics verdict and render-and-compare from the exported MJCF.
+
+Importing this package is cheap: the entry functions load their modules (and MuJoCo) on first use.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+__all__ = ["adopt_settled", "solve_layout", "verify_scene"]
+
+if TYPE_CHECKING:  # pragma: no cover
+    from layout.solver import solve_layout
+    from layout.verify import adopt_settled, verify_scene
+
+
+def __getattr__(name: str):
+    if name == "solve_layout":
+        from layout.solver import solve_layout
+
+        return solve_layout
+    if name in ("verify_scene", "adopt_settled"):
+        from layout import verify
+
+        return getattr(verify, name)
+    raise AttributeError(f"module 'layout' has no attribute {name!r}")

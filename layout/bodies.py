@@ -1,0 +1,90 @@
+"""The solver's working state for one object (internal to ``layout``; never passed between stages)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from layout.geometry import Piece, SupportSurface, footprint, object_pieces, top_surfaces
+from scene_builder.model import ObjectAsset
+
+
+@dataclass(eq=False)
+class Body:
+    """One object while the solver moves it: fixed rotation, a position that changes.
+
+    rotation: (3, 3) world_from_asset rotation (after yaw snapping).
+    position_m: (3,) world_from_asset translation, updated in place by the solver.
+    initial_position_m: (3,) the translation the solver started from.
+    pieces / surfaces / footprint_rel_m: geometry relative to ``position_m`` in world axes.
+    lo_rel_m, hi_rel_m: (3,) bounds of all pieces relative to ``position_m``.
+    piece_lo_rel_m, piece_hi_rel_m: (K, 3) bounds of each piece relative to ``position_m``.
+    com_rel_m: (3,) centre of mass relative to ``position_m``.
+    """
+
+    name: str
+    asset: ObjectAsset
+    rotation: np.ndarray
+    position_m: np.ndarray
+    initial_position_m: np.ndarray
+    pieces: tuple[Piece, ...]
+    surfaces: tuple[SupportSurface, ...]
+    footprint_rel_m: np.ndarray
+    lo_rel_m: np.ndarray
+    hi_rel_m: np.ndarray
+    piece_lo_rel_m: np.ndarray
+    piece_hi_rel_m: np.ndarray
+    com_rel_m: np.ndarray
+    mass_kg: float
+    fixed: bool
+    parent: int = -1  # index of the supporting body; -1 floor, -2 wall
+    support_surface: int = -1  # index into the parent's ``surfaces`` when parent >= 0
+    children: list[int] = field(default_factory=list)
+
+    @property
+    def bottom_m(self) -> float:
+        return float(self.position_m[2] + self.lo_rel_m[2])
+
+    @property
+    def height_m(self) -> float:
+        return float(self.hi_rel_m[2] - self.lo_rel_m[2])
+
+    def world_from_asset(self) -> np.ndarray:
+        t = np.eye(4)
+        t[:3, :3] = self.rotation
+        t[:3, 3] = self.position_m
+        return t
+
+    def world_vertices(self) -> np.ndarray:
+        """(V, 3) all collision vertices in the world."""
+        return np.concatenate([p.verts_rel_m for p in self.pieces]) + self.position_m
+
+
+def make_body(asset: ObjectAsset, world_from_asset: np.ndarray) -> Body:
+    """Working state of ``asset`` placed at ``world_from_asset`` (4, 4)."""
+    rotation = np.array(world_from_asset[:3, :3], dtype=np.float64)
+    position = np.array(world_from_asset[:3, 3], dtype=np.float64)
+    pieces = object_pieces(asset, rotation)
+    lo = np.min([p.lo_rel_m for p in pieces], axis=0)
+    hi = np.max([p.hi_rel_m for p in pieces], axis=0)
+    band = max(0.01, 0.05 * float(hi[2] - lo[2]))
+    masses = np.array([p.inertial.mass_kg for p in asset.parts])
+    com_asset = np.sum([p.inertial.mass_kg * p.inertial.com_m for p in asset.parts], axis=0) / masses.sum()
+    return Body(
+        name=asset.name,
+        asset=asset,
+        rotation=rotation,
+        position_m=position,
+        initial_position_m=position.copy(),
+        pieces=pieces,
+        surfaces=top_surfaces(pieces),
+        footprint_rel_m=footprint(pieces, band),
+        lo_rel_m=lo,
+        hi_rel_m=hi,
+        piece_lo_rel_m=np.array([p.lo_rel_m for p in pieces]),
+        piece_hi_rel_m=np.array([p.hi_rel_m for p in pieces]),
+        com_rel_m=rotation @ com_asset,
+        mass_kg=float(masses.sum()),
+        fixed=bool(asset.is_fixed),
+    )

@@ -1,0 +1,387 @@
+"""The layout solver: initial poses, Manhattan yaw snapping, support graph, and a penetration-free
+placement that stays as close as it can to the observation.
+
+Method
+------
+1. Start from each ``GeneratedAsset.world_from_asset`` (the pose that best explains the observed
+   points); snap its yaw to the walls when the points agree (``layout.snapping``).
+2. Build the support graph bottom-up and set each object's height so that its bottom touches its
+   support exactly (``layout.support``). Heights never change after this.
+3. Remove interpenetration by the smallest horizontal moves, Gauss-Seidel over the colliding
+   pairs until nothing moves: broad phase by a sort-and-sweep of object boxes, exact narrow
+   phase between convex pieces by MuJoCo's GJK/EPA (``layout.narrowphase``); a colliding pair is
+   pushed apart along the horizontal minimum-translation vector of the pieces clipped to their
+   common height band (``layout.geometry.horizontal_mtv``) plus ``clearance_m``, the move split
+   by mass (fixed furniture does not move); an object carries everything resting on it. Walls
+   push objects back to the room side; an object resting on another keeps its centre of mass
+   over the supporting face.
+Since every move is the minimum that removes a violation, the result is the nearest feasible
+layout that the greedy scheme reaches, i.e. the least deviation from the observation it can find.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from layout.bodies import Body, make_body
+from layout.geometry import clip_to_slab_xy, closest_point_in_polygon, horizontal_mtv, hull_edge_normals
+from layout.narrowphase import ConvexWorld
+from layout.snapping import YawSnap, reference_yaw, snap_yaw
+from layout.support import build_support, subtree
+from scene_builder.config import LayoutConfig
+from scene_builder.errors import InputError
+from scene_builder.model import GeneratedAsset, LayoutResult, Perception, PlacedObject, Plane, Scene
+
+# Signed distances above -PENETRATION_TOL_M count as touching (resting contacts are exact up to
+# floating point).
+PENETRATION_TOL_M = 1e-5
+# A wall-clearance shortfall smaller than this is not worth a move.
+CLEARANCE_TOL_M = 1e-4
+# Hysteresis: neighbours are pushed apart to the full clearance, but only once their gap falls
+# below this share of it. Without the slack, jammed clusters trade sub-millimetre clearance
+# shortfalls around a cycle forever.
+CLEARANCE_TRIGGER = 0.5
+# A pair pushed apart this many times is from then on separated as a whole (see pair_push).
+ESCALATE_AFTER_PUSHES = 4
+# Centre of mass kept this far inside a supporting face.
+SUPPORT_INSET_M = 0.01
+
+
+@dataclass(frozen=True)
+class SolveStats:
+    """Diagnostics of one solve (for benchmarks and tests).
+
+    snaps: per object (input order). mean_shift_m / max_shift_m: plan displacement of the objects
+    from their (snapped) starting position. converged: no violation was left to fix.
+    """
+
+    snaps: tuple[YawSnap, ...]
+    mean_shift_m: float
+    max_shift_m: float
+    converged: bool
+    iterations: int
+
+
+def candidate_pairs(lo_m: np.ndarray, hi_m: np.ndarray, margin_m: float) -> np.ndarray:
+    """Broad phase: (P, 2) index pairs i < j whose boxes (N, 3) overlap when grown by ``margin_m``.
+
+    Sort-and-sweep on x (vectorised), then a y/z box test: O(N log N + P) for scattered objects.
+    Pairs are sorted lexicographically, so the solver's visiting order is deterministic.
+    """
+    n = len(lo_m)
+    if n < 2:
+        return np.zeros((0, 2), dtype=np.int64)
+    order = np.argsort(lo_m[:, 0], kind="stable")
+    xs_lo = lo_m[order, 0]
+    end = np.searchsorted(xs_lo, hi_m[order, 0] + margin_m, side="right")
+    counts = np.maximum(end - np.arange(1, n + 1), 0)
+    total = int(counts.sum())
+    if total == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    a = np.repeat(np.arange(n), counts)
+    starts = np.cumsum(counts) - counts
+    b = a + 1 + (np.arange(total) - np.repeat(starts, counts))
+    ia, ib = order[a], order[b]
+    keep = np.all(lo_m[ia, 1:] <= hi_m[ib, 1:] + margin_m, axis=1) & np.all(lo_m[ib, 1:] <= hi_m[ia, 1:] + margin_m, axis=1)
+    pairs = np.sort(np.stack([ia[keep], ib[keep]], axis=1), axis=1)
+    return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+
+
+class _Solver:
+    def __init__(self, bodies: list[Body], walls: tuple[Plane, ...], config: LayoutConfig) -> None:
+        self.bodies = bodies
+        self.walls = walls
+        self.clearance = float(config.clearance_m)
+        self.world = ConvexWorld([b.pieces for b in bodies])
+        # Walls are vertical planes: an object's distance to a wall is the minimum over its
+        # (fixed-rotation) vertices of n . v, precomputed once, plus n . position.
+        self.wall_n = np.array([w.normal for w in walls], dtype=np.float64).reshape(-1, 3)
+        self.wall_off = np.array([w.offset_m for w in walls], dtype=np.float64)
+        self.wall_min_rel = np.array(
+            [[float(np.min(np.concatenate([p.verts_rel_m for p in b.pieces]) @ n)) for n in self.wall_n] for b in bodies]
+        ).reshape(len(bodies), len(walls))
+        for i, b in enumerate(bodies):
+            self.world.set_position(i, b.position_m)
+        # Pairs found fine, with the body versions they were checked at: re-checked only after
+        # one of the two moved.
+        self.version = np.zeros(len(bodies), dtype=np.int64)
+        self.checked: dict[tuple[int, int], tuple[int, int]] = {}
+        self.push_count: dict[tuple[int, int], int] = {}
+
+    # -- state -------------------------------------------------------------------------------
+    def boxes(self) -> tuple[np.ndarray, np.ndarray]:
+        pos = np.array([b.position_m for b in self.bodies])
+        lo = np.array([b.lo_rel_m for b in self.bodies]) + pos
+        hi = np.array([b.hi_rel_m for b in self.bodies]) + pos
+        return lo, hi
+
+    def move_tree(self, i: int, delta_xy: np.ndarray) -> None:
+        for k in subtree(self.bodies, i):
+            self.bodies[k].position_m[:2] += delta_xy
+            self.world.set_position(k, self.bodies[k].position_m)
+            self.version[k] += 1
+
+    def wall_gaps(self, k: int) -> np.ndarray:
+        """(W,) signed distance of body k to each wall."""
+        return self.wall_min_rel[k] + self.wall_n @ self.bodies[k].position_m + self.wall_off
+
+    def free_travel(self, i: int, direction: np.ndarray) -> float:
+        """How far body i (with what rests on it) can slide along ``direction`` (2,) before it
+        comes within the clearance of a wall (inf without walls in the way)."""
+        if not len(self.wall_n):
+            return np.inf
+        c = self.wall_n[:, :2] @ direction
+        towards = c < -1e-9
+        if not np.any(towards):
+            return np.inf
+        travel = np.inf
+        for k in subtree(self.bodies, i):
+            gap = self.wall_gaps(k)[towards] - self.clearance
+            travel = min(travel, float(np.min(np.maximum(gap, 0.0) / -c[towards])))
+        return travel
+
+    def tree_mass(self, i: int) -> float:
+        return float(sum(self.bodies[k].mass_kg for k in subtree(self.bodies, i)))
+
+    # -- constraints ---------------------------------------------------------------------------
+    def piece_pairs(self, i: int, j: int, margin: float) -> np.ndarray:
+        bi, bj = self.bodies[i], self.bodies[j]
+        lo_i, hi_i = bi.piece_lo_rel_m + bi.position_m, bi.piece_hi_rel_m + bi.position_m
+        lo_j, hi_j = bj.piece_lo_rel_m + bj.position_m, bj.piece_hi_rel_m + bj.position_m
+        ok = np.all(lo_i[:, None, :] <= hi_j[None, :, :] + margin, axis=2) & np.all(lo_j[None, :, :] <= hi_i[:, None, :] + margin, axis=2)
+        return np.argwhere(ok)
+
+    def pair_push(self, i: int, j: int, whole: bool = False) -> tuple[np.ndarray, float]:
+        """Horizontal direction (2,) and amount (m) to move j relative to i; amount 0 when fine.
+
+        By default the push is the largest of the minimal pushes of the violating piece pairs.
+        ``whole``: separate the convex hulls of all violating pieces of each body instead (used
+        when minimal pushes cycle, e.g. a table top sliding between another table's legs).
+        """
+        bi, bj = self.bodies[i], self.bodies[j]
+        direct = bi.parent == j or bj.parent == i
+        best_dir, best_amount = np.zeros(2), 0.0
+        involved: list[tuple[int, int, float]] = []
+        for a, b in self.piece_pairs(i, j, self.clearance):
+            d, _ = self.world.distance(self.world.geom_ids[i][a], self.world.geom_ids[j][b], self.clearance + 1e-3)
+            z_lo = max(bi.piece_lo_rel_m[a, 2] + bi.position_m[2], bj.piece_lo_rel_m[b, 2] + bj.position_m[2])
+            z_hi = min(bi.piece_hi_rel_m[a, 2] + bi.position_m[2], bj.piece_hi_rel_m[b, 2] + bj.position_m[2])
+            thick = z_hi - z_lo
+            if direct:
+                # Resting on each other: touching is the point; only real overlap is fixed.
+                violated = d < -PENETRATION_TOL_M
+            else:
+                violated = d < -PENETRATION_TOL_M or (d < CLEARANCE_TRIGGER * self.clearance and thick > self.clearance)
+            if not violated or thick <= 0.0:
+                continue
+            involved.append((int(a), int(b), d))
+            if whole:
+                continue
+            pa, pb = bi.pieces[a], bj.pieces[b]
+            xa = clip_to_slab_xy(pa.verts_rel_m + bi.position_m, pa.edges, z_lo, z_hi)
+            xb = clip_to_slab_xy(pb.verts_rel_m + bj.position_m, pb.edges, z_lo, z_hi)
+            if len(xa) == 0 or len(xb) == 0:
+                continue
+            u, overlap = horizontal_mtv(xa, xb, np.concatenate([pa.axes_xy, pb.axes_xy]))
+            amount = overlap + self.clearance
+            if amount <= 1e-9:
+                # Projections already apart, yet the pieces are closer than the clearance
+                # (slanted faces): open the gap by the shortfall.
+                amount = self.clearance - d
+            if amount > best_amount:
+                best_dir, best_amount = u, amount
+        if whole and involved:
+            return self._hull_push(i, j, involved)
+        return best_dir, best_amount
+
+    def _hull_push(self, i: int, j: int, involved: list[tuple[int, int, float]]) -> tuple[np.ndarray, float]:
+        bi, bj = self.bodies[i], self.bodies[j]
+        ai = sorted({a for a, _, _ in involved})
+        aj = sorted({b for _, b, _ in involved})
+        z_lo = max(min(bi.piece_lo_rel_m[a, 2] for a in ai) + bi.position_m[2], min(bj.piece_lo_rel_m[b, 2] for b in aj) + bj.position_m[2])
+        z_hi = min(max(bi.piece_hi_rel_m[a, 2] for a in ai) + bi.position_m[2], max(bj.piece_hi_rel_m[b, 2] for b in aj) + bj.position_m[2])
+        xa = np.concatenate([clip_to_slab_xy(bi.pieces[a].verts_rel_m + bi.position_m, bi.pieces[a].edges, z_lo, z_hi) for a in ai])
+        xb = np.concatenate([clip_to_slab_xy(bj.pieces[b].verts_rel_m + bj.position_m, bj.pieces[b].edges, z_lo, z_hi) for b in aj])
+        if len(xa) == 0 or len(xb) == 0:
+            return np.zeros(2), 0.0
+        axes = np.concatenate([hull_edge_normals(xa), hull_edge_normals(xb)])
+        u, overlap = horizontal_mtv(xa, xb, axes)
+        worst = min(d for _, _, d in involved)
+        return u, max(overlap + self.clearance, self.clearance - worst)
+
+    def movers(self, i: int, j: int) -> tuple[int, int]:
+        """The bodies that move when i and j collide: for each, its highest support ancestor
+        below their lowest common one (-1: none moves on that side, i.e. it supports the other).
+
+        Two boxes on one table slide on the table; a box on table A touching table B moves all
+        of A (what rests on a body travels with it, and a push that the support-containment step
+        would undo is never tried)."""
+        path_i, path_j = [i], [j]
+        while self.bodies[path_i[-1]].parent >= 0:
+            path_i.append(self.bodies[path_i[-1]].parent)
+        while self.bodies[path_j[-1]].parent >= 0:
+            path_j.append(self.bodies[path_j[-1]].parent)
+        common = set(path_i) & set(path_j)
+
+        def branch(path: list[int]) -> int:
+            out = -1
+            for k in path:
+                if k in common:
+                    break
+                out = k
+            return out
+
+        return branch(path_i), branch(path_j)
+
+    def resolve_pair(self, i: int, j: int) -> bool:
+        bodies = self.bodies
+        if self.checked.get((i, j)) == (self.version[i], self.version[j]):
+            return False
+        mover_i, mover_j = self.movers(i, j)
+        share_i = 0.0 if mover_i < 0 or bodies[mover_i].fixed else 1.0
+        share_j = 0.0 if mover_j < 0 or bodies[mover_j].fixed else 1.0
+        if share_i == 0.0 and share_j == 0.0:
+            return False
+        if share_i > 0.0 and share_j > 0.0:
+            # Split by mass: the lighter stack moves more.
+            mi, mj = self.tree_mass(mover_i), self.tree_mass(mover_j)
+            share_i, share_j = mj / (mi + mj), mi / (mi + mj)
+        # Minimal pushes first; a pair pushed again and again is separated as a whole.
+        pushes = self.push_count.get((i, j), 0)
+        u, amount = self.pair_push(i, j, whole=pushes >= ESCALATE_AFTER_PUSHES)
+        if amount <= 0.0:
+            self.checked[(i, j)] = (self.version[i], self.version[j])
+            return False
+        self.push_count[(i, j)] = pushes + 1
+        # A body that a wall stops hands the rest of the move to the other one.
+        move_j = amount * share_j
+        move_i = amount - move_j
+        if share_i > 0 and share_j > 0:
+            move_j = min(move_j, self.free_travel(mover_j, u))
+            move_i = amount - move_j
+            if move_i > self.free_travel(mover_i, -u):
+                move_i = self.free_travel(mover_i, -u)
+                move_j = amount - move_i
+        if move_j > 0:
+            self.move_tree(mover_j, u * move_j)
+        if move_i > 0:
+            self.move_tree(mover_i, -u * move_i)
+        return True
+
+    def push_out_of_walls(self) -> bool:
+        moved = False
+        for i in range(len(self.bodies)):
+            for w, gap in enumerate(self.wall_gaps(i)):
+                n_xy = self.wall_n[w, :2]
+                norm = float(np.linalg.norm(n_xy))
+                short = self.clearance - gap
+                if norm > 1e-9 and short > CLEARANCE_TOL_M:
+                    self.move_tree(i, n_xy / norm * (short / norm))
+                    moved = True
+        return moved
+
+    def keep_on_support(self) -> bool:
+        moved = False
+        for i, b in enumerate(self.bodies):
+            if b.parent < 0 or b.fixed:
+                continue
+            s = self.bodies[b.parent]
+            poly = s.surfaces[b.support_surface].polygon_rel_m + s.position_m[:2]
+            com = b.position_m[:2] + b.com_rel_m[:2]
+            target = closest_point_in_polygon(com, poly, SUPPORT_INSET_M)
+            delta = target - com
+            if float(np.linalg.norm(delta)) > 1e-6:
+                self.move_tree(i, delta)
+                moved = True
+        return moved
+
+    def run(self, max_iterations: int) -> tuple[int, bool]:
+        for it in range(max_iterations):
+            moved = False
+            lo, hi = self.boxes()
+            for i, j in candidate_pairs(lo, hi, self.clearance):
+                moved |= self.resolve_pair(int(i), int(j))
+            moved |= self.push_out_of_walls()
+            moved |= self.keep_on_support()
+            if not moved:
+                return it + 1, True
+        return max_iterations, False
+
+    # -- measurement ---------------------------------------------------------------------------
+    def max_penetration(self) -> float:
+        """Deepest overlap (m) between pieces of distinct objects, and of objects with the floor
+        and the walls, measured exactly (GJK/EPA)."""
+        worst = 0.0
+        lo, hi = self.boxes()
+        for i, j in candidate_pairs(lo, hi, 0.0):
+            for a, b in self.piece_pairs(int(i), int(j), 0.0):
+                d, _ = self.world.distance(self.world.geom_ids[i][a], self.world.geom_ids[j][b], 0.0)
+                worst = max(worst, -d)
+        for b in self.bodies:
+            worst = max(worst, -b.bottom_m)
+            if self.walls:
+                v = b.world_vertices()
+                worst = max(worst, max(-float(np.min(w.signed_distance_m(v))) for w in self.walls))
+        return worst
+
+
+def solve_layout_with_stats(
+    perception: Perception, generated: tuple[GeneratedAsset, ...], config: LayoutConfig, seed: int = 0
+) -> tuple[LayoutResult, SolveStats]:
+    """:func:`solve_layout` plus diagnostics (snapping decisions, displacements)."""
+    names = [g.asset.name for g in generated]
+    if len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise InputError(f"layout: object names must be unique, repeated: {', '.join(dup)}; rename the assets")
+    # Work in name order so that the result does not depend on the input order.
+    order = sorted(range(len(generated)), key=lambda k: names[k])
+    ref = reference_yaw(perception.room)
+    snaps: list[YawSnap] = [YawSnap(False, 0.0, np.nan, np.nan)] * len(generated)
+    bodies: list[Body] = []
+    for k in order:
+        g = generated[k]
+        pose, snap = snap_yaw(g.asset, g.world_from_asset, g.observed_points_world_m, ref, seed=seed + k)
+        snaps[k] = snap
+        bodies.append(make_body(g.asset, pose))
+    if not bodies:
+        scene = Scene(camera=perception.camera, room=perception.room, objects=())
+        return LayoutResult(scene=scene, support=()), SolveStats(tuple(snaps), 0.0, 0.0, True, 0)
+
+    walls = tuple(perception.room.walls)
+    solver = _Solver(bodies, walls, config)
+    before = solver.max_penetration()
+    edges, _ = build_support(bodies, walls)
+    for i, b in enumerate(bodies):
+        solver.world.set_position(i, b.position_m)
+    iterations, converged = solver.run(int(config.max_iterations))
+    after = solver.max_penetration()
+
+    by_name = {b.name: b for b in bodies}
+    parent_of = {e.child: e.parent for e in edges}
+    placed = tuple(
+        PlacedObject(asset=g.asset, world_from_asset=by_name[g.asset.name].world_from_asset(), support=parent_of[g.asset.name])
+        for g in generated
+    )
+    scene = Scene(camera=perception.camera, room=perception.room, objects=placed)
+    edge_order = {n: k for k, n in enumerate(names)}
+    support = tuple(sorted(edges, key=lambda e: edge_order[e.child]))
+    shifts = np.array([np.linalg.norm(b.position_m[:2] - b.initial_position_m[:2]) for b in bodies])
+    stats = SolveStats(tuple(snaps), float(shifts.mean()), float(shifts.max()), converged, iterations)
+    return (
+        LayoutResult(scene=scene, support=support, iterations=iterations, max_penetration_before_m=before, max_penetration_after_m=after),
+        stats,
+    )
+
+
+def solve_layout(
+    perception: Perception, generated: tuple[GeneratedAsset, ...], config: LayoutConfig, seed: int = 0
+) -> LayoutResult:
+    """Place the generated assets in the world: gravity-aligned, no interpenetration (objects,
+    floor, walls), every object resting on its support, as close to the observation as possible.
+
+    ``seed`` only picks the subsample of observed points used for yaw snapping; the result is a
+    deterministic function of the inputs and the seed. ``scene.objects`` keeps the input order.
+    """
+    return solve_layout_with_stats(perception, generated, config, seed)[0]

@@ -1,0 +1,121 @@
+"""Support graph: which object rests on which (floor, another object's top face, or a wall), built
+bottom-up from geometry, and the vertical placement that makes each resting contact exact."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from layout.bodies import Body
+from layout.geometry import clip_convex_polygons, polygon_area
+from scene_builder.model import Plane, SupportEdge
+
+FLOOR, WALL = -1, -2
+# A top face counts as a support when it lies below the object's bottom + this tolerance
+# (observed bottoms sink into supports by depth noise and by completion errors).
+SUPPORT_TOL_MIN_M = 0.05
+SUPPORT_TOL_HEIGHT_FRACTION = 0.25
+# Share of the object's footprint that must lie over the face.
+MIN_FOOTPRINT_OVERLAP = 0.25
+# Faces lower than this are the floor's business.
+MIN_SURFACE_HEIGHT_M = 0.02
+# Fixed furniture this close to a wall and off the floor hangs on the wall.
+WALL_CONTACT_M = 0.05
+
+
+def _footprint_world(b: Body) -> np.ndarray:
+    return b.footprint_rel_m + b.position_m[:2]
+
+
+def _overlap_fraction(foot: np.ndarray, poly: np.ndarray) -> float:
+    area = polygon_area(foot)
+    if area <= 1e-8:
+        # Degenerate footprint (a point or a line): inside or not, by its centroid.
+        c = foot.mean(axis=0)
+        d = np.roll(poly, -1, axis=0) - poly
+        side = d[:, 0] * (c[1] - poly[:, 1]) - d[:, 1] * (c[0] - poly[:, 0])
+        return 1.0 if np.all(side >= 0) else 0.0
+    return polygon_area(clip_convex_polygons(foot, poly)) / area
+
+
+def _near_wall(b: Body, walls: tuple[Plane, ...]) -> bool:
+    if not walls:
+        return False
+    v = b.world_vertices()
+    return any(float(np.min(w.signed_distance_m(v))) < WALL_CONTACT_M for w in walls)
+
+
+def build_support(bodies: list[Body], walls: tuple[Plane, ...]) -> tuple[list[SupportEdge], list[int]]:
+    """Assign each body its support and set its height so that it rests exactly on it.
+
+    Bodies are processed bottom-up (by initial bottom height, then name), and a body can only rest
+    on a body processed before it, so the graph has no cycles. A body rests on the highest top
+    face (of an earlier body) that lies below its bottom + tolerance and under at least 25 % of
+    its footprint; else fixed furniture off the floor and against a wall hangs on the wall (its
+    height is kept); else it stands on the floor. Updates ``position_m[2]``, ``parent`` and
+    ``children`` in place. Returns the edges (in processing order) and the processing order.
+    """
+    order = sorted(range(len(bodies)), key=lambda i: (bodies[i].bottom_m, bodies[i].name))
+    edges: list[SupportEdge] = []
+    placed: list[int] = []
+    for b in bodies:
+        b.parent, b.support_surface, b.children = FLOOR, -1, []
+    for i in order:
+        b = bodies[i]
+        bottom = b.bottom_m
+        tol = max(SUPPORT_TOL_MIN_M, SUPPORT_TOL_HEIGHT_FRACTION * b.height_m)
+        foot = _footprint_world(b)
+        lo_xy = foot.min(axis=0)
+        hi_xy = foot.max(axis=0)
+        best: tuple[float, float, int, int] | None = None  # (height, overlap, body, surface)
+        for j in placed:
+            s = bodies[j]
+            s_lo = s.position_m[:2] + s.lo_rel_m[:2]
+            s_hi = s.position_m[:2] + s.hi_rel_m[:2]
+            if np.any(s_lo > hi_xy) or np.any(s_hi < lo_xy):
+                continue
+            for k, surf in enumerate(s.surfaces):
+                h = float(s.position_m[2] + surf.height_rel_m)
+                if h < MIN_SURFACE_HEIGHT_M or h > bottom + tol:
+                    continue
+                frac = _overlap_fraction(foot, surf.polygon_rel_m + s.position_m[:2])
+                if frac < MIN_FOOTPRINT_OVERLAP:
+                    continue
+                key = (h, frac, -j)
+                if best is None or key > (best[0], best[1], -best[2]):
+                    best = (h, frac, j, k)
+        if best is not None:
+            h, _, j, k = best
+            b.parent, b.support_surface = j, k
+            bodies[j].children.append(i)
+            parent_name = bodies[j].name
+        elif b.fixed and bottom > tol and _near_wall(b, walls):
+            b.parent = WALL
+            h = bottom
+            parent_name = "wall"
+        else:
+            h = 0.0
+            parent_name = "floor"
+        edges.append(SupportEdge(child=b.name, parent=parent_name, contact_gap_m=float(bottom - h)))
+        b.position_m[2] += h - bottom
+        placed.append(i)
+    return edges, order
+
+
+def subtree(bodies: list[Body], i: int) -> list[int]:
+    """Indices of body ``i`` and everything resting on it, directly or not (depth first)."""
+    out, stack = [], [i]
+    while stack:
+        k = stack.pop()
+        out.append(k)
+        stack.extend(reversed(bodies[k].children))
+    return out
+
+
+def is_ancestor(bodies: list[Body], a: int, b: int) -> bool:
+    """Whether ``a`` supports ``b`` directly or through a chain."""
+    k = bodies[b].parent
+    while k >= 0:
+        if k == a:
+            return True
+        k = bodies[k].parent
+    return False
