@@ -26,6 +26,9 @@ import numpy as np
 __all__ = [
     "Box3D",
     "Match",
+    "ObjectBox",
+    "ObjectScores",
+    "box_from_pose",
     "box_iou_3d",
     "category_accuracy",
     "depth_absrel",
@@ -37,6 +40,8 @@ __all__ = [
     "p90_or_none",
     "recall_precision",
     "relative_error",
+    "scene_boxes",
+    "score_objects",
     "size_error_rel",
     "yaw_error_deg",
     "yaw_period_deg",
@@ -216,3 +221,105 @@ def median_or_none(values) -> float | None:
 def p90_or_none(values) -> float | None:
     v = [float(x) for x in values if x is not None and np.isfinite(x)]
     return float(np.percentile(v, 90)) if v else None
+
+
+# --------------------------------------------------------------------------------------------
+# Object-level scoring of one scene
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class ObjectBox:
+    """An object reduced to what is scored: name, label, gravity-aligned box (in the ground-truth
+    world frame), mass_kg (None when unknown) and visible (ground truth: enough pixels to count in
+    recall; predictions: always True)."""
+
+    name: str
+    label: str
+    box: Box3D
+    mass_kg: float | None = None
+    visible: bool = True
+
+
+@dataclass(frozen=True)
+class ObjectScores:
+    """Scores of matched predictions against ground truth in one scene.
+
+    recall: matched visible true objects / visible true objects. precision: matched predictions /
+    predictions. Per matched pair (same order as ``pairs`` of (pred name, true name)):
+    position_error_m (centre distance), yaw_error_deg, size_error_rel (mean over the 3 axes),
+    mass_error_rel (None when either mass is unknown), box_iou.
+    """
+
+    n_true: int
+    n_true_visible: int
+    n_matched_visible: int
+    n_pred: int
+    recall: float | None
+    precision: float | None
+    category_accuracy: float | None
+    pairs: tuple[tuple[str, str], ...]
+    position_error_m: tuple[float, ...]
+    yaw_error_deg: tuple[float, ...]
+    size_error_rel: tuple[float, ...]
+    mass_error_rel: tuple[float | None, ...]
+    box_iou: tuple[float, ...]
+
+
+def score_objects(
+    pred: list[ObjectBox] | tuple[ObjectBox, ...],
+    true: list[ObjectBox] | tuple[ObjectBox, ...],
+    match: Match,
+    synonyms: dict[str, tuple[str, ...]] | None = None,
+) -> ObjectScores:
+    """Score ``pred`` against ``true`` given a matching (indices into the two sequences)."""
+    pairs = [(i, j) for i, j in match.pairs]
+    n_vis = sum(1 for t in true if t.visible)
+    matched_vis = sum(1 for _, j in pairs if true[j].visible)
+    recall, precision = recall_precision(matched_vis, n_vis, len(pairs), len(pred))
+    pos, yaw, size, mass, iou = [], [], [], [], []
+    for i, j in pairs:
+        p, t = pred[i].box, true[j].box
+        pos.append(float(np.linalg.norm(p.center_m - t.center_m)))
+        yaw.append(yaw_error_deg(p.yaw_rad, t.yaw_rad, t.size_m))
+        size.append(float(np.mean(size_error_rel(p, t))))
+        pm, tm = pred[i].mass_kg, true[j].mass_kg
+        mass.append(relative_error(pm, tm) if pm is not None and tm else None)
+        iou.append(box_iou_3d(p, t))
+    return ObjectScores(
+        n_true=len(true),
+        n_true_visible=n_vis,
+        n_matched_visible=matched_vis,
+        n_pred=len(pred),
+        recall=recall,
+        precision=precision,
+        category_accuracy=category_accuracy([pred[i].label for i, _ in pairs], [true[j].label for _, j in pairs], synonyms),
+        pairs=tuple((pred[i].name, true[j].name) for i, j in pairs),
+        position_error_m=tuple(pos),
+        yaw_error_deg=tuple(yaw),
+        size_error_rel=tuple(size),
+        mass_error_rel=tuple(mass),
+        box_iou=tuple(iou),
+    )
+
+
+def box_from_pose(world_from_object: np.ndarray, size_m, origin: str = "bottom") -> Box3D:
+    """The gravity-aligned box of an object of extents ``size_m`` at a (4, 4) pose.
+
+    origin: ``"bottom"`` when the pose's origin is the centre of the box's bottom face (the asset
+    frame of :mod:`scene_builder.model`), ``"center"`` when it is the box centre. Yaw is the angle
+    of the pose's x axis projected on the floor (the pose is assumed near gravity-aligned)."""
+    size = np.asarray(size_m, dtype=np.float64)
+    offset = np.array([0.0, 0.0, size[2] / 2.0]) if origin == "bottom" else np.zeros(3)
+    center = world_from_object[:3, :3] @ offset + world_from_object[:3, 3]
+    yaw = float(np.arctan2(world_from_object[1, 0], world_from_object[0, 0]))
+    return Box3D(center, size, yaw)
+
+
+def scene_boxes(scene, gt_from_world: np.ndarray) -> list[ObjectBox]:
+    """Every placed object of a :class:`scene_builder.model.Scene` as an :class:`ObjectBox` in the
+    ground-truth frame (``gt_from_world``: (4, 4) from the scene's world to the truth's)."""
+    out = []
+    for o in scene.objects:
+        out.append(ObjectBox(o.name, o.asset.label, box_from_pose(gt_from_world @ o.world_from_asset, o.asset.size_m), o.asset.mass_kg))
+    return out

@@ -1,0 +1,762 @@
+"""``scene-builder bench``: score the pipeline and a naive baseline on the same inputs.
+
+Suites
+------
+* ``synthetic``: N procedural rooms (:mod:`scene_builder.procedural`, seeds ``seed .. seed+N-1``,
+  5 to 8 objects, every other room with sensor-like depth noise) with exact ground truth: boxes,
+  masses, instance masks and clean depth.
+* ``real``: every sample with depth under ``../shared/data/real`` (or a folder given). Only the
+  SUN RGB-D sample with 3D boxes has object ground truth; the others are scored on physics and on
+  render-and-compare against the observation.
+
+The baseline
+------------
+The naive placement of a published scene application: for each perceived object (the same masks
+and depth the pipeline perceived), the axis-aligned box of its depth points **in the camera
+frame**, gravity taken along the camera's +y axis, the floor at the lowest observed point, no
+penetration handling and no settling; free box bodies of density 500 kg/m^3.
+
+Both methods go through the same checks, in this module: the exported MJCF is loaded in MuJoCo,
+the deepest penetration between different objects (or an object and the floor / walls) at t = 0
+is measured, the scene is simulated for ``settle_s`` (3 s) and every free body's drift and
+rotation recorded (stable: < 1 cm and < 2 degrees); the MJCF is rendered from ``input_camera`` for
+depth AbsRel and mask IoU. Objects are scored in the ground truth's world frame, reached through
+the camera: ``truth_from_method = truth.world_from_camera @ inv(method.world_from_camera)``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import json
+import os
+import platform
+import resource
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from scene_builder import frames, metrics
+from scene_builder.config import BuildConfig, ExportConfig, InputSpec
+from scene_builder.errors import InputError
+from scene_builder.model import CameraIntrinsics, Perception
+
+__all__ = [
+    "BaselineBox",
+    "BaselineScene",
+    "BenchResult",
+    "MethodScores",
+    "PhysicsCheck",
+    "SceneResult",
+    "Summary",
+    "baseline_mjcf",
+    "evaluate_baseline",
+    "evaluate_sample",
+    "naive_baseline",
+    "oracle_perception",
+    "physics_check",
+    "print_result",
+    "render_ids_and_depth",
+    "run_bench",
+]
+
+BASELINE_DENSITY_KG_M3 = 500.0
+SUITES = ("synthetic", "real")
+DEFAULT_REAL_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+
+DEFINITIONS = {
+    "recall": "matched visible true objects / visible true objects (>= 150 visible pixels), pooled over scenes",
+    "precision": "matched built objects / built objects, pooled over scenes with object ground truth",
+    "matching": "Hungarian on mask IoU >= 0.25 between perceived masks and true instance masks (synthetic); on 3D centre distance gated at max(0.3 m, half the true box diagonal) (SUN RGB-D boxes)",
+    "position_error_m": "distance between the centres of matched true and built bounding boxes, in the truth's world reached through the camera",
+    "yaw_error_deg": "yaw difference modulo the true box's symmetry (180 deg, 90 deg for a square footprint)",
+    "size_error_rel": "mean over the 3 axes of |built - true| / true extent, after matching horizontal axes",
+    "mass_error_rel": "|built - true| / true mass (procedural rooms: density x primitive volume)",
+    "box_iou_3d": "exact IoU of gravity-aligned yawed boxes (footprint polygon overlap x height overlap)",
+    "max_penetration_m": "per scene: deepest contact between different objects or an object and the floor/walls at t = 0 in MuJoCo; summary: median over scenes (worst in max_penetration_m_worst)",
+    "stable_fraction": "free objects that move < 1 cm and rotate < 2 deg over 3 s of simulation / free objects, pooled over scenes",
+    "depth_absrel": "per scene: mean |rendered - reference| / reference depth over object pixels (true instances and clean depth for synthetic rooms; perceived masks and observed depth for real photos), rendered from input_camera; summary: median over scenes",
+    "mask_iou": "per object: IoU of the object's rendered silhouette and its true instance mask (synthetic) or perceived mask (real); summary: median over objects",
+    "seconds_per_scene": "wall-clock seconds of pipeline.build (pipeline) or of baseline construction and MJCF writing (baseline)",
+    "peak_rss_mb": "resource.getrusage(RUSAGE_SELF).ru_maxrss of the bench process after the scene (MiB)",
+}
+
+
+# --------------------------------------------------------------------------------------------
+# Physics check and render-and-compare, shared by both methods
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class PhysicsCheck:
+    """Physics of an MJCF scene. per_object: (name, start penetration m, drift m, rotation deg,
+    stable) for each free object."""
+
+    max_penetration_m: float
+    max_drift_m: float
+    max_rotation_deg: float
+    n_free: int
+    n_stable: int
+    per_object: tuple[tuple[str, float, float, float, bool], ...]
+
+
+def _object_of_body(model) -> list[str]:
+    """Object name of every body: the name of its root body (child of the world)."""
+    return [model.body(int(model.body_rootid[b])).name for b in range(model.nbody)]
+
+
+def physics_check(mjcf_path: Path, settle_s: float = 3.0, stable_drift_m: float = 0.01, stable_rotation_deg: float = 2.0) -> PhysicsCheck:
+    """Load an MJCF, measure the deepest inter-object (and object-floor/wall) penetration at t = 0,
+    simulate ``settle_s`` seconds and measure each free body's drift and rotation."""
+    import mujoco
+
+    model = mujoco.MjModel.from_xml_path(str(mjcf_path))
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    body_obj = _object_of_body(model)
+    flex_obj = [model.flex(i).name for i in range(model.nflex)]
+
+    def owner(geom: int, flex: int) -> str:
+        if geom >= 0:
+            return body_obj[model.geom_bodyid[geom]]
+        return flex_obj[flex] if flex >= 0 else ""
+
+    pen: dict[str, float] = {}
+    deepest = 0.0
+    for i in range(data.ncon):
+        c = data.contact[i]
+        a, b = owner(c.geom[0], c.flex[0]), owner(c.geom[1], c.flex[1])
+        if a == b:
+            continue  # parts of one object (its own joints keep them apart)
+        depth = max(0.0, -float(c.dist))
+        deepest = max(deepest, depth)
+        for n in (a, b):
+            if n not in ("world", ""):
+                pen[n] = max(pen.get(n, 0.0), depth)
+    free = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
+    adr = [int(model.jnt_qposadr[j]) for j in free]
+    q0 = data.qpos.copy()
+    steps = int(round(settle_s / model.opt.timestep))
+    for _ in range(steps):
+        mujoco.mj_step(model, data)
+    per = []
+    for j, a in zip(free, adr):
+        name = body_obj[model.jnt_bodyid[j]]
+        drift = float(np.linalg.norm(data.qpos[a : a + 3] - q0[a : a + 3]))
+        dot = abs(float(np.dot(data.qpos[a + 3 : a + 7], q0[a + 3 : a + 7])))
+        rot = float(np.degrees(2.0 * np.arccos(min(1.0, dot))))
+        if not np.isfinite(drift):
+            drift, rot = float("inf"), 180.0
+        per.append((name, pen.get(name, 0.0), drift, rot, drift < stable_drift_m and rot < stable_rotation_deg))
+    return PhysicsCheck(
+        max_penetration_m=deepest,
+        max_drift_m=max((p[2] for p in per), default=0.0),
+        max_rotation_deg=max((p[3] for p in per), default=0.0),
+        n_free=len(per),
+        n_stable=sum(1 for p in per if p[4]),
+        per_object=tuple(per),
+    )
+
+
+def render_ids_and_depth(mjcf_path: Path, width_px: int, height_px: int, camera: str = "input_camera") -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+    """Render an MJCF from its camera: (H, W) float32 depth (0 where nothing), (H, W) int32 index
+    into the returned object names (-1 for floor, walls and background), and the names."""
+    import mujoco
+
+    model = mujoco.MjModel.from_xml_path(str(mjcf_path))
+    model.vis.global_.offwidth = max(int(model.vis.global_.offwidth), width_px)
+    model.vis.global_.offheight = max(int(model.vis.global_.offheight), height_px)
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    body_obj = _object_of_body(model)
+    names = tuple(sorted({n for n in body_obj if n != "world"} | {model.flex(i).name for i in range(model.nflex)}))
+    index = {n: i for i, n in enumerate(names)}
+    geom_idx = np.array([index.get(body_obj[model.geom_bodyid[g]], -1) for g in range(model.ngeom)] + [-1], dtype=np.int32)
+    flex_idx = np.array([index.get(model.flex(i).name, -1) for i in range(model.nflex)] + [-1], dtype=np.int32)
+    with mujoco.Renderer(model, height_px, width_px) as r:
+        r.enable_depth_rendering()
+        r.update_scene(data, camera=camera)
+        depth = r.render().astype(np.float32)
+        r.disable_depth_rendering()
+        r.enable_segmentation_rendering()
+        r.update_scene(data, camera=camera)
+        seg = r.render()
+    far = float(model.stat.extent * model.vis.map.zfar)
+    depth[depth >= 0.999 * far] = 0.0
+    ids = np.full(seg.shape[:2], -1, dtype=np.int32)
+    is_geom = seg[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM)
+    ids[is_geom] = geom_idx[seg[..., 0][is_geom]]
+    is_flex = seg[..., 1] == int(mujoco.mjtObj.mjOBJ_FLEX)
+    if is_flex.any():
+        ids[is_flex] = flex_idx[np.clip(seg[..., 0][is_flex], -1, model.nflex - 1)]
+    return depth, ids, names
+
+
+# --------------------------------------------------------------------------------------------
+# The naive baseline
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class BaselineBox:
+    """An axis-aligned box in the camera frame. center_cam_m, size_cam_m: (3,) along camera x, y, z."""
+
+    name: str
+    label: str
+    center_cam_m: np.ndarray
+    size_cam_m: np.ndarray
+
+    @property
+    def mass_kg(self) -> float:
+        return float(BASELINE_DENSITY_KG_M3 * np.prod(self.size_cam_m))
+
+
+@dataclass(frozen=True, eq=False)
+class BaselineScene:
+    """The baseline's boxes and its world: Z = camera -y (gravity along camera +y), X = camera z,
+    floor z = 0 at the lowest observed point. world_from_camera: (4, 4)."""
+
+    boxes: tuple[BaselineBox, ...]
+    world_from_camera: np.ndarray
+    intrinsics: CameraIntrinsics
+
+
+# World X = camera z, world Y = camera -x, world Z = camera -y.
+_BASE_R_WORLD_CAM = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+
+
+def naive_baseline(perception: Perception, max_depth_m: float = 10.0) -> BaselineScene:
+    """Axis-aligned camera-frame boxes of each perceived object's depth points (its mask on the
+    observed depth), floor at the lowest observed point of the whole image."""
+    obs = perception.observation
+    k = obs.intrinsics
+    depth = obs.depth_m.astype(np.float64)
+    valid = (depth > 0) & (depth < max_depth_m)
+    if not valid.any():
+        raise InputError("the observation has no valid depth; the baseline needs depth")
+    pts = k.unproject(depth)
+    floor_y = float(pts[..., 1][valid].max())  # camera y points down: the lowest point has the largest y
+    boxes = []
+    for o in perception.objects:
+        m = o.mask & valid
+        if not m.any():
+            continue
+        p = pts[m]
+        lo, hi = p.min(axis=0), p.max(axis=0)
+        size = np.maximum(hi - lo, 0.01)  # a flat patch still makes a 1 cm box
+        boxes.append(BaselineBox(o.name, o.label, (lo + hi) / 2.0, size))
+    return BaselineScene(tuple(boxes), frames.pose(_BASE_R_WORLD_CAM, (0.0, 0.0, floor_y)), k)
+
+
+def baseline_boxes(base: BaselineScene, gt_from_world: np.ndarray) -> list[metrics.ObjectBox]:
+    """The baseline's boxes as scored objects in the truth's frame."""
+    out = []
+    for b in base.boxes:
+        # In the baseline's world every box is axis-aligned (its world is a permutation of the
+        # camera axes): extents along world X, Y, Z are the camera z, x, y sizes.
+        center_w = frames.transform_points(base.world_from_camera, b.center_cam_m[None])[0]
+        size_w = np.array([b.size_cam_m[2], b.size_cam_m[0], b.size_cam_m[1]])
+        pose = gt_from_world @ frames.pose(np.eye(3), center_w)
+        out.append(metrics.ObjectBox(b.name, b.label, metrics.box_from_pose(pose, size_w, origin="center"), b.mass_kg))
+    return out
+
+
+def baseline_mjcf(base: BaselineScene, path: Path) -> Path:
+    """Write the baseline as MJCF (MjSpec): floor plane ``floor`` at z = 0, a free box body per
+    object (density 500 kg/m^3, no penetration handling), the camera ``input_camera``."""
+    import mujoco
+
+    spec = mujoco.MjSpec()
+    spec.modelname = "naive_baseline"
+    spec.option.timestep = 0.002
+    k = base.intrinsics
+    spec.visual.global_.offwidth = max(640, k.width_px)
+    spec.visual.global_.offheight = max(480, k.height_px)
+    wb = spec.worldbody
+    wb.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0.0, 0.0, 0.05])
+    cam = frames.mujoco_camera(base.world_from_camera, k)
+    c = wb.add_camera(name="input_camera", pos=list(cam["pos"]), quat=list(cam["quat"]))
+    c.resolution = list(cam["resolution"])
+    c.focal_pixel = list(cam["focalpixel"])
+    c.principal_pixel = list(cam["principalpixel"])
+    c.sensor_size = list(cam["sensorsize"])
+    for b in base.boxes:
+        center_w = frames.transform_points(base.world_from_camera, b.center_cam_m[None])[0]
+        half_w = np.abs(_BASE_R_WORLD_CAM) @ (b.size_cam_m / 2.0)
+        body = wb.add_body(name=b.name, pos=list(center_w))
+        body.add_freejoint(name=f"{b.name}/free")
+        body.add_geom(name=f"{b.name}/box", type=mujoco.mjtGeom.mjGEOM_BOX, size=list(half_w), density=BASELINE_DENSITY_KG_M3)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(spec.to_xml())
+    return path
+
+
+def oracle_perception(sample_dir: Path) -> Perception:
+    """A :class:`Perception` made from a procedural sample's ground truth: true instance masks,
+    the sample's depth, the true camera pose and walls. For testing the baseline and the scoring
+    without the perception stage (and as an upper bound on what perception can hand on)."""
+    from PIL import Image
+
+    from scene_builder.model import BackendUse, Camera, Observation, PerceivedObject, Plane, Room
+
+    sample_dir = Path(sample_dir)
+    meta = json.loads((sample_dir / "meta.json").read_text())
+    gt = meta.get("ground_truth") or {}
+    if gt.get("objects") is None or not gt.get("instances"):
+        raise InputError(f"{sample_dir} has no instance ground truth (a procedural room sample is needed)")
+    s = _sample(sample_dir)
+    rgb = np.asarray(Image.open(s.rgb).convert("RGB"))
+    depth = np.asarray(Image.open(s.depth)).astype(np.float32) / 1000.0
+    c = json.loads((sample_dir / "camera.json").read_text())
+    k = CameraIntrinsics(c["fx"], c["fy"], c["cx"], c["cy"], c["width"], c["height"], "file")
+    cam = Camera(k, np.array(gt["camera"]["world_from_camera"], dtype=np.float64))
+    inst = np.asarray(Image.open(sample_dir / gt["instances"]))
+    pts = frames.transform_points(cam.world_from_camera, k.unproject(depth).reshape(-1, 3)).reshape(depth.shape + (3,))
+    objects = []
+    for o in gt["objects"]:
+        mask = inst == o["object_id"]
+        valid = mask & (depth > 0)
+        if not valid.any():
+            continue
+        objects.append(PerceivedObject(o["object_id"], o["name"], o["category"], 1.0, mask, pts[valid], rgb[valid]))
+    walls = tuple(Plane(np.array(w["normal"], dtype=np.float64), float(w["offset_m"]), "wall") for w in gt["walls"])
+    obs = Observation(str(s.rgb), rgb, depth, k, "sensor")
+    return Perception(obs, cam, Room(walls), tuple(objects), (BackendUse("segmentation", "oracle", "ground-truth instances"),))
+
+
+def evaluate_baseline(perception: Perception, truth, work_dir: Path, config: BuildConfig) -> MethodScores:
+    """Build, check and score the naive baseline on a perception (the pipeline's, or an oracle)."""
+    t0 = time.perf_counter()
+    base = naive_baseline(perception, config.perception.max_depth_m)
+    path = baseline_mjcf(base, Path(work_dir) / "baseline.xml")
+    seconds = time.perf_counter() - t0
+    pred: list[metrics.ObjectBox] = []
+    if truth is not None:
+        pred = baseline_boxes(base, truth.world_from_camera @ np.linalg.inv(base.world_from_camera))
+    lay = config.layout
+    check = physics_check(path, lay.settle_s, lay.stable_drift_m, lay.stable_rotation_deg)
+    return _score_method(pred, _match(pred, perception, truth), truth, check, path, perception, seconds)
+
+
+# --------------------------------------------------------------------------------------------
+# Results
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class MethodScores:
+    """One method on one scene. Object scores are None where the scene has no object truth."""
+
+    objects: metrics.ObjectScores | None
+    max_penetration_m: float
+    max_drift_m: float
+    n_free: int
+    n_stable: int
+    depth_absrel: float | None
+    mask_iou: tuple[float, ...]
+    seconds: float
+    pipeline_verdict: dict | None = None
+
+
+@dataclass(frozen=True)
+class SceneResult:
+    """One scene: inputs, both methods' scores, timings (pipeline stages) and memory."""
+
+    name: str
+    path: str
+    n_true: int | None
+    n_perceived: int | None
+    depth_noise: bool
+    pipeline: MethodScores | None
+    baseline: MethodScores | None
+    stage_seconds: tuple[tuple[str, float], ...]
+    peak_rss_mb: float
+    error: str | None = None
+
+
+@dataclass(frozen=True)
+class Summary:
+    """Aggregates over the scenes of a suite (see ``DEFINITIONS``); None where nothing to score."""
+
+    scenes: int
+    failed_scenes: int
+    recall: float | None
+    precision: float | None
+    position_error_m_median: float | None
+    position_error_m_p90: float | None
+    yaw_error_deg_median: float | None
+    size_error_rel_median: float | None
+    category_accuracy: float | None
+    mass_error_rel_median: float | None
+    box_iou_3d_median: float | None
+    max_penetration_m: float | None
+    max_penetration_m_worst: float | None
+    stable_fraction: float | None
+    depth_absrel_median: float | None
+    mask_iou_median: float | None
+    seconds_per_scene_median: float | None
+    stage_seconds_median: dict[str, float] | None = None
+    peak_rss_mb: float | None = None
+
+
+@dataclass(frozen=True)
+class BenchResult:
+    suite: str
+    summary: Summary
+    baseline: Summary
+    scenes: tuple[SceneResult, ...]
+    machine: dict
+    date: str
+    command: str
+    out_json: Path
+
+    def to_json(self) -> dict:
+        def clean(v):
+            if isinstance(v, float):
+                return v if np.isfinite(v) else None
+            if isinstance(v, dict):
+                return {k: clean(x) for k, x in v.items()}
+            if isinstance(v, (list, tuple)):
+                return [clean(x) for x in v]
+            if isinstance(v, Path):
+                return str(v)
+            return v
+
+        d = dataclasses.asdict(self)
+        d["out_json"] = str(self.out_json)
+        d["definitions"] = DEFINITIONS
+        return clean(d)
+
+
+def summarize(scenes: list[SceneResult] | tuple[SceneResult, ...], which: str) -> Summary:
+    """Aggregate ``which`` (``"pipeline"`` or ``"baseline"``) over the scenes (see DEFINITIONS)."""
+    ms = [getattr(s, which) for s in scenes if getattr(s, which) is not None]
+    objs = [m.objects for m in ms if m.objects is not None]
+    n_vis = sum(o.n_true_visible for o in objs)
+    n_pred = sum(o.n_pred for o in objs)
+    matched_vis = sum(o.n_matched_visible for o in objs)
+    matched_pred = sum(len(o.pairs) for o in objs)
+    pool = lambda attr: [x for o in objs for x in getattr(o, attr)]  # noqa: E731
+    cat = [(o.category_accuracy, len(o.pairs)) for o in objs if o.category_accuracy is not None]
+    n_free = sum(m.n_free for m in ms)
+    pens = [m.max_penetration_m for m in ms]
+    stages: dict[str, list[float]] = {}
+    if which == "pipeline":
+        for s in scenes:
+            for k, v in s.stage_seconds:
+                stages.setdefault(k, []).append(v)
+    return Summary(
+        scenes=len(scenes),
+        failed_scenes=sum(1 for s in scenes if s.error is not None),
+        recall=matched_vis / n_vis if n_vis else None,
+        precision=matched_pred / n_pred if n_pred else None,
+        position_error_m_median=metrics.median_or_none(pool("position_error_m")),
+        position_error_m_p90=metrics.p90_or_none(pool("position_error_m")),
+        yaw_error_deg_median=metrics.median_or_none(pool("yaw_error_deg")),
+        size_error_rel_median=metrics.median_or_none(pool("size_error_rel")),
+        category_accuracy=sum(a * n for a, n in cat) / sum(n for _, n in cat) if cat and sum(n for _, n in cat) else None,
+        mass_error_rel_median=metrics.median_or_none(pool("mass_error_rel")),
+        box_iou_3d_median=metrics.median_or_none(pool("box_iou")),
+        max_penetration_m=metrics.median_or_none(pens),
+        max_penetration_m_worst=max(pens) if pens else None,
+        stable_fraction=sum(m.n_stable for m in ms) / n_free if n_free else None,
+        depth_absrel_median=metrics.median_or_none([m.depth_absrel for m in ms]),
+        mask_iou_median=metrics.median_or_none([x for m in ms for x in m.mask_iou]),
+        seconds_per_scene_median=metrics.median_or_none([m.seconds for m in ms]),
+        stage_seconds_median={k: float(np.median(v)) for k, v in stages.items()} or None,
+        peak_rss_mb=max((s.peak_rss_mb for s in scenes), default=None),
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# Evaluating one scene
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class _Sample:
+    name: str
+    path: Path
+    rgb: Path
+    depth: Path
+    intrinsics: tuple[float, float, float, float] | None
+    noisy: bool
+
+
+def _sample(path: Path) -> _Sample:
+    rgb = path / "rgb.png" if (path / "rgb.png").exists() else path / "rgb.jpg"
+    if not rgb.exists() or not (path / "depth.png").exists():
+        raise InputError(f"{path} is not a sample folder (needs rgb.png or rgb.jpg and depth.png)")
+    k = None
+    if (path / "camera.json").exists():
+        c = json.loads((path / "camera.json").read_text())
+        k = (float(c["fx"]), float(c["fy"]), float(c["cx"]), float(c["cy"]))
+    noisy = False
+    if (path / "meta.json").exists():
+        noisy = json.loads((path / "meta.json").read_text()).get("depth_noise") is not None
+    return _Sample(path.name, path, rgb, path / "depth.png", k, noisy)
+
+
+def _score_method(
+    pred: list[metrics.ObjectBox],
+    match: metrics.Match | None,
+    truth,
+    physics: PhysicsCheck,
+    mjcf: Path,
+    perception: Perception,
+    seconds: float,
+    verdict: dict | None = None,
+) -> MethodScores:
+    """Object scores (given a matching), physics, and render-and-compare of one method's MJCF."""
+    obs = perception.observation
+    h, w = obs.depth_m.shape
+    obj_scores = metrics.score_objects(pred, truth.objects, match, truth.synonyms) if truth is not None and match is not None else None
+    depth_r, ids_r, names_r = render_ids_and_depth(mjcf, w, h)
+    index = {n: i for i, n in enumerate(names_r)}
+    ious: list[float] = []
+    if truth is not None and truth.instances is not None and truth.instances.shape == (h, w):
+        ref_depth = truth.depth_m if truth.depth_m is not None else obs.depth_m
+        region = truth.instances > 0
+        by_name = {t.name: oid for t, oid in zip(truth.objects, truth.object_ids or ())}
+        for pname, tname in obj_scores.pairs if obj_scores else ():
+            ious.append(metrics.mask_iou(ids_r == index.get(pname, -2), truth.instances == by_name[tname]))
+    else:
+        ref_depth = obs.depth_m
+        region = np.zeros((h, w), bool)
+        for o in perception.objects:
+            region |= o.mask
+            ious.append(metrics.mask_iou(ids_r == index.get(o.name, -2), o.mask))
+    absrel = metrics.depth_absrel(depth_r, ref_depth, region)
+    return MethodScores(obj_scores, physics.max_penetration_m, physics.max_drift_m, physics.n_free, physics.n_stable, absrel, tuple(ious), seconds, verdict)
+
+
+def _match(pred: list[metrics.ObjectBox], perception: Perception, truth) -> metrics.Match | None:
+    if truth is None:
+        return None
+    if truth.instances is not None and truth.instances.shape == perception.observation.depth_m.shape:
+        # Masks are shared by both methods: match perceived objects to true instances once, then
+        # map to each method's objects by name (a method may drop objects).
+        masks = [o.mask for o in perception.objects]
+        m = metrics.match_by_mask_iou(metrics.mask_iou_matrix(masks, truth.instances, truth.object_ids))
+        pos = {p.name: i for i, p in enumerate(pred)}
+        pairs = [(pos[perception.objects[i].name], j) for i, j in m.pairs if perception.objects[i].name in pos]
+        scores = [s for (i, _), s in zip(m.pairs, m.scores) if perception.objects[i].name in pos]
+        return metrics.Match(tuple(pairs), tuple(scores))
+    return metrics.match_by_center(np.array([p.box.center_m for p in pred]).reshape(-1, 3), [t.box for t in truth.objects])
+
+
+def evaluate_sample(sample_dir: Path, work_dir: Path, config: BuildConfig) -> SceneResult:
+    """Build one sample with the pipeline and the baseline and score both."""
+    from scene_builder.pipeline import build
+    from scene_builder.procedural import load_truth
+
+    s = _sample(Path(sample_dir))
+    truth = load_truth(s.path)
+    inputs = InputSpec(s.rgb, s.depth, 0.001, s.intrinsics)
+    t0 = time.perf_counter()
+    result = build(inputs, work_dir / s.name, config)
+    t_pipe = time.perf_counter() - t0
+    perception = result.perception
+
+    lay = config.layout
+    pipe_pred: list[metrics.ObjectBox] = []
+    if truth is not None:
+        pipe_pred = metrics.scene_boxes(result.scene, truth.world_from_camera @ np.linalg.inv(result.scene.camera.world_from_camera))
+    v = result.verdict
+    verdict = {"max_penetration_m": v.max_penetration_m, "settle_max_drift_m": v.settle_max_drift_m, "stable": v.stable}
+    check = physics_check(result.files.mjcf, lay.settle_s, lay.stable_drift_m, lay.stable_rotation_deg)
+    pipe = _score_method(pipe_pred, _match(pipe_pred, perception, truth), truth, check, result.files.mjcf, perception, t_pipe, verdict)
+    bl = evaluate_baseline(perception, truth, work_dir / f"{s.name}_baseline", config)
+    return SceneResult(
+        name=s.name,
+        path=str(s.path),
+        n_true=len(truth.objects) if truth is not None else None,
+        n_perceived=len(perception.objects),
+        depth_noise=s.noisy,
+        pipeline=pipe,
+        baseline=bl,
+        stage_seconds=tuple((k, float(x)) for k, x in result.timings_s),
+        peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# run_bench
+# --------------------------------------------------------------------------------------------
+
+
+def machine_description() -> dict:
+    """CPU model, core count, memory, OS, Python and key library versions."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    mem_gb = None
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemTotal"):
+                mem_gb = round(int(line.split()[1]) / 1024 / 1024, 1)
+    except OSError:
+        pass
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:
+        cores = os.cpu_count()
+    import mujoco
+
+    return {
+        "cpu": cpu,
+        "cores": cores,
+        "memory_gb": mem_gb,
+        "os": platform.platform(),
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "mujoco": mujoco.__version__,
+        "gpu": None,
+    }
+
+
+def _suite_samples(suite: str, rooms: int, data_dir: Path | None, seed: int, tmp: Path) -> list[Path]:
+    if suite == "synthetic":
+        from scene_builder.procedural import make_room, render_room
+
+        if rooms < 1:
+            raise InputError(f"--rooms must be at least 1, got {rooms}")
+        out = []
+        for i in range(rooms):
+            s = seed + i
+            spec = make_room(s, n_objects=5 + s % 4, noise=i % 2 == 1)
+            out.append(render_room(spec, tmp / "rooms" / spec.name))
+        return out
+    if suite == "real":
+        root = Path(data_dir) if data_dir is not None else DEFAULT_REAL_DATA
+        if not root.is_dir():
+            raise InputError(f"real data folder {root} not found; pass --data with a folder of samples (rgb + depth.png)")
+        samples = sorted(d for d in root.iterdir() if d.is_dir() and (d / "depth.png").exists())
+        if not samples and (root / "depth.png").exists():
+            samples = [root]
+        if not samples:
+            raise InputError(f"no samples with depth.png under {root}; pass --data with a folder of samples")
+        return samples
+    raise InputError(f"unknown suite '{suite}'; choose one of: {', '.join(SUITES)}")
+
+
+def run_bench(
+    suite: str,
+    rooms: int,
+    data_dir: Path | None,
+    out_json: Path,
+    seed: int = 0,
+    config: BuildConfig | None = None,
+    console=None,
+    keep_dir: Path | None = None,
+) -> BenchResult:
+    """Run a suite, write ``out_json`` and print a table; returns the result.
+
+    A scene on which the pipeline raises is recorded with its error (and counted in
+    ``failed_scenes``) and the suite goes on: one failing photo must not hide the other numbers.
+    config: build settings (default: seed ``seed``, no rerun recording). keep_dir: keep every
+    scene's outputs there (default: a temporary folder, removed at the end).
+    """
+    from rich.console import Console
+
+    console = console or Console(stderr=True, highlight=False)
+    config = config or BuildConfig(seed=seed, export=ExportConfig(viz="off"))
+    out_json = Path(out_json)
+    command = f"scene-builder bench --suite {suite}" + (f" --rooms {rooms}" if suite == "synthetic" else "") + (f" --data {data_dir}" if data_dir else "") + f" --json {out_json} --seed {seed}"
+    tmp = Path(tempfile.mkdtemp(prefix="scene-builder-bench-")) if keep_dir is None else Path(keep_dir)
+    tmp.mkdir(parents=True, exist_ok=True)
+    scenes: list[SceneResult] = []
+    try:
+        samples = _suite_samples(suite, rooms, data_dir, seed, tmp)
+        for i, sample in enumerate(samples):
+            t0 = time.perf_counter()
+            try:
+                res = evaluate_sample(sample, tmp / "builds", config)
+            except Exception as err:  # recorded in the results and the table, never hidden
+                res = SceneResult(sample.name, str(sample), None, None, False, None, None, (), resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, f"{type(err).__name__}: {err}")
+            scenes.append(res)
+            console.print(_scene_line(i + 1, len(samples), res, time.perf_counter() - t0))
+    finally:
+        if keep_dir is None:
+            shutil.rmtree(tmp, ignore_errors=True)
+    result = BenchResult(
+        suite=suite,
+        summary=summarize(scenes, "pipeline"),
+        baseline=summarize(scenes, "baseline"),
+        scenes=tuple(scenes),
+        machine=machine_description(),
+        date=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        command=command,
+        out_json=out_json,
+    )
+    out_json.parent.mkdir(parents=True, exist_ok=True)
+    out_json.write_text(json.dumps(result.to_json(), indent=1) + "\n")
+    print_result(result, console)
+    return result
+
+
+def _scene_line(i: int, n: int, r: SceneResult, seconds: float) -> str:
+    if r.error is not None:
+        return f"[red]✗[/red] {i}/{n} {r.name}: {r.error}"
+    p, b = r.pipeline, r.baseline
+    rec = "" if p.objects is None or p.objects.recall is None else f"recall {p.objects.recall:.2f}, "
+    return (
+        f"[green]✓[/green] {i}/{n} {r.name}: {r.n_perceived} objects, {rec}penetration {p.max_penetration_m * 1000:.1f} mm "
+        f"(baseline {b.max_penetration_m * 1000:.0f} mm), stable {p.n_stable}/{p.n_free} (baseline {b.n_stable}/{b.n_free}), {seconds:.1f} s"
+    )
+
+
+SUMMARY_ROWS = (
+    ("recall", "recall", "{:.2f}"),
+    ("precision", "precision", "{:.2f}"),
+    ("position error median (m)", "position_error_m_median", "{:.3f}"),
+    ("position error p90 (m)", "position_error_m_p90", "{:.3f}"),
+    ("yaw error median (deg)", "yaw_error_deg_median", "{:.1f}"),
+    ("size error median (rel)", "size_error_rel_median", "{:.2f}"),
+    ("3D box IoU median", "box_iou_3d_median", "{:.2f}"),
+    ("category accuracy", "category_accuracy", "{:.2f}"),
+    ("mass error median (rel)", "mass_error_rel_median", "{:.2f}"),
+    ("max penetration, median scene (mm)", "max_penetration_m", "{:.1f}", 1000.0),
+    ("max penetration, worst scene (mm)", "max_penetration_m_worst", "{:.1f}", 1000.0),
+    ("stable fraction (3 s)", "stable_fraction", "{:.2f}"),
+    ("depth AbsRel median", "depth_absrel_median", "{:.3f}"),
+    ("mask IoU median", "mask_iou_median", "{:.2f}"),
+    ("seconds per scene median", "seconds_per_scene_median", "{:.2f}"),
+)
+
+
+def format_value(summary: dict | Summary, row: tuple) -> str:
+    """One cell of the summary table ('-' where there is nothing to report)."""
+    key, fmt = row[1], row[2]
+    v = summary[key] if isinstance(summary, dict) else getattr(summary, key)
+    if v is None:
+        return "-"
+    return fmt.format(v * (row[3] if len(row) > 3 else 1.0))
+
+
+def print_result(result: BenchResult, console=None) -> None:
+    """The pipeline-versus-baseline table of a bench result, printed with rich."""
+    from rich.console import Console
+    from rich.table import Table
+
+    console = console or Console(highlight=False)
+    t = Table(title=f"scene-builder bench --suite {result.suite}: {result.summary.scenes} scenes ({result.summary.failed_scenes} failed)")
+    t.add_column("metric")
+    t.add_column("pipeline", justify="right")
+    t.add_column("naive baseline", justify="right")
+    for row in SUMMARY_ROWS:
+        t.add_row(row[0], format_value(result.summary, row), format_value(result.baseline, row))
+    console.print(t)
+    if result.summary.stage_seconds_median:
+        console.print("median seconds per stage: " + ", ".join(f"{k} {v:.2f}" for k, v in result.summary.stage_seconds_median.items()))
+    console.print(f"peak memory {result.summary.peak_rss_mb or 0:.0f} MiB; results in {result.out_json}")
