@@ -154,7 +154,7 @@ def test_depth_noise_is_proportional_with_holes():
 def test_demo_input_is_a_loadable_sample(tmp_path):
     from PIL import Image
 
-    out = procedural.write_demo_input(tmp_path / "demo", seed=0)
+    out = procedural.write_demo_input(tmp_path / "demo", seed=0, n_objects=7)
     for name in ("rgb.png", "depth.png", "camera.json", "meta.json", "instances.png"):
         assert (out / name).exists()
     rgb = np.asarray(Image.open(out / "rgb.png").convert("RGB"))
