@@ -1,0 +1,41 @@
+"""bench_report renders the bench JSON it is given (numbers from a real baseline run)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from scene_builder import bench, bench_report, procedural
+from scene_builder.config import BuildConfig
+from scene_builder.errors import InputError
+
+
+def test_report_renders_summary_and_scenes(tmp_path, capsys):
+    sample = procedural.render_room(procedural.make_room(3, n_objects=5), tmp_path / "room")
+    scores = bench.evaluate_baseline(bench.oracle_perception(sample), procedural.load_truth(sample), tmp_path / "w", BuildConfig())
+    scene = bench.SceneResult("room_3", str(sample), 5, 5, True, scores, scores, (("perception", 1.5), ("total", 4.0)), 321.0)
+    bad = bench.SceneResult("broken", "x", None, None, False, None, None, (), 321.0, "InputError: no depth")
+    scenes = (scene, bad)
+    result = bench.BenchResult("synthetic", bench.summarize(scenes, "pipeline"), bench.summarize(scenes, "baseline"), scenes, bench.machine_description(), "2026-11-21T00:00:00+00:00", "scene-builder bench --suite synthetic --rooms 2", tmp_path / "bench.json")
+    path = tmp_path / "bench.json"
+    path.write_text(json.dumps(result.to_json()))
+
+    assert bench_report.main([str(path)]) == 0
+    md = capsys.readouterr().out
+    assert "`scene-builder bench --suite synthetic --rooms 2`" in md and "2026-11-21" in md
+    assert "## Suite `synthetic`: 2 scenes (1 failed)" in md
+    pen_mm = f"{scores.max_penetration_m * 1000:.1f}"
+    assert f"| max penetration, median scene (mm) | {pen_mm} | {pen_mm} |" in md
+    assert "| broken | failed: InputError: no depth" in md
+    assert "room_3 (noisy depth)" in md and f"{scores.n_stable}/{scores.n_free}" in md
+    assert "median seconds per stage: perception 1.50, total 4.00".lower() in md.lower()
+
+
+def test_report_refuses_files_that_are_not_bench_results(tmp_path):
+    p = tmp_path / "x.json"
+    p.write_text("{}")
+    with pytest.raises(InputError):
+        bench_report.render([p])
+    with pytest.raises(InputError):
+        bench_report.render([tmp_path / "missing.json"])
