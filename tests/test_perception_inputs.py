@@ -1,0 +1,248 @@
+"""Perception input loading: every bad input class raises InputError with a useful line, and
+intrinsics come from the flag, camera.json, EXIF or the default field of view."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from perception.inputs import MAX_SIDE_PX, load_input
+from scene_builder.config import InputSpec, PerceptionConfig
+from scene_builder.errors import InputError
+
+CFG = PerceptionConfig()
+
+
+def _photo(path, w=64, h=48, exif=None):
+    rng = np.random.default_rng(0)
+    im = Image.fromarray(rng.integers(0, 255, (h, w, 3), dtype=np.uint8))
+    if exif is None:
+        im.save(path)
+    else:
+        im.save(path, exif=exif)
+    return path
+
+
+def _depth_png(path, depth_mm):
+    Image.fromarray(np.asarray(depth_mm, dtype=np.uint16)).save(path)
+    return path
+
+
+def _ramp_mm(w=64, h=48):
+    return np.tile(np.linspace(1000, 3000, w), (h, 1)).astype(np.uint16)
+
+
+# ------------------------------------------------------------------------------------------
+# Bad inputs
+# ------------------------------------------------------------------------------------------
+
+
+def test_missing_image(tmp_path):
+    with pytest.raises(InputError, match="not found"):
+        load_input(InputSpec(tmp_path / "nope.jpg"), CFG)
+
+
+def test_text_file_named_jpg(tmp_path):
+    p = tmp_path / "photo.jpg"
+    p.write_text("this is not a photo")
+    with pytest.raises(InputError, match="cannot read .* as an image"):
+        load_input(InputSpec(p), CFG)
+
+
+def test_missing_depth(tmp_path):
+    with pytest.raises(InputError, match="depth map not found"):
+        load_input(InputSpec(_photo(tmp_path / "a.png"), tmp_path / "d.png"), CFG)
+
+
+def test_corrupt_depth(tmp_path):
+    d = tmp_path / "d.png"
+    d.write_bytes(b"\x89PNG garbage")
+    with pytest.raises(InputError, match="cannot read .* as a depth image"):
+        load_input(InputSpec(_photo(tmp_path / "a.png"), d), CFG)
+
+
+def test_rgb_depth_image_is_rejected(tmp_path):
+    d = tmp_path / "d.png"
+    _photo(d)
+    with pytest.raises(InputError, match="one channel"):
+        load_input(InputSpec(_photo(tmp_path / "a.png"), d), CFG)
+
+
+def test_depth_of_wrong_size_names_both_sizes(tmp_path):
+    d = _depth_png(tmp_path / "d.png", _ramp_mm(32, 24))
+    with pytest.raises(InputError) as err:
+        load_input(InputSpec(_photo(tmp_path / "a.png", 64, 48), d), CFG)
+    assert "32x24" in str(err.value) and "64x48" in str(err.value)
+
+
+def test_all_zero_depth(tmp_path):
+    d = _depth_png(tmp_path / "d.png", np.zeros((48, 64)))
+    with pytest.raises(InputError, match="no valid depth"):
+        load_input(InputSpec(_photo(tmp_path / "a.png"), d), CFG)
+
+
+def test_nan_depth_npy(tmp_path):
+    d = tmp_path / "d.npy"
+    np.save(d, np.full((48, 64), np.nan, dtype=np.float32))
+    with pytest.raises(InputError, match="no valid depth"):
+        load_input(InputSpec(_photo(tmp_path / "a.png"), d), CFG)
+
+
+def test_too_little_valid_depth(tmp_path):
+    depth = np.zeros((48, 64), dtype=np.float32)
+    depth[:2, :50] = 2.0  # 100 of 3072 pixels: 3 %
+    depth[5, 5] = np.inf
+    depth[6, 6] = -1.0
+    d = tmp_path / "d.npy"
+    np.save(d, depth)
+    with pytest.raises(InputError, match=r"only 3\.3% of the pixels"):
+        load_input(InputSpec(_photo(tmp_path / "a.png"), d), CFG)
+
+
+@pytest.mark.parametrize("scale", [0.0, -0.001, float("nan")])
+def test_bad_depth_scale(tmp_path, scale):
+    d = _depth_png(tmp_path / "d.png", _ramp_mm())
+    with pytest.raises(InputError, match="depth scale must be a positive"):
+        load_input(InputSpec(_photo(tmp_path / "a.png"), d, depth_scale=scale), CFG)
+
+
+@pytest.mark.parametrize(
+    "k, message",
+    [
+        ((-500.0, 500.0, 32.0, 24.0), "fx, fy > 0"),
+        ((500.0, float("nan"), 32.0, 24.0), "fx, fy > 0"),
+        ((500.0, 500.0, 320.0, 24.0), "principal point .* far outside"),
+        ((500.0, 500.0, 32.0, -40.0), "principal point .* far outside"),
+        ((500.0, 500.0, 32.0), "4 numbers"),
+    ],
+)
+def test_bad_intrinsics_flag(tmp_path, k, message):
+    with pytest.raises(InputError, match=message):
+        load_input(InputSpec(_photo(tmp_path / "a.png"), intrinsics=k), CFG)
+
+
+def test_unreadable_camera_json(tmp_path):
+    img = _photo(tmp_path / "rgb.png")
+    (tmp_path / "camera.json").write_text("{fx: 1")
+    with pytest.raises(InputError, match="cannot read intrinsics from .*camera.json"):
+        load_input(InputSpec(img), CFG)
+
+
+def test_camera_json_for_another_aspect_ratio(tmp_path):
+    img = _photo(tmp_path / "rgb.png", 64, 48)
+    (tmp_path / "camera.json").write_text(json.dumps({"fx": 50, "fy": 50, "cx": 32, "cy": 32, "width": 64, "height": 64}))
+    with pytest.raises(InputError, match="different aspect ratio"):
+        load_input(InputSpec(img), CFG)
+
+
+def test_bad_fov(tmp_path):
+    with pytest.raises(InputError, match="field of view"):
+        load_input(InputSpec(_photo(tmp_path / "a.png"), fov_deg=0.0), CFG)
+
+
+# ------------------------------------------------------------------------------------------
+# Intrinsics sources
+# ------------------------------------------------------------------------------------------
+
+
+def test_intrinsics_flag(tmp_path):
+    k = load_input(InputSpec(_photo(tmp_path / "a.png"), intrinsics=(60.0, 61.0, 31.0, 23.0)), CFG).intrinsics
+    assert k.source == "flag" and (k.fx_px, k.fy_px, k.cx_px, k.cy_px) == (60.0, 61.0, 31.0, 23.0)
+
+
+def test_intrinsics_from_camera_json_scaled(tmp_path):
+    img = _photo(tmp_path / "rgb.png", 64, 48)
+    # camera.json written for the full-resolution 128x96 original of this photo.
+    (tmp_path / "camera.json").write_text(json.dumps({"fx": 100.0, "fy": 102.0, "cx": 63.5, "cy": 47.5, "width": 128, "height": 96}))
+    k = load_input(InputSpec(img), CFG).intrinsics
+    assert k.source == "file"
+    assert (k.fx_px, k.fy_px) == pytest.approx((50.0, 51.0))
+    assert (k.cx_px, k.cy_px) == pytest.approx((31.5, 23.5))  # still the image centre
+
+
+def test_intrinsics_flag_beats_camera_json(tmp_path):
+    img = _photo(tmp_path / "rgb.png")
+    (tmp_path / "camera.json").write_text(json.dumps({"fx": 100.0, "fy": 100.0, "cx": 32, "cy": 24, "width": 64, "height": 48}))
+    assert load_input(InputSpec(img, intrinsics=(70.0, 70.0, 32.0, 24.0)), CFG).intrinsics.source == "flag"
+
+
+def test_intrinsics_from_exif_35mm(tmp_path):
+    exif = Image.Exif()
+    exif.get_ifd(0x8769)[0xA405] = 28  # FocalLengthIn35mmFilm
+    img = _photo(tmp_path / "a.jpg", 60, 40, exif=exif)
+    k = load_input(InputSpec(img), CFG).intrinsics
+    assert k.source == "exif"
+    # 28 mm on the 43.27 mm full-frame diagonal; a 3:2 image has the full-frame aspect ratio, so
+    # this is also 28 / 36 of the width.
+    assert k.fx_px == pytest.approx(28.0 / 36.0 * 60.0, rel=1e-6)
+    assert k.fx_px == pytest.approx(28.0 * math.hypot(60, 40) / math.hypot(36, 24))
+
+
+def test_intrinsics_from_exif_focal_length_and_sensor(tmp_path):
+    exif = Image.Exif()
+    ifd = exif.get_ifd(0x8769)
+    ifd[0x920A] = 4.0  # FocalLength, mm
+    ifd[0xA20E] = 10.0  # FocalPlaneXResolution: 10 px per mm
+    ifd[0xA210] = 4  # unit: mm
+    img = _photo(tmp_path / "a.jpg", 60, 40, exif=exif)
+    k = load_input(InputSpec(img), CFG).intrinsics
+    assert k.source == "exif" and k.fx_px == pytest.approx(40.0)
+
+
+def test_exif_orientation_is_applied(tmp_path):
+    exif = Image.Exif()
+    exif[0x0112] = 6  # rotate 90 degrees clockwise to display
+    img = _photo(tmp_path / "a.jpg", 64, 48, exif=exif)
+    loaded = load_input(InputSpec(img), CFG)
+    assert loaded.rgb.shape == (64, 48, 3)
+    assert (loaded.intrinsics.width_px, loaded.intrinsics.height_px) == (48, 64)
+
+
+def test_default_fov_and_fov_flag(tmp_path):
+    img = _photo(tmp_path / "a.png", 64, 48)
+    k = load_input(InputSpec(img), CFG).intrinsics
+    assert k.source == "default-fov"
+    assert k.fx_px == pytest.approx(32.0 / math.tan(math.radians(CFG.default_fov_deg / 2)))
+    k90 = load_input(InputSpec(img, fov_deg=90.0), CFG).intrinsics
+    assert k90.source == "flag" and k90.fx_px == pytest.approx(32.0)
+
+
+# ------------------------------------------------------------------------------------------
+# Depth formats and downscaling
+# ------------------------------------------------------------------------------------------
+
+
+def test_depth_formats_agree(tmp_path):
+    img = _photo(tmp_path / "a.png")
+    mm = _ramp_mm()
+    mm[0, :] = 0
+    from_png = load_input(InputSpec(img, _depth_png(tmp_path / "d.png", mm)), CFG).depth_m
+    np.save(tmp_path / "d.npy", mm.astype(np.float64) / 1000.0)
+    from_npy = load_input(InputSpec(img, tmp_path / "d.npy"), CFG).depth_m
+    Image.fromarray(mm.astype(np.float32) / 1000.0, mode="F").save(tmp_path / "d.tif")
+    from_tif = load_input(InputSpec(img, tmp_path / "d.tif"), CFG).depth_m
+    Image.fromarray((mm // 20).astype(np.uint8)).save(tmp_path / "d8.png")
+    from_8bit = load_input(InputSpec(img, tmp_path / "d8.png", depth_scale=0.02), CFG).depth_m
+    assert from_png.dtype == np.float32 and from_png[0].max() == 0.0
+    np.testing.assert_allclose(from_png, mm / 1000.0, atol=1e-6)
+    np.testing.assert_allclose(from_npy, from_png, atol=1e-6)
+    np.testing.assert_allclose(from_tif, from_png, atol=1e-6)
+    np.testing.assert_allclose(from_8bit, from_png, atol=0.021)
+
+
+def test_large_image_is_downscaled_with_depth_and_intrinsics(tmp_path):
+    w, h = 2000, 1500
+    Image.fromarray(np.zeros((h, w, 3), dtype=np.uint8)).save(tmp_path / "big.png")
+    mm = np.full((h, w), 2000, dtype=np.uint16)
+    mm[:, w // 2 :] = 4000
+    _depth_png(tmp_path / "d.png", mm)
+    loaded = load_input(InputSpec(tmp_path / "big.png", tmp_path / "d.png", intrinsics=(1500.0, 1500.0, 999.5, 749.5)), CFG)
+    assert loaded.rgb.shape == (960, MAX_SIDE_PX, 3) and loaded.depth_m.shape == (960, MAX_SIDE_PX)
+    # Nearest neighbour: no depth in between the two walls is invented.
+    assert set(np.unique(loaded.depth_m).tolist()) == {2.0, 4.0}
+    k = loaded.intrinsics
+    assert k.fx_px == pytest.approx(1500.0 * 0.64) and k.cx_px == pytest.approx((MAX_SIDE_PX - 1) / 2)
