@@ -163,3 +163,33 @@ def test_demo_input_is_a_loadable_sample(tmp_path):
     objs = meta["ground_truth"]["objects"]
     assert len(objs) == 7 and sum(o["visible_px"] > 0 for o in objs) >= 5
     assert meta["ground_truth"]["camera"]["world_from_camera"][3] == [0.0, 0.0, 0.0, 1.0]
+
+
+def test_compare_to_ground_truth_aligns_worlds_through_the_camera(tmp_path):
+    from layout.synthetic import box_asset
+
+    from scene_builder.model import Camera, PlacedObject, Room, Scene
+
+    spec = procedural.make_room(8, n_objects=6)
+    sample = procedural.render_room(spec, tmp_path / "room")
+    # The same objects described in another world frame (yawed 40 degrees and shifted): only the
+    # camera relates the two, as for a real build.
+    other_from_gt = frames.pose(frames.rot_z(np.radians(40)), (1.0, -2.0, 0.0))
+    placed = []
+    for i, o in enumerate(spec.objects[:-1]):  # the last object is "missed"
+        size = np.array(o.size_m) * (1.1 if i == 0 else 1.0)  # the first is built 10 % too big
+        placed.append(PlacedObject(box_asset(o.name, size, o.category), other_from_gt @ o.world_from_object))
+    scene = Scene(Camera(spec.camera.intrinsics, other_from_gt @ spec.camera.world_from_camera), Room(), tuple(placed))
+    result = procedural.compare_to_ground_truth(scene, sample)
+    s = result["summary"]
+    gt_objects = json.loads((sample / "meta.json").read_text())["ground_truth"]["objects"]
+    visible = {o["name"] for o in gt_objects if o["visible_px"] >= procedural.MIN_VISIBLE_PX}
+    built = {o.name for o in spec.objects[:-1]}
+    assert s["precision"] == 1.0 and s["category_accuracy"] == 1.0
+    assert s["recall"] == pytest.approx(len(visible & built) / len(visible))
+    assert s["position_error_m_median"] == pytest.approx(0.0, abs=1e-6)
+    assert s["yaw_error_deg_median"] == pytest.approx(0.0, abs=1e-6)
+    first = next(o for o in result["objects"] if o["true"] == spec.objects[0].name)
+    assert first["size_error_rel"] == pytest.approx(0.1)
+    assert first["box_iou_3d"] == pytest.approx(1 / 1.1**3)
+    assert first["position_error_m"] == pytest.approx(0.05 * spec.objects[0].size_m[2])  # grown about its bottom
