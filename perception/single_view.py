@@ -228,7 +228,7 @@ def estimate_geometry(
     if len(segs):
         d = segs[:, 2:] - segs[:, :2]
         ang_from_vertical = np.degrees(np.arctan2(np.abs(d[:, 0]), np.abs(d[:, 1])))
-        near_vertical = ang_from_vertical < 25.0
+        near_vertical = ang_from_vertical < 20.0
 
         def is_vertical(vp: np.ndarray) -> bool:
             # Direction within 35 deg of the image's vertical axis (camera roughly upright).
@@ -306,6 +306,8 @@ class SingleViewDepth:
         self.max_depth_m = max_depth_m
         self.default_fov_deg = default_fov_deg
         self.seed = seed
+        self.floor_colour_dist = 20.0  # CIE Lab distance to the floor seed colour
+        self.max_floor_depth_m = 7.0  # farthest floor point a room is expected to show
         self.last_geometry: SingleViewGeometry | None = None
 
     def estimate(self, rgb: np.ndarray, intrinsics: CameraIntrinsics | None = None) -> DepthEstimate:
@@ -411,19 +413,26 @@ class SingleViewDepth:
         mean_lab /= np.maximum(counts, 1)[:, None]
         below = np.bincount(labels.ravel(), weights=(down > 0.02).ravel().astype(np.float64), minlength=n_lab)
         below_frac = below / np.maximum(counts, 1)
-        bottom_rows = labels[int(h * 0.9) :, :]
-        seed_labels, seed_counts = np.unique(bottom_rows, return_counts=True)
+        # The seed band skips the outermost 3% (NYU-style frames have a constant border).
+        band = labels[int(h * 0.85) : int(h * 0.97), int(w * 0.05) : int(w * 0.95)]
+        seed_labels, seed_counts = np.unique(band, return_counts=True)
         # Seed: the superpixels covering the bottom band, weighted by their share of it.
         seed_colour = (mean_lab[seed_labels] * seed_counts[:, None]).sum(0) / seed_counts.sum()
         dist = np.linalg.norm(mean_lab - seed_colour, axis=1)
-        candidate = (below_frac > 0.95) & (dist < 25.0)
+        # A floor superpixel lies below the horizon, has the floor's colour, and its farthest
+        # floor point (its top row) is within the room (walls near the horizon would otherwise
+        # read as floor kilometres away).
+        top_row = np.full(n_lab, h, dtype=np.int64)
+        np.minimum.at(top_row, labels.ravel(), np.repeat(np.arange(h), w))
+        far_floor = np.array([self.camera_height_m / max(float(down[r, :].max()), 1e-6) for r in range(h)])
+        candidate = (below_frac > 0.95) & (dist < self.floor_colour_dist) & (far_floor[np.minimum(top_row, h - 1)] < self.max_floor_depth_m)
         # Grow through 4-neighbour adjacency from the bottom-touching candidates.
         adj_a = np.concatenate([labels[:, :-1].ravel(), labels[:-1, :].ravel()])
         adj_b = np.concatenate([labels[:, 1:].ravel(), labels[1:, :].ravel()])
         diff = adj_a != adj_b
         pairs = np.unique(np.stack([adj_a[diff], adj_b[diff]], 1), axis=0)
         in_floor = np.zeros(n_lab, dtype=np.bool_)
-        in_floor[np.unique(labels[-1, :])] = True
+        in_floor[seed_labels[seed_counts >= 0.02 * band.size]] = True
         in_floor &= candidate
         changed = True
         while changed:
