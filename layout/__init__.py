@@ -8,11 +8,11 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-__all__ = ["adopt_settled", "solve_layout", "verify_scene"]
+__all__ = ["adopt_settled", "settled_scene", "solve_layout", "verify_scene"]
 
 if TYPE_CHECKING:  # pragma: no cover
     from layout.solver import solve_layout
-    from layout.verify import adopt_settled, verify_scene
+    from layout.verify import adopt_settled, settled_scene, verify_scene
 
 
 def __getattr__(name: str):
@@ -20,7 +20,7 @@ def __getattr__(name: str):
         from layout.solver import solve_layout
 
         return solve_layout
-    if name in ("verify_scene", "adopt_settled"):
+    if name in ("verify_scene", "adopt_settled", "settled_scene"):
         from layout import verify
 
         return getattr(verify, name)

@@ -16,7 +16,9 @@ SNAP_COST_SLACK_M = 0.002
 # With too few observed points to judge a fit, snap only small corrections.
 MIN_POINTS_FOR_FIT = 20
 SNAP_MAX_DEG_WITHOUT_EVIDENCE = 12.0
-MAX_FIT_POINTS = 600
+MAX_FIT_POINTS = 300
+# The snapped pose's plan position may move this far to re-fit the points.
+MAX_REFIT_M = 0.15
 
 
 @dataclass(frozen=True)
@@ -75,8 +77,9 @@ def _refit_xy(points: np.ndarray, bounds: np.ndarray, rotation: np.ndarray, posi
         p = position + np.array([dxy[0], dxy[1], 0.0])
         return box_surface_distance((points - p) @ rotation, bounds)
 
-    sol = least_squares(residual, np.zeros(2), loss="soft_l1", f_scale=0.01, bounds=([-0.15, -0.15], [0.15, 0.15]), xtol=1e-6)
-    return position + np.array([sol.x[0], sol.x[1], 0.0])
+    sol = least_squares(residual, np.zeros(2), loss="soft_l1", f_scale=0.01, xtol=1e-6)
+    dxy = np.clip(sol.x, -MAX_REFIT_M, MAX_REFIT_M)
+    return position + np.array([dxy[0], dxy[1], 0.0])
 
 
 def snap_yaw(

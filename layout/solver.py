@@ -21,12 +21,13 @@ layout that the greedy scheme reaches, i.e. the least deviation from the observa
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from layout.bodies import Body, make_body
-from layout.geometry import clip_to_slab_xy, closest_point_in_polygon, horizontal_mtv, hull_edge_normals
+from layout.geometry import clip_to_slab_xy, closest_point_in_polygon, horizontal_mtv
 from layout.narrowphase import ConvexWorld
 from layout.snapping import YawSnap, reference_yaw, snap_yaw
 from layout.support import build_support, subtree
@@ -45,6 +46,7 @@ CLEARANCE_TOL_M = 1e-4
 CLEARANCE_TRIGGER = 0.5
 # A pair pushed apart this many times is from then on separated as a whole (see pair_push).
 ESCALATE_AFTER_PUSHES = 4
+_FAN = np.stack([np.cos(np.radians(np.arange(0.0, 180.0, 7.5))), np.sin(np.radians(np.arange(0.0, 180.0, 7.5)))], axis=1)
 # Centre of mass kept this far inside a supporting face.
 SUPPORT_INSET_M = 0.01
 
@@ -62,6 +64,7 @@ class SolveStats:
     max_shift_m: float
     converged: bool
     iterations: int
+    phase_cpu_s: tuple[tuple[str, float], ...] = ()
 
 
 def candidate_pairs(lo_m: np.ndarray, hi_m: np.ndarray, margin_m: float) -> np.ndarray:
@@ -206,7 +209,9 @@ class _Solver:
         xb = np.concatenate([clip_to_slab_xy(bj.pieces[b].verts_rel_m + bj.position_m, bj.pieces[b].edges, z_lo, z_hi) for b in aj])
         if len(xa) == 0 or len(xb) == 0:
             return np.zeros(2), 0.0
-        axes = np.concatenate([hull_edge_normals(xa), hull_edge_normals(xb)])
+        # Any axis gives a valid (separating) push; the pieces' own axes plus a 7.5-degree fan
+        # approximate the hulls' edge normals without building the hulls.
+        axes = np.concatenate([bi.pieces[a].axes_xy for a in ai] + [bj.pieces[b].axes_xy for b in aj] + [_FAN])
         u, overlap = horizontal_mtv(xa, xb, axes)
         worst = min(d for _, _, d in involved)
         return u, max(overlap + self.clearance, self.clearance - worst)
@@ -271,15 +276,18 @@ class _Solver:
         return True
 
     def push_out_of_walls(self) -> bool:
+        if not len(self.wall_n):
+            return False
+        pos = np.array([b.position_m for b in self.bodies])
+        gaps = self.wall_min_rel + pos @ self.wall_n.T + self.wall_off  # (N, W)
         moved = False
-        for i in range(len(self.bodies)):
-            for w, gap in enumerate(self.wall_gaps(i)):
-                n_xy = self.wall_n[w, :2]
-                norm = float(np.linalg.norm(n_xy))
-                short = self.clearance - gap
-                if norm > 1e-9 and short > CLEARANCE_TOL_M:
-                    self.move_tree(i, n_xy / norm * (short / norm))
-                    moved = True
+        for i, w in np.argwhere(self.clearance - gaps > CLEARANCE_TOL_M):
+            n_xy = self.wall_n[w, :2]
+            norm = float(np.linalg.norm(n_xy))
+            short = self.clearance - float(self.wall_gaps(int(i))[w])  # earlier moves count
+            if norm > 1e-9 and short > CLEARANCE_TOL_M:
+                self.move_tree(int(i), n_xy / norm * (short / norm))
+                moved = True
         return moved
 
     def keep_on_support(self) -> bool:
@@ -337,6 +345,14 @@ def solve_layout_with_stats(
         raise InputError(f"layout: object names must be unique, repeated: {', '.join(dup)}; rename the assets")
     # Work in name order so that the result does not depend on the input order.
     order = sorted(range(len(generated)), key=lambda k: names[k])
+    clock = [time.process_time()]
+    phases: list[tuple[str, float]] = []
+
+    def lap(name: str) -> None:
+        now = time.process_time()
+        phases.append((name, now - clock[0]))
+        clock[0] = now
+
     ref = reference_yaw(perception.room)
     snaps: list[YawSnap] = [YawSnap(False, 0.0, np.nan, np.nan)] * len(generated)
     bodies: list[Body] = []
@@ -345,18 +361,24 @@ def solve_layout_with_stats(
         pose, snap = snap_yaw(g.asset, g.world_from_asset, g.observed_points_world_m, ref, seed=seed + k)
         snaps[k] = snap
         bodies.append(make_body(g.asset, pose))
+    lap("snap")
     if not bodies:
         scene = Scene(camera=perception.camera, room=perception.room, objects=())
         return LayoutResult(scene=scene, support=()), SolveStats(tuple(snaps), 0.0, 0.0, True, 0)
 
     walls = tuple(perception.room.walls)
     solver = _Solver(bodies, walls, config)
+    lap("narrowphase_setup")
     before = solver.max_penetration()
+    lap("measure_before")
     edges, _ = build_support(bodies, walls)
     for i, b in enumerate(bodies):
         solver.world.set_position(i, b.position_m)
+    lap("support")
     iterations, converged = solver.run(int(config.max_iterations))
+    lap("solve")
     after = solver.max_penetration()
+    lap("measure_after")
 
     by_name = {b.name: b for b in bodies}
     parent_of = {e.child: e.parent for e in edges}
@@ -368,7 +390,7 @@ def solve_layout_with_stats(
     edge_order = {n: k for k, n in enumerate(names)}
     support = tuple(sorted(edges, key=lambda e: edge_order[e.child]))
     shifts = np.array([np.linalg.norm(b.position_m[:2] - b.initial_position_m[:2]) for b in bodies])
-    stats = SolveStats(tuple(snaps), float(shifts.mean()), float(shifts.max()), converged, iterations)
+    stats = SolveStats(tuple(snaps), float(shifts.mean()), float(shifts.max()), converged, iterations, tuple(phases))
     return (
         LayoutResult(scene=scene, support=support, iterations=iterations, max_penetration_before_m=before, max_penetration_after_m=after),
         stats,

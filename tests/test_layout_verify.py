@@ -1,0 +1,211 @@
+"""verify_scene: penetration, settling, toppling and render-and-compare on MJCF fixtures.
+
+``write_fixture_mjcf`` is a deliberately small MJCF writer that follows the naming conventions
+of DEVELOPERS.md (body NAME, free joint NAME/free, collision pieces in group 3, floor, wall_i,
+input_camera); it lets the physics check be tested independently of the exporter.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from layout.synthetic import box_asset, empty_perception
+from scene_builder.config import LayoutConfig
+from scene_builder.frames import mujoco_camera, pose, quat_wxyz_from_matrix, rot_z, transform_points
+from scene_builder.model import Observation, PerceivedObject, Perception, PlacedObject, Plane, Scene
+
+
+def write_fixture_mjcf(scene: Scene, path, timestep_s: float = 0.002):
+    """Write ``scene`` as MJCF (single-part rigid objects), returns the path."""
+    import mujoco
+
+    spec = mujoco.MjSpec()
+    spec.compiler.degree = False
+    spec.option.timestep = timestep_s
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    k = scene.camera.intrinsics
+    spec.visual.global_.offwidth = max(640, k.width_px)
+    spec.visual.global_.offheight = max(480, k.height_px)
+    spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[20, 20, 0.1], group=0)
+    for i, w in enumerate(scene.room.walls):
+        n = np.asarray(w.normal)
+        x = np.cross([0.0, 0.0, 1.0], n)
+        x /= np.linalg.norm(x)
+        r = np.stack([x, np.cross(n, x), n], axis=1)
+        spec.worldbody.add_geom(
+            name=f"wall_{i}", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[20, 20, 0.1], pos=-w.offset_m * n,
+            quat=quat_wxyz_from_matrix(r), group=2, rgba=[0.8, 0.8, 0.8, 0.3],
+        )
+    cam = mujoco_camera(scene.camera.world_from_camera, k)
+    c = spec.worldbody.add_camera(name="input_camera", pos=cam["pos"], quat=cam["quat"])
+    c.resolution = list(cam["resolution"])
+    c.focal_pixel = list(cam["focalpixel"])
+    c.principal_pixel = list(cam["principalpixel"])
+    c.sensor_size = list(cam["sensorsize"])
+    for o in scene.objects:
+        part = o.asset.root
+        body = spec.worldbody.add_body(name=o.name, pos=o.world_from_asset[:3, 3], quat=quat_wxyz_from_matrix(o.world_from_asset[:3, :3]))
+        if not o.asset.is_fixed:
+            body.add_freejoint(name=f"{o.name}/free")
+        moments, axes = part.inertial.principal()
+        body.explicitinertial = True
+        body.mass = part.inertial.mass_kg
+        body.ipos = part.inertial.com_m
+        body.iquat = quat_wxyz_from_matrix(axes)
+        body.inertia = moments
+        vis = spec.add_mesh(name=f"{o.name}/visual", uservert=part.visual.vertices_m.ravel(), userface=part.visual.faces.ravel())
+        body.add_geom(type=mujoco.mjtGeom.mjGEOM_MESH, meshname=vis.name, group=1, contype=0, conaffinity=0, density=0.0)
+        for j, piece in enumerate(part.collision):
+            mesh = spec.add_mesh(name=f"{o.name}/collision_{j}", uservert=piece.vertices_m.ravel())
+            body.add_geom(type=mujoco.mjtGeom.mjGEOM_MESH, meshname=mesh.name, group=3, density=0.0, friction=[0.6, 0.005, 0.0001])
+    spec.compile()
+    path.write_text(spec.to_xml())
+    return path
+
+
+def _scene(objects, walls=()) -> Scene:
+    p = empty_perception(tuple(walls))
+    return Scene(camera=p.camera, room=p.room, objects=tuple(objects))
+
+
+def _placed(name, size, xyz, yaw=0.0, rotation=None):
+    r = rot_z(yaw) if rotation is None else rotation
+    return PlacedObject(box_asset(name, size), pose(r, xyz))
+
+
+def test_stable_scene_passes(tmp_path):
+    scene = _scene(
+        [
+            _placed("a", (0.4, 0.4, 0.3), (0.0, 0.0, 0.0)),
+            _placed("b", (0.3, 0.3, 0.2), (0.0, 0.0, 0.3), yaw=0.3),
+            _placed("c", (0.5, 0.3, 0.6), (1.0, 0.5, 0.0), yaw=1.0),
+        ],
+        walls=[Plane(np.array([1.0, 0.0, 0.0]), 2.0, "wall")],
+    )
+    verdict, fidelity = __import__("layout").verify_scene(write_fixture_mjcf(scene, tmp_path / "s.xml"), scene, LayoutConfig())
+    assert fidelity is None
+    assert verdict.max_penetration_m < 1e-3
+    assert verdict.stable, verdict.objects
+    assert abs(verdict.simulated_s - 3.0) < 0.01
+    assert {t.name for t in verdict.trajectories} == {"a", "b", "c"}
+    t = verdict.trajectories[0]
+    assert 80 <= len(t.times_s) <= 100  # ~30 Hz over 3 s
+    assert all(not o.toppled for o in verdict.objects)
+
+
+def test_planted_penetration_is_measured(tmp_path):
+    from layout import verify_scene
+
+    # b overlaps a by 3 cm along x; c is sunk 2 cm into the floor.
+    scene = _scene(
+        [
+            _placed("a", (0.4, 0.4, 0.3), (0.0, 0.0, 0.0)),
+            _placed("b", (0.4, 0.4, 0.3), (0.37, 0.0, 0.0)),
+            _placed("c", (0.3, 0.3, 0.3), (2.0, 0.0, -0.02)),
+        ]
+    )
+    verdict, _ = verify_scene(write_fixture_mjcf(scene, tmp_path / "p.xml"), scene, LayoutConfig(settle_s=0.1))
+    pens = {o.name: o.start_penetration_m for o in verdict.objects}
+    assert verdict.max_penetration_m == pytest.approx(0.03, abs=0.004)
+    assert pens["a"] == pytest.approx(0.03, abs=0.004) and pens["b"] == pytest.approx(0.03, abs=0.004)
+    assert pens["c"] == pytest.approx(0.02, abs=0.004)
+    assert len(verdict.contact_points_m) > 0
+    pts = np.array(verdict.contact_points_m)
+    assert np.any(np.abs(pts[:, 0] - 0.185) < 0.03)  # contacts in the overlap of a and b (x 0.17..0.2)
+
+
+def test_toppling_object_is_caught(tmp_path):
+    from layout import verify_scene
+
+    # A tall thin box standing on one bottom edge, tilted 15 degrees about y: it falls over.
+    tilt = np.array([[np.cos(0.26), 0, np.sin(0.26)], [0, 1, 0], [-np.sin(0.26), 0, np.cos(0.26)]])
+    tall = _placed("tall", (0.06, 0.06, 0.7), (0.0, 0.0, 0.0), rotation=tilt)
+    # Lift it so its lowest corner touches the floor.
+    low = transform_points(tall.world_from_asset, tall.asset.root.collision[0].vertices_m)[:, 2].min()
+    tall = PlacedObject(tall.asset, pose(tilt, (0.0, 0.0, -low)))
+    scene = _scene([tall, _placed("calm", (0.3, 0.3, 0.3), (1.5, 0.0, 0.0))])
+    verdict, _ = verify_scene(write_fixture_mjcf(scene, tmp_path / "t.xml"), scene, LayoutConfig())
+    v = {o.name: o for o in verdict.objects}
+    assert v["tall"].toppled and v["tall"].rotation_deg > 30.0
+    assert not v["calm"].toppled and v["calm"].drift_m < 0.01
+    assert not verdict.stable
+    assert verdict.settle_max_rotation_deg == pytest.approx(v["tall"].rotation_deg)
+
+
+def test_settled_scene_adopts_final_poses(tmp_path):
+    from layout import settled_scene, verify_scene
+
+    # A box dropped from 10 cm lands on the floor: the settled pose has its bottom at z ~ 0.
+    scene = _scene([_placed("drop", (0.3, 0.3, 0.2), (0.0, 0.0, 0.1), yaw=0.4)])
+    verdict, _ = verify_scene(write_fixture_mjcf(scene, tmp_path / "d.xml"), scene, LayoutConfig(settle_s=1.0))
+    assert verdict.settle_max_drift_m == pytest.approx(0.1, abs=0.01)
+    settled = settled_scene(scene, verdict)
+    t = settled.objects[0].world_from_asset
+    assert abs(t[2, 3]) < 0.005
+    np.testing.assert_allclose(t[:3, :3], scene.objects[0].world_from_asset[:3, :3], atol=1e-3)
+    verdict2, _ = verify_scene(write_fixture_mjcf(settled, tmp_path / "d2.xml"), settled, LayoutConfig(settle_s=1.0))
+    assert verdict2.settle_max_drift_m < 0.005
+
+
+def _raycast_perception(scene: Scene, width: int = 48, height: int = 36) -> Perception:
+    """An observation made independently of MuJoCo: trimesh ray casting of the visual meshes
+    from the scene camera gives planar depth and instance masks."""
+    import trimesh
+
+    base = empty_perception(scene.room.walls, width, height)
+    k = base.camera.intrinsics
+    cam = base.camera.world_from_camera
+    u, v = np.meshgrid(np.arange(width, dtype=float), np.arange(height, dtype=float))
+    dirs_cam = np.stack([(u - k.cx_px) / k.fx_px, (v - k.cy_px) / k.fy_px, np.ones_like(u)], -1).reshape(-1, 3)
+    dirs = dirs_cam @ cam[:3, :3].T
+    origins = np.repeat(cam[:3, 3][None], len(dirs), axis=0)
+    depth = np.zeros(len(dirs))
+    owner = np.full(len(dirs), -1)
+    for idx, o in enumerate(scene.objects):
+        mesh = o.asset.root.visual
+        tm = trimesh.Trimesh(transform_points(o.world_from_asset, mesh.vertices_m), mesh.faces, process=False)
+        locs, ray_ids, _ = tm.ray.intersects_location(origins, dirs, multiple_hits=False)
+        z = (locs - cam[:3, 3]) @ cam[:3, 2]  # planar depth along the optical axis
+        closer = (depth[ray_ids] == 0) | (z < depth[ray_ids])
+        depth[ray_ids[closer]] = z[closer]
+        owner[ray_ids[closer]] = idx
+    objs = []
+    for idx, o in enumerate(scene.objects):
+        mask = (owner == idx).reshape(height, width)
+        pts = np.zeros((1, 3))
+        objs.append(PerceivedObject(idx + 1, o.name, "box", 1.0, mask, pts, np.zeros((1, 3), np.uint8)))
+    obs = Observation("raycast", np.zeros((height, width, 3), np.uint8), depth.reshape(height, width).astype(np.float32), k, "sensor")
+    return Perception(obs, base.camera, base.room, tuple(objs))
+
+
+@pytest.mark.slow
+def test_render_and_compare_matches_independent_raycast(tmp_path):
+    from layout import verify_scene
+
+    scene = _scene([_placed("left", (0.5, 0.6, 0.5), (0.0, 0.6, 0.0)), _placed("right", (0.4, 0.4, 0.8), (0.4, -0.7, 0.0), yaw=0.5)])
+    perception = _raycast_perception(scene)
+    assert all(o.mask.sum() > 20 for o in perception.objects)
+    cfg = LayoutConfig(settle_s=0.05)
+    _, fid = verify_scene(write_fixture_mjcf(scene, tmp_path / "r.xml"), scene, cfg, perception)
+    assert fid.depth_absrel < 0.02
+    assert fid.mask_iou_mean > 0.85
+    assert {n for n, _ in fid.mask_iou} == {"left", "right"}
+    # The same observation against a scene with "right" moved 40 cm: its IoU and the depth error
+    # degrade, "left" is unaffected.
+    moved = _scene([scene.objects[0], _placed("right", (0.4, 0.4, 0.8), (0.4, -0.3, 0.0), yaw=0.5)])
+    _, fid2 = verify_scene(write_fixture_mjcf(moved, tmp_path / "m.xml"), moved, cfg, perception)
+    iou = dict(fid2.mask_iou)
+    assert iou["right"] < 0.6 and iou["left"] > 0.85
+    assert fid2.depth_absrel > fid.depth_absrel
+
+
+def test_missing_body_is_an_export_error(tmp_path):
+    from layout import verify_scene
+    from scene_builder.errors import ExportError
+
+    scene = _scene([_placed("a", (0.3, 0.3, 0.3), (0, 0, 0))])
+    path = write_fixture_mjcf(scene, tmp_path / "a.xml")
+    other = _scene([_placed("b", (0.3, 0.3, 0.3), (0, 0, 0))])
+    with pytest.raises(ExportError, match="no body or flex named 'b'"):
+        verify_scene(path, other, LayoutConfig(settle_s=0.01))
