@@ -44,9 +44,9 @@ WALL_MAX_TILT_DEG = 6.0
 #: Downward pitch assumed when nothing in the image tells where gravity points.
 TYPICAL_PITCH_DEG = 10.0
 #: Points sampled for RANSAC (seeded); planes are refined on all points afterwards.
-RANSAC_SAMPLES = 40_000
+RANSAC_SAMPLES = 10_000
 _RANSAC_THRESHOLD_M = 0.025
-_MAX_PLANES = 10
+_MAX_PLANES = 8
 #: A plane must hold this fraction of the sampled points to count (floor, wall, ceiling).
 _MIN_PLANE_FRACTION = 0.03
 
@@ -139,7 +139,7 @@ def _ransac_planes(points: np.ndarray, seed: int) -> list[tuple[np.ndarray, floa
         if len(remaining) < min_inliers:
             break
         pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(remaining))
-        model, inliers = pcd.segment_plane(distance_threshold=_RANSAC_THRESHOLD_M, ransac_n=3, num_iterations=400)
+        model, inliers = pcd.segment_plane(distance_threshold=_RANSAC_THRESHOLD_M, ransac_n=3, num_iterations=200)
         if len(inliers) < min_inliers:
             break
         n, d = _towards_camera(np.asarray(model[:3], dtype=np.float64), float(model[3]))
@@ -166,11 +166,11 @@ def _refine(
 
     near = np.flatnonzero(np.abs(points @ n + d) < 0.08)
     if len(near) >= 3:
-        if len(near) > 20_000:
-            near = near[np.sort(np.random.default_rng(seed).choice(len(near), 20_000, replace=False))]
+        if len(near) > 8_000:
+            near = near[np.sort(np.random.default_rng(seed).choice(len(near), 8_000, replace=False))]
         o3d.utility.random.seed(int(seed))
         pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[near]))
-        model, _ = pcd.segment_plane(distance_threshold=0.012, ransac_n=3, num_iterations=300)
+        model, _ = pcd.segment_plane(distance_threshold=0.012, ransac_n=3, num_iterations=200)
         n_new = np.asarray(model[:3], dtype=np.float64)
         scale = np.linalg.norm(n_new)
         n_new, d_new = n_new / scale, float(model[3]) / scale
@@ -328,7 +328,8 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0) -> R
     # Walls (vertical, little seen behind them) and the ceiling (horizontal, above the camera).
     sin_wall = np.sin(np.radians(WALL_MAX_TILT_DEG))
     for n0, d0, count in sorted(planes, key=lambda p: -p[2]):
-        if abs(n0 @ up) < sin_wall:
+        if floor_found and abs(n0 @ up) < sin_wall:
+            # Without a floor in view a large vertical plane is as likely a cabinet front as a wall.
             n = _unit(n0 - (n0 @ up) * up)
             _, _, inl = _refine(pts, thr, n, d0, seed, iterations=1)
             if inl.sum() < 3:

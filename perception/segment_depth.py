@@ -26,13 +26,12 @@ import numpy as np
 from perception.protocols import InstanceMasks
 from scene_builder.model import CameraIntrinsics
 
-__all__ = ["DepthClusterSegmenter", "LINK_RADIUS_M", "MERGE_RADIUS_M", "VOXEL_M", "cluster_points"]
+__all__ = ["DepthClusterSegmenter", "LINK_RADIUS_M", "MERGE_RADIUS_M", "VOXEL_M", "cluster_points", "link_radius_m"]
 
 VOXEL_M = 0.02
 LINK_RADIUS_M = 0.045
 MERGE_RADIUS_M = 0.10
 _LAYER_BIN_M = 0.01
-_CELL_M = 0.05
 
 
 def _voxelize(points: np.ndarray, voxel_m: float) -> tuple[np.ndarray, np.ndarray]:
@@ -45,71 +44,91 @@ def _voxelize(points: np.ndarray, voxel_m: float) -> tuple[np.ndarray, np.ndarra
     return centroids, inverse
 
 
-def _components(centroids: np.ndarray, radius_m: float) -> np.ndarray:
-    """(M,) component label of each voxel centroid, linking centroids within ``radius_m``."""
+def _components(centroids: np.ndarray, radius_m: np.ndarray | float) -> np.ndarray:
+    """(M,) component label of each voxel centroid; two centroids are linked when closer than
+    the larger of their radii (``radius_m``: scalar or (M,) metres)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
 
     m = len(centroids)
-    pairs = cKDTree(centroids).query_pairs(radius_m, output_type="ndarray")
+    radius = np.broadcast_to(np.asarray(radius_m, dtype=np.float64), (m,))
+    pairs = cKDTree(centroids).query_pairs(float(radius.max()), output_type="ndarray")
+    if len(pairs):
+        dist = np.linalg.norm(centroids[pairs[:, 0]] - centroids[pairs[:, 1]], axis=1)
+        pairs = pairs[dist < np.maximum(radius[pairs[:, 0]], radius[pairs[:, 1]])]
     graph = coo_matrix((np.ones(len(pairs), dtype=np.int8), (pairs[:, 0], pairs[:, 1])), shape=(m, m))
     _, labels = connected_components(graph, directed=False)
     return labels
 
 
-def cluster_points(points: np.ndarray) -> np.ndarray:
-    """(N,) int64 cluster label (0..K-1) of each of the (N, 3) points: Euclidean connected
-    components at :data:`LINK_RADIUS_M` over :data:`VOXEL_M` voxels."""
-    if len(points) == 0:
+def link_radius_m(depth_m: np.ndarray, focal_px: float) -> np.ndarray:
+    """Link radius for points at planar depth ``depth_m``: :data:`LINK_RADIUS_M`, or six pixel
+    footprints (z / f) when larger, so that a surface seen at a grazing angle (rows of a table
+    top 12 degrees below the line of sight are ~5 pixel footprints apart) stays in one piece.
+    Capped at 12 cm."""
+    return np.clip(6.0 * np.asarray(depth_m, dtype=np.float64) / focal_px, LINK_RADIUS_M, 0.12)
+
+
+def cluster_points(points_cam: np.ndarray, focal_px: float) -> np.ndarray:
+    """(N,) int64 cluster label (0..K-1) of each of the (N, 3) camera-frame points: Euclidean
+    connected components over :data:`VOXEL_M` voxels with the radius of :func:`link_radius_m`."""
+    if len(points_cam) == 0:
         return np.zeros(0, dtype=np.int64)
-    centroids, inverse = _voxelize(points, VOXEL_M)
-    return _components(centroids, LINK_RADIUS_M)[inverse].astype(np.int64)
+    centroids, inverse = _voxelize(points_cam, VOXEL_M)
+    return _components(centroids, link_radius_m(centroids[:, 2], focal_px))[inverse].astype(np.int64)
 
 
-def _footprint(xy: np.ndarray, origin: np.ndarray) -> set[tuple[int, int]]:
-    cells = np.floor((xy - origin) / _CELL_M).astype(np.int64)
-    return set(map(tuple, np.unique(cells, axis=0).tolist()))
-
-
-def _split_on_support(points: np.ndarray, up: np.ndarray, horiz: np.ndarray, min_points: int) -> np.ndarray | None:
+def _split_on_support(points: np.ndarray, up: np.ndarray, horiz: np.ndarray, min_points: int, focal_px: float) -> np.ndarray | None:
     """Split what stands on a horizontal layer of one cluster.
 
     points: (N, 3) camera-frame points of the cluster; up: (3,) unit up; horiz: (2, 3) two
-    horizontal unit axes. Returns (N,) int labels (0 = the support, 1.. = objects on it) or None
+    horizontal unit axes; focal_px: focal length (for the link radius). Returns (N,) int labels (0 = the support, 1.. = objects on it) or None
     when there is nothing to split.
     """
+    from scipy.spatial import Delaunay, QhullError, cKDTree
+
     h = points @ up
     if h.max() - h.min() < 0.15:
         return None
     edges = np.arange(h.min(), h.max() + 2 * _LAYER_BIN_M, _LAYER_BIN_M)
     hist, _ = np.histogram(h, bins=edges)
     layer_counts = np.convolve(hist, np.ones(3, dtype=np.int64), mode="same")
+    # A horizontal surface packs its points into one thin slab; vertical faces spread evenly.
+    typical = float(np.median(layer_counts[layer_counts > 0]))
     # Candidate support layers, highest first: dense slabs (a horizontal surface seen from above
     # puts many points at one height) with enough points standing above them.
     for k in np.argsort(-edges[:-1]):
-        if layer_counts[k] < max(min_points, 0.12 * len(points)):
+        if layer_counts[k] < max(0.5 * min_points, 3.0 * typical):
             continue
-        top = edges[k] + 2 * _LAYER_BIN_M
-        above = h > top + 0.02
-        if above.sum() < min_points or (~above).sum() < min_points:
+        layer_h = edges[k] + 0.5 * _LAYER_BIN_M
+        above = h > layer_h + 0.04
+        # The support (the layer and what is under it) must be a real object, not the rim of one.
+        if above.sum() < min_points or (h <= layer_h + 1.5 * _LAYER_BIN_M).sum() < max(min_points, 0.3 * len(points)):
             continue
-        layer = np.abs(h - (edges[k] + 0.5 * _LAYER_BIN_M)) < 1.5 * _LAYER_BIN_M
+        layer = np.abs(h - layer_h) < 1.5 * _LAYER_BIN_M
         xy = points @ horiz.T
-        origin = xy.min(axis=0)
-        support_cells = _footprint(xy[layer], origin)
+        # The support's footprint is the convex hull of its top layer: the part of the layer under
+        # the object standing on it is hidden, so the layer's own cells would have a hole there.
+        layer_xy = xy[layer][:: max(1, int(layer.sum()) // 2000)]
+        try:
+            hull = Delaunay(layer_xy)
+        except QhullError:  # a degenerate (collinear) layer is no support surface
+            continue
         above_idx = np.flatnonzero(above)
-        pieces = cluster_points(points[above_idx])
+        pieces = cluster_points(points[above_idx], focal_px)
         labels = np.zeros(len(points), dtype=np.int64)
         next_label = 1
+        just_above = h > layer_h + 1.2 * _LAYER_BIN_M
         for p in range(int(pieces.max()) + 1):
             sel = above_idx[pieces == p]
-            if len(sel) < min_points:
+            if len(sel) < min_points or np.mean(hull.find_simplex(xy[sel]) >= 0) < 0.8:
                 continue
-            cells = _footprint(xy[sel], origin)
-            if len(cells & support_cells) >= 0.8 * len(cells):
-                labels[sel] = next_label
-                next_label += 1
+            # The piece's lowest centimetres, down to the support surface, go with it.
+            near = cKDTree(xy[sel]).query(xy, distance_upper_bound=0.02)[0] < np.inf
+            labels[just_above & near & (labels == 0)] = next_label
+            labels[sel] = next_label
+            next_label += 1
         return labels if next_label > 1 else None
     return None
 
@@ -150,7 +169,8 @@ class DepthClusterSegmenter:
             return InstanceMasks(np.zeros((h, w), dtype=np.int32), np.zeros(0, dtype=np.float32))
         points = intrinsics.unproject(depth_m).reshape(-1, 3)[idx]
         centroids, inverse = _voxelize(points, VOXEL_M)
-        vox_labels = _components(centroids, LINK_RADIUS_M)
+        focal = 0.5 * (intrinsics.fx_px + intrinsics.fy_px)
+        vox_labels = _components(centroids, link_radius_m(centroids[:, 2], focal))
         labels = vox_labels[inverse]
 
         if up_cam is not None:
@@ -161,7 +181,7 @@ class DepthClusterSegmenter:
             next_label = int(labels.max()) + 1
             for c in np.flatnonzero(np.bincount(labels) >= 2 * self.min_points):
                 sel = np.flatnonzero(labels == c)
-                split = _split_on_support(points[sel], up, horiz, self.min_points)
+                split = _split_on_support(points[sel], up, horiz, self.min_points, focal)
                 if split is None:
                     continue
                 for s in range(1, int(split.max()) + 1):
