@@ -1,0 +1,247 @@
+"""The rerun recording of a build (rerun-sdk 0.41). The only module of the project importing rerun.
+
+Entity tree (world is Z up, ``RIGHT_HAND_Z_UP``)::
+
+    world                                   ViewCoordinates
+    world/camera                            Transform3D world_from_camera + Pinhole (OpenCV RDF)
+    world/camera/rgb | depth | masks        Image, DepthImage (metres), SegmentationImage
+    world/points/<name>                     observed points of each object (perception)
+    world/objects/<name>                    Transform3D world_from_asset, on the ``sim_time``
+                                            timeline (the settle simulation when a verdict is given)
+    world/objects/<name>/visual/<part>      Mesh3D with vertex colours, asset frame
+    world/objects/<name>/collision/<part>/piece_<k>   convex pieces (toggle the ``collision`` subtrees)
+    world/objects/<name>/label              the object's name at its centre
+    world/support                           LineStrips3D child centre -> supporter centre, labelled
+    world/contacts                          contact / penetration points of the physics check
+    report                                  TextDocument: physics verdict and fidelity
+
+A blueprint lays out the 3D view beside the photo with masks and the depth image.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from scene_builder.frames import quat_wxyz_from_matrix, transform_points
+from scene_builder.model import Fidelity, LayoutResult, Perception, PhysicsVerdict, PlacedObject, Scene
+
+APP_ID = "scene_builder"
+
+
+def _xyzw(rotation: np.ndarray) -> np.ndarray:
+    q = quat_wxyz_from_matrix(rotation)
+    return np.array([q[1], q[2], q[3], q[0]])
+
+
+def _colors(part) -> np.ndarray:
+    v = part.visual
+    if v.vertex_colors_rgba is not None:
+        return np.asarray(v.vertex_colors_rgba)
+    rgba = np.round(np.clip(part.material.rgba, 0.0, 1.0) * 255).astype(np.uint8)
+    return np.tile(rgba, (len(v.vertices_m), 1))
+
+
+def _centre_world(placed: PlacedObject) -> np.ndarray:
+    lo = np.min([p.visual.bounds_m[0] for p in placed.asset.parts], axis=0)
+    hi = np.max([p.visual.bounds_m[1] for p in placed.asset.parts], axis=0)
+    return transform_points(placed.world_from_asset, ((lo + hi) / 2.0)[None])[0]
+
+
+def object_entity(name: str) -> str:
+    """Entity path of an object (rerun escapes characters that are not path-safe)."""
+    import rerun as rr
+
+    return "world/objects/" + rr.escape_entity_path_part(name)
+
+
+def record_scene(
+    out_path: Path,
+    *,
+    scene: Scene,
+    perception: Perception | None = None,
+    layout: LayoutResult | None = None,
+    verdict: PhysicsVerdict | None = None,
+    fidelity: Fidelity | None = None,
+    spawn: bool = False,
+) -> Path:
+    """Write the recording to ``out_path`` (.rrd); ``spawn`` also opens the viewer."""
+    import rerun as rr
+
+    out_path = Path(out_path)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    # A fixed recording id keeps the output deterministic for a given build.
+    rec = rr.RecordingStream(APP_ID, recording_id=f"{APP_ID}-{out_path.stem}", send_properties=False)
+    blueprint = _blueprint(perception is not None)
+    rec.save(out_path, default_blueprint=blueprint)
+    if spawn:
+        # Spawning connects a second sink; the saved file keeps everything too.
+        rr.spawn(connect=False)
+        rec.set_sinks(rr.FileSink(out_path), rr.GrpcSink())
+        rec.send_blueprint(blueprint)
+
+    rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    _log_camera(rec, scene, perception)
+    if perception is not None:
+        _log_perception(rec, perception)
+    _log_objects(rec, scene, verdict)
+    _log_support(rec, scene, layout)
+    if verdict is not None and verdict.contact_points_m:
+        rec.log("world/contacts", rr.Points3D(np.asarray(verdict.contact_points_m), colors=[255, 40, 40], radii=0.01), static=True)
+    _log_report(rec, scene, layout, verdict, fidelity)
+    rec.flush()
+    rec.disconnect()
+    return out_path
+
+
+def _blueprint(with_images: bool):
+    import rerun.blueprint as rrb
+
+    # The depth image would be drawn as a point cloud in front of everything: keep it 2D only.
+    view3d = rrb.Spatial3DView(name="scene", origin="world", contents=["+ world/**", "- world/camera/depth", "- world/camera/masks"])
+    if not with_images:
+        return rrb.Blueprint(rrb.Horizontal(view3d, rrb.TextDocumentView(origin="report", name="report"), column_shares=[3, 1]))
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            view3d,
+            rrb.Vertical(
+                rrb.Spatial2DView(name="photo + masks", origin="world/camera", contents=["world/camera/rgb", "world/camera/masks"]),
+                rrb.Spatial2DView(name="depth", origin="world/camera", contents=["world/camera/depth"]),
+                rrb.TextDocumentView(origin="report", name="report"),
+            ),
+            column_shares=[3, 2],
+        ),
+        collapse_panels=False,
+    )
+
+
+def _log_camera(rec, scene: Scene, perception: Perception | None) -> None:
+    import rerun as rr
+
+    t = scene.camera.world_from_camera
+    k = scene.camera.intrinsics
+    rec.log("world/camera", rr.Transform3D(translation=t[:3, 3], quaternion=_xyzw(t[:3, :3])), static=True)
+    rec.log(
+        "world/camera",
+        rr.Pinhole(image_from_camera=k.matrix, resolution=[k.width_px, k.height_px], camera_xyz=rr.ViewCoordinates.RDF,
+                   image_plane_distance=0.5),
+        static=True,
+    )
+
+
+def _log_perception(rec, perception: Perception) -> None:
+    import rerun as rr
+
+    obs = perception.observation
+    rec.log("world/camera/rgb", rr.Image(obs.rgb), static=True)
+    rec.log("world/camera/depth", rr.DepthImage(obs.depth_m, meter=1.0), static=True)
+    seg = np.zeros(obs.rgb.shape[:2], dtype=np.uint16)
+    infos = [rr.AnnotationInfo(id=0, label="background", color=(0, 0, 0, 0))]
+    palette = _palette(len(perception.objects))
+    for i, o in enumerate(perception.objects):
+        seg[o.mask] = o.object_id
+        infos.append(rr.AnnotationInfo(id=o.object_id, label=f"{o.name} ({o.label})", color=palette[i]))
+    rec.log("world/camera/masks", rr.AnnotationContext(infos), static=True)
+    rec.log("world/camera/masks", rr.SegmentationImage(seg), static=True)
+    for o in perception.objects:
+        rec.log(
+            "world/points/" + rr.escape_entity_path_part(o.name),
+            rr.Points3D(o.points_world_m, colors=o.colors_rgb, radii=0.004),
+            static=True,
+        )
+
+
+def _palette(n: int) -> list[tuple[int, int, int, int]]:
+    """Well-separated colours (golden-ratio hue steps), deterministic."""
+    import colorsys
+
+    out = []
+    for i in range(n):
+        r, g, b = colorsys.hsv_to_rgb((i * 0.618033988749895) % 1.0, 0.75, 0.95)
+        out.append((int(r * 255), int(g * 255), int(b * 255), 140))
+    return out
+
+
+def _log_objects(rec, scene: Scene, verdict: PhysicsVerdict | None) -> None:
+    import rerun as rr
+    import rerun.blueprint as rrb
+
+    for placed in scene.objects:
+        ent = object_entity(placed.name)
+        for part in placed.asset.parts:
+            pe = rr.escape_entity_path_part(part.name)
+            rec.log(
+                f"{ent}/visual/{pe}",
+                rr.Mesh3D(vertex_positions=part.visual.vertices_m, triangle_indices=part.visual.faces, vertex_colors=_colors(part)),
+                static=True,
+            )
+            for k, piece in enumerate(part.collision):
+                rec.log(
+                    f"{ent}/collision/{pe}/piece_{k}",
+                    rr.Mesh3D(vertex_positions=piece.vertices_m, triangle_indices=piece.faces, albedo_factor=[230, 80, 80, 110]),
+                    static=True,
+                )
+        # Collision pieces start hidden (they cover the visual meshes); tick them on in the viewer.
+        rec.log(f"{ent}/collision", rrb.EntityBehavior(visible=False), static=True)
+        lo = np.min([p.visual.bounds_m[0] for p in placed.asset.parts], axis=0)
+        hi = np.max([p.visual.bounds_m[1] for p in placed.asset.parts], axis=0)
+        rec.log(f"{ent}/label", rr.Points3D([(lo + hi) / 2.0], labels=[placed.name], radii=0.005), static=True)
+
+    # Poses live on the sim_time timeline: the solved pose at t = 0, then the settle simulation.
+    trajectories = {tr.name: tr for tr in (verdict.trajectories if verdict is not None else ())}
+    for placed in scene.objects:
+        ent = object_entity(placed.name)
+        t = placed.world_from_asset
+        rec.set_time("sim_time", duration=0.0)
+        rec.log(ent, rr.Transform3D(translation=t[:3, 3], quaternion=_xyzw(t[:3, :3])))
+        tr = trajectories.get(placed.name)
+        if tr is None:
+            continue
+        # Trajectories give the free body's origin; the root body frame is the asset frame.
+        quats_xyzw = np.asarray(tr.quats_wxyz)[:, [1, 2, 3, 0]]
+        rec.send_columns(
+            ent,
+            indexes=[rr.TimeColumn("sim_time", duration=np.asarray(tr.times_s))],
+            columns=rr.Transform3D.columns(translation=np.asarray(tr.positions_m), quaternion=quats_xyzw),
+        )
+
+
+def _log_support(rec, scene: Scene, layout: LayoutResult | None) -> None:
+    import rerun as rr
+
+    edges = [(e.child, e.parent) for e in layout.support] if layout is not None else [(o.name, o.support) for o in scene.objects]
+    names = {o.name for o in scene.objects}
+    strips, labels = [], []
+    for child, parent in sorted(edges):
+        if child not in names:
+            continue
+        c = _centre_world(scene.object(child))
+        if parent in names:
+            p = _centre_world(scene.object(parent))
+        elif parent == "floor":
+            p = np.array([c[0], c[1], 0.0])
+        else:
+            continue
+        strips.append([c, p])
+        labels.append(f"{child} on {parent}")
+    if strips:
+        rec.log("world/support", rr.LineStrips3D(np.asarray(strips), labels=labels, colors=[60, 200, 90], radii=0.006), static=True)
+
+
+def _log_report(rec, scene: Scene, layout: LayoutResult | None, verdict: PhysicsVerdict | None, fidelity: Fidelity | None) -> None:
+    import rerun as rr
+
+    lines = [f"# {len(scene.objects)} objects", ""]
+    for o in scene.objects:
+        lines.append(f"- **{o.name}** ({o.asset.label}, {o.asset.kind.value}{', fixed' if o.asset.is_fixed else ''}): "
+                     f"{o.asset.mass_kg:.2f} kg, {len(o.asset.parts)} part(s), on {o.support}")
+    if layout is not None:
+        lines += ["", f"layout: {layout.iterations} iterations, penetration {layout.max_penetration_before_m * 1000:.1f} mm -> {layout.max_penetration_after_m * 1000:.1f} mm"]
+    if verdict is not None:
+        lines += ["", f"physics ({verdict.simulated_s:g} s): {'stable' if verdict.stable else 'NOT stable'}, "
+                  f"max penetration {verdict.max_penetration_m * 1000:.1f} mm, max drift {verdict.settle_max_drift_m * 1000:.1f} mm, "
+                  f"max rotation {verdict.settle_max_rotation_deg:.2f} deg"]
+    if fidelity is not None:
+        lines += ["", f"fidelity: depth AbsRel {fidelity.depth_absrel:.3f}, mask IoU {fidelity.mask_iou_mean:.3f}"]
+    rec.log("report", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN), static=True)
