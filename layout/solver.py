@@ -249,12 +249,17 @@ class _Solver:
         share_j = 0.0 if mover_j < 0 or bodies[mover_j].fixed else 1.0
         if share_i == 0.0 and share_j == 0.0:
             return False
-        if share_i > 0.0 and share_j > 0.0:
-            # Split by mass: the lighter stack moves more.
-            mi, mj = self.tree_mass(mover_i), self.tree_mass(mover_j)
-            share_i, share_j = mj / (mi + mj), mi / (mi + mj)
-        # Minimal pushes first; a pair pushed again and again is separated as a whole.
         pushes = self.push_count.get((i, j), 0)
+        if share_i > 0.0 and share_j > 0.0:
+            if pushes < ESCALATE_AFTER_PUSHES:
+                # Split by mass: the lighter stack moves more.
+                mi, mj = self.tree_mass(mover_i), self.tree_mass(mover_j)
+                share_i, share_j = mj / (mi + mj), mi / (mi + mj)
+            else:
+                # A light object trapped between heavy ones would otherwise shuttle between
+                # them: in a jam both sides give way equally, so the cluster spreads out.
+                share_i = share_j = 0.5
+        # Minimal pushes first; a pair pushed again and again is separated as a whole.
         u, amount = self.pair_push(i, j, whole=pushes >= ESCALATE_AFTER_PUSHES)
         if amount <= 0.0:
             self.checked[(i, j)] = (self.version[i], self.version[j])

@@ -11,9 +11,9 @@ from scene_builder.model import Plane, SupportEdge
 
 FLOOR, WALL = -1, -2
 # A top face counts as a support when it lies below the object's bottom + this tolerance
-# (observed bottoms sink into supports by depth noise and by completion errors).
-SUPPORT_TOL_MIN_M = 0.05
-SUPPORT_TOL_HEIGHT_FRACTION = 0.25
+# (observed bottoms sink into supports by depth noise and by completion errors). Not more: an
+# object standing on the floor next to a low box must not be lifted onto it.
+SUPPORT_TOL_M = 0.05
 # Share of the object's footprint that must lie over the face.
 MIN_FOOTPRINT_OVERLAP = 0.25
 # Faces lower than this are the floor's business.
@@ -62,7 +62,7 @@ def build_support(bodies: list[Body], walls: tuple[Plane, ...]) -> tuple[list[Su
     for i in order:
         b = bodies[i]
         bottom = b.bottom_m
-        tol = max(SUPPORT_TOL_MIN_M, SUPPORT_TOL_HEIGHT_FRACTION * b.height_m)
+        tol = SUPPORT_TOL_M
         foot = _footprint_world(b)
         lo_xy = foot.min(axis=0)
         hi_xy = foot.max(axis=0)
@@ -95,7 +95,13 @@ def build_support(bodies: list[Body], walls: tuple[Plane, ...]) -> tuple[list[Su
         else:
             h = 0.0
             parent_name = "floor"
-        edges.append(SupportEdge(child=b.name, parent=parent_name, contact_gap_m=float(bottom - h)))
+        # The gap as observed: the child's and the support's initial heights.
+        if b.parent >= 0:
+            s = bodies[b.parent]
+            h_obs = h + float(s.initial_position_m[2] - s.position_m[2])
+        else:
+            h_obs = h
+        edges.append(SupportEdge(child=b.name, parent=parent_name, contact_gap_m=float(bottom - h_obs)))
         b.position_m[2] += h - bottom
         placed.append(i)
     return edges, order

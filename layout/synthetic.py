@@ -132,11 +132,13 @@ def empty_perception(walls: tuple[Plane, ...] = (), width_px: int = 64, height_p
     return Perception(observation=obs, camera=Camera(k, world_from_camera), room=Room(walls), objects=())
 
 
-def clutter(n: int, seed: int = 0, points_per_object: int = 60) -> tuple[Perception, tuple[GeneratedAsset, ...]]:
+def clutter(
+    n: int, seed: int = 0, points_per_object: int = 60, mix: tuple[float, float, float, float] = (0.6, 0.2, 0.1, 0.1)
+) -> tuple[Perception, tuple[GeneratedAsset, ...]]:
     """``n`` objects dropped overlapping on a floor patch sized for about 0.5 m^2 each.
 
-    Mix: 60 % boxes, 20 % random convex pieces, 10 % tables (5 pieces), 10 % small boxes started
-    near the top of a table (within +-3 cm). Yaws are multiples of 90 deg plus up to +-20 deg;
+    ``mix``: shares of boxes, random convex pieces, tables (5 pieces) and small boxes started
+    near the top of a table (within +-3 cm); default 60/20/10/10 %. Yaws are multiples of 90 deg plus up to +-20 deg;
     floor objects start with their bottom between 3 cm below and 5 cm above the floor.
     Two walls bound the patch (x = -side/2 - 0.05 and y = -side/2 - 0.05, normals into the room).
     """
@@ -148,7 +150,7 @@ def clutter(n: int, seed: int = 0, points_per_object: int = 60) -> tuple[Percept
     )
     out: list[GeneratedAsset] = []
     tables: list[tuple[np.ndarray, np.ndarray]] = []
-    kinds = rng.choice(4, size=n, p=[0.6, 0.2, 0.1, 0.1])
+    kinds = rng.choice(4, size=n, p=np.asarray(mix) / np.sum(mix))
     kinds = np.sort(kinds)  # tables (2) before things placed on them (3)
     for i, kind in enumerate(kinds):
         name = f"obj_{i:04d}"

@@ -179,7 +179,6 @@ def _raycast_perception(scene: Scene, width: int = 48, height: int = 36) -> Perc
     return Perception(obs, base.camera, base.room, tuple(objs))
 
 
-@pytest.mark.slow
 def test_render_and_compare_matches_independent_raycast(tmp_path):
     from layout import verify_scene
 
