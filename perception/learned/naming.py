@@ -177,7 +177,7 @@ def size_plausibility(label: str, size_m: tuple[float, float, float], sigma_log:
 
     size_m: (length, width, height) with length >= width. Compared with the category's typical
     horizontal extents (sorted) and height in log space: a factor of 3 off on one axis is one
-    standard deviation (exp(-1/2)); so a 1.5 m tall "laptop" (typical 2 cm) scores about 1e-10.
+    standard deviation (exp(-1/2)); so a 1.5 m tall, 0.6 m long "laptop" scores about 3e-4.
     """
     typ = BY_NAME[label].typical_size_m
     horiz = sorted(typ[:2], reverse=True)
