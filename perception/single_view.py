@@ -191,14 +191,15 @@ def focal_from_orthogonal_vps(v1: np.ndarray, v2: np.ndarray, cx: float, cy: flo
 def gravity_pitch_roll_deg(gravity_cam: np.ndarray) -> tuple[float, float]:
     """(pitch, roll) in degrees of a camera whose frame sees gravity along ``gravity_cam``.
 
-    pitch > 0: looking down (gravity has a negative z component... the optical axis points below
-    the horizon). roll > 0: the camera is rotated clockwise about its optical axis.
+    pitch > 0: looking down (the optical axis points below the horizon, so gravity has a positive
+    z component in the camera frame). roll > 0: gravity leans towards -x in the image, i.e. the
+    camera is rotated clockwise about its optical axis.
     """
     g = np.asarray(gravity_cam, dtype=np.float64)
     g = g / np.linalg.norm(g)
-    pitch = float(np.degrees(np.arcsin(np.clip(-g[2], -1.0, 1.0))))
+    pitch = float(np.degrees(np.arcsin(np.clip(g[2], -1.0, 1.0))))
     roll = float(np.degrees(np.arctan2(-g[0], g[1])))
-    return -pitch, roll
+    return pitch, roll
 
 
 def estimate_geometry(
