@@ -307,6 +307,7 @@ class SingleViewDepth:
         self.max_depth_m = max_depth_m
         self.default_fov_deg = default_fov_deg
         self.seed = seed
+        self.work_px = 640  # long side of the image the floor and superpixels are computed on
         self.floor_colour_dist = 20.0  # CIE Lab distance to the floor seed colour
         self.max_floor_depth_m = 7.0  # farthest floor point a room is expected to show
         self.last_geometry: SingleViewGeometry | None = None
@@ -325,7 +326,19 @@ class SingleViewDepth:
         else:
             fx = fy = geo.focal_px
             cx, cy = (w - 1) / 2.0, (h - 1) / 2.0
-        depth = self._depth(arr, geo.gravity_cam, fx, fy, cx, cy)
+        # Superpixels and the floor run at <= 640 px on the long side (the result is a
+        # piecewise-planar room, so nothing is lost), then the depth is resized back.
+        scale = min(1.0, self.work_px / max(h, w))
+        if scale < 1.0:
+            from PIL import Image
+
+            sw, sh = max(1, int(round(w * scale))), max(1, int(round(h * scale)))
+            small = np.asarray(Image.fromarray(arr).resize((sw, sh), Image.Resampling.BILINEAR))
+            sx, sy = sw / w, sh / h
+            d_small = self._depth(small, geo.gravity_cam, fx * sx, fy * sy, (cx + 0.5) * sx - 0.5, (cy + 0.5) * sy - 0.5)
+            depth = np.asarray(Image.fromarray(d_small.astype(np.float32)).resize((w, h), Image.Resampling.BILINEAR))
+        else:
+            depth = self._depth(arr, geo.gravity_cam, fx, fy, cx, cy)
         focal = geo.focal_px if geo.focal_source == "vanishing-points" else None
         return DepthEstimate(depth_m=depth.astype(np.float32), focal_px=focal)
 

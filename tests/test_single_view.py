@@ -82,8 +82,9 @@ def test_metric_depth_on_nyu_without_using_its_depth():
         scaled.append(np.mean(np.abs(ps - t) / t))
         d1.append(np.mean(np.maximum(p / t, t / p) < 1.25))
         print(name, "AbsRel %.3f  median-scaled %.3f  delta1 %.3f" % (absrel[-1], scaled[-1], d1[-1]))
-    # Constant 1 m depth scores AbsRel about 0.65 on these frames; a metric model with no scale
-    # must do clearly better.
+    # Measured: mean AbsRel 0.43, median-scaled 0.46 (a constant 2.5 m guess scores 0.26 / 0.25
+    # here, see perception/bench_depth.py; a constant 1 m, 0.66). The bound catches a broken
+    # floor / horizon, which puts depths off by factors of several.
     assert np.mean(absrel) < 0.55
     assert np.mean(scaled) < 0.55
 
