@@ -83,10 +83,10 @@ def _split_on_support(points: np.ndarray, up: np.ndarray, horiz: np.ndarray, min
     """Split what stands on a horizontal layer of one cluster.
 
     points: (N, 3) camera-frame points of the cluster; up: (3,) unit up; horiz: (2, 3) two
-    horizontal unit axes; focal_px: focal length (for the link radius). Returns (N,) int labels (0 = the support, 1.. = objects on it) or None
-    when there is nothing to split.
+    horizontal unit axes; focal_px: focal length (for the link radius). Returns (N,) int labels
+    (0 = the support, 1.. = objects on it) or None when there is nothing to split.
     """
-    from scipy.spatial import Delaunay, QhullError, cKDTree
+    from scipy.spatial import ConvexHull, QhullError, cKDTree
 
     h = points @ up
     if h.max() - h.min() < 0.15:
@@ -98,9 +98,8 @@ def _split_on_support(points: np.ndarray, up: np.ndarray, horiz: np.ndarray, min
     typical = float(np.median(layer_counts[layer_counts > 0]))
     # Candidate support layers, highest first: dense slabs (a horizontal surface seen from above
     # puts many points at one height) with enough points standing above them.
-    for k in np.argsort(-edges[:-1]):
-        if layer_counts[k] < max(0.5 * min_points, 3.0 * typical):
-            continue
+    dense = np.flatnonzero(layer_counts >= max(0.5 * min_points, 3.0 * typical))
+    for k in dense[::-1]:
         layer_h = edges[k] + 0.5 * _LAYER_BIN_M
         above = h > layer_h + 0.04
         # The support (the layer and what is under it) must be a real object, not the rim of one.
@@ -112,21 +111,26 @@ def _split_on_support(points: np.ndarray, up: np.ndarray, horiz: np.ndarray, min
         # the object standing on it is hidden, so the layer's own cells would have a hole there.
         layer_xy = xy[layer][:: max(1, int(layer.sum()) // 2000)]
         try:
-            hull = Delaunay(layer_xy)
+            facets = ConvexHull(layer_xy).equations  # (F, 3): inside where a . xy + b <= 0
         except QhullError:  # a degenerate (collinear) layer is no support surface
             continue
         above_idx = np.flatnonzero(above)
         pieces = cluster_points(points[above_idx], focal_px)
         labels = np.zeros(len(points), dtype=np.int64)
         next_label = 1
-        just_above = h > layer_h + 1.2 * _LAYER_BIN_M
-        for p in range(int(pieces.max()) + 1):
-            sel = above_idx[pieces == p]
-            if len(sel) < min_points or np.mean(hull.find_simplex(xy[sel]) >= 0) < 0.8:
+        # Points between the layer and the pieces: the pieces' lowest centimetres.
+        skirt = np.flatnonzero((h > layer_h + 1.2 * _LAYER_BIN_M) & ~above)
+        order = np.argsort(pieces, kind="stable")
+        bounds = np.searchsorted(pieces[order], np.arange(int(pieces.max()) + 2))
+        for p in np.flatnonzero(np.bincount(pieces) >= min_points):
+            sel = above_idx[order[bounds[p] : bounds[p + 1]]]
+            inside = np.all(xy[sel] @ facets[:, :2].T + facets[:, 2] <= 0.01, axis=1)
+            if inside.mean() < 0.8:
                 continue
-            # The piece's lowest centimetres, down to the support surface, go with it.
-            near = cKDTree(xy[sel]).query(xy, distance_upper_bound=0.02)[0] < np.inf
-            labels[just_above & near & (labels == 0)] = next_label
+            if len(skirt):
+                near = cKDTree(xy[sel]).query(xy[skirt], distance_upper_bound=0.02)[0] < np.inf
+                free = labels[skirt] == 0
+                labels[skirt[near & free]] = next_label
             labels[sel] = next_label
             next_label += 1
         return labels if next_label > 1 else None
