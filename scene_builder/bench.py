@@ -558,6 +558,7 @@ def evaluate_sample(sample_dir: Path, work_dir: Path, config: BuildConfig) -> Sc
     s = _sample(Path(sample_dir))
     truth = load_truth(s.path)
     inputs = InputSpec(s.rgb, s.depth, 0.001, s.intrinsics)
+    work_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     result = build(inputs, work_dir / s.name, config)
     t_pipe = time.perf_counter() - t0
@@ -625,7 +626,7 @@ def machine_description() -> dict:
     }
 
 
-def _suite_samples(suite: str, rooms: int, data_dir: Path | None, seed: int, tmp: Path) -> list[Path]:
+def _suite_samples(suite: str, rooms: int, data_dir: Path | None, seed: int, tmp: Path, n_objects: int | None = None) -> list[Path]:
     if suite == "synthetic":
         from scene_builder.procedural import make_room, render_room
 
@@ -634,7 +635,7 @@ def _suite_samples(suite: str, rooms: int, data_dir: Path | None, seed: int, tmp
         out = []
         for i in range(rooms):
             s = seed + i
-            spec = make_room(s, n_objects=5 + s % 4, noise=i % 2 == 1)
+            spec = make_room(s, n_objects=n_objects or 5 + s % 4, noise=i % 2 == 1)
             out.append(render_room(spec, tmp / "rooms" / spec.name))
         return out
     if suite == "real":
@@ -659,13 +660,15 @@ def run_bench(
     config: BuildConfig | None = None,
     console=None,
     keep_dir: Path | None = None,
+    n_objects: int | None = None,
 ) -> BenchResult:
     """Run a suite, write ``out_json`` and print a table; returns the result.
 
     A scene on which the pipeline raises is recorded with its error (and counted in
     ``failed_scenes``) and the suite goes on: one failing photo must not hide the other numbers.
     config: build settings (default: seed ``seed``, no rerun recording). keep_dir: keep every
-    scene's outputs there (default: a temporary folder, removed at the end).
+    scene's outputs there (default: a temporary folder, removed at the end). n_objects: objects
+    per procedural room (default 5 to 8, varying with the seed).
     """
     from rich.console import Console
 
@@ -677,7 +680,7 @@ def run_bench(
     tmp.mkdir(parents=True, exist_ok=True)
     scenes: list[SceneResult] = []
     try:
-        samples = _suite_samples(suite, rooms, data_dir, seed, tmp)
+        samples = _suite_samples(suite, rooms, data_dir, seed, tmp, n_objects)
         for i, sample in enumerate(samples):
             t0 = time.perf_counter()
             try:
