@@ -25,8 +25,8 @@ Choices (the validators and Newton accept these):
 * Joint frames: every part frame is the asset frame, so localPos0 = localPos1 = anchor; the
   joint axis token is X and localRot0 = localRot1 rotates X onto ``Joint.axis``. Revolute
   limits are degrees (UsdPhysics), prismatic metres. Joint damping goes to a DriveAPI with zero
-  stiffness; dry friction and effort limit are kept as ``sceneBuilder:`` attributes (the drive's
-  maxForce too).
+  stiffness; dry friction is ``mjc:frictionloss`` (MuJoCo's USD schema name, read by Newton), the
+  effort limit the drive's maxForce (and ``sceneBuilder:effortLimit``).
 * usd-core 26.11 has no UsdPhysics deformable schema: deformables are exported as rigid bodies
   (rigid fallback) carrying ``sceneBuilder:deformable:*`` attributes (Young's modulus, Poisson
   ratio, damping, resolution) so that a soft-body importer can pick them up.
@@ -357,7 +357,7 @@ def _set_joint_frames(joint, pos0, rot0, pos1, rot1) -> None:
 
 
 def _add_joint(stage, jpath, asset: ObjectAsset, part: Part, body0, body1) -> None:
-    from pxr import UsdPhysics
+    from pxr import Sdf, UsdPhysics
 
     j = part.joint
     assert j is not None
@@ -407,7 +407,8 @@ def _add_joint(stage, jpath, asset: ObjectAsset, part: Part, body0, body1) -> No
         drive.CreateTargetVelocityAttr(0.0)
         if j.effort_limit > 0:
             drive.CreateMaxForceAttr(float(j.effort_limit))
-    _custom(prim, "frictionLoss", j.friction)
+    # Dry friction under the MuJoCo USD schema's name, which Newton's importer reads too.
+    prim.CreateAttribute("mjc:frictionloss", Sdf.ValueTypeNames.Float, custom=True).Set(float(j.friction))
     _custom(prim, "effortLimit", j.effort_limit)
     _custom(prim, "damping", j.damping)
 
