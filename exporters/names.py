@@ -36,6 +36,7 @@ def valid_identifier(name: str) -> str:
     """A USD prim name (``Tf.MakeValidIdentifier`` rules: letters, digits, ``_``, not starting
     with a digit). Written without pxr so that it is cheap; ``test_export_usd`` checks it agrees
     with ``Tf.MakeValidIdentifier``."""
+    name = name.split("\x00", 1)[0]  # Tf reads a C string
     if not name:
         return "_"
     # Tf works on UTF-8 bytes: every byte that is not [A-Za-z0-9_] becomes one "_".
