@@ -47,6 +47,7 @@ class GeometricPriorNamer:
         """size_m: (length, width, height) with length >= width. Returns (label, confidence)."""
         length, width, height = (max(float(s), 0.01) for s in size_m)
         obs = np.log([length, width, height])
+        thin = width < 0.15 and width < 0.3 * length
         best, best_d = "object", np.inf
         for label in CANDIDATES:
             x, y, z = BY_NAME[label].typical_size_m
@@ -54,6 +55,9 @@ class GeometricPriorNamer:
             diff = obs - typ
             # The unseen back makes the footprint look smaller than it is: forgive that more.
             diff[:2] = np.where(diff[:2] < 0, 0.6 * diff[:2], diff[:2])
+            if thin:
+                # Only one face was seen (a cabinet front): its depth says nothing.
+                diff = diff[[0, 2]]
             d = float(np.sqrt(np.mean(diff * diff)))
             if d < best_d:
                 best, best_d = label, d
