@@ -28,6 +28,8 @@ def gravity_aligned_size(points_world_m: np.ndarray) -> tuple[float, float, floa
     points are within 10 cm of it (a table's legs are often hidden), else from its lowest point.
     """
     p = np.asarray(points_world_m, dtype=np.float64)
+    if len(p) > 4000:  # a deterministic stride keeps the percentiles and bounds the cost
+        p = p[:: len(p) // 4000 + 1]
     xy = p[:, :2] - p[:, :2].mean(axis=0)
     best = None
     for a in np.radians(np.arange(0.0, 90.0, 2.0)):
@@ -59,6 +61,19 @@ def _resolve_depth(loaded, registries, config: PerceptionConfig) -> tuple[np.nda
     if known is None and est.focal_px is not None and np.isfinite(est.focal_px) and est.focal_px > 0:
         k = CameraIntrinsics(float(est.focal_px), float(est.focal_px), k.cx_px, k.cy_px, k.width_px, k.height_px, "depth-model")
     return depth, k, use.backend, uses
+
+
+def _main_clusters(pix: np.ndarray, points_cam: np.ndarray, k: CameraIntrinsics, share: float = 0.1) -> np.ndarray:
+    """(H, W) bool: the pixels of ``pix`` whose 3D points belong to a Euclidean cluster holding at
+    least ``share`` of them (drops flying pixels and background seen past a mask's edge)."""
+    from perception.segment_depth import cluster_points
+
+    idx = np.flatnonzero(pix.reshape(-1))
+    labels = cluster_points(points_cam.reshape(-1, 3)[idx], 0.5 * (k.fx_px + k.fy_px))
+    sizes = np.bincount(labels)
+    out = np.zeros(pix.size, dtype=bool)
+    out[idx[sizes[labels] >= share * len(idx)]] = True
+    return out.reshape(pix.shape)
 
 
 def _crop(rgb: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -94,13 +109,21 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
         raise InputError(f"segmentation backend '{seg_use.backend}' returned masks of shape {labels.shape} for a {depth_m.shape} image; choose another --segmentation-backend")
 
     # Instances with enough observed points and a plausible height, largest first.
+    # An image-space mask (a learned segmenter's) bleeds over object edges onto the room and
+    # onto whatever is behind: its 3D points keep the room out and only the clusters that hold
+    # a real share of the object (depth clusters are connected by construction).
+    geometric = bool(getattr(segmenter, "accepts_gravity", False))
     kept: list[tuple[np.ndarray, np.ndarray]] = []
     for inst in range(1, int(labels.max(initial=0)) + 1):
         mask = labels == inst
-        pix = mask & valid
+        pix = mask & valid & ~frame.background
         if pix.sum() < config.min_object_points:
             continue
-        z = (points_cam[pix] @ frame.up_cam)
+        if not geometric:
+            pix = _main_clusters(pix, points_cam, k)
+            if pix.sum() < config.min_object_points:
+                continue
+        z = points_cam[pix] @ frame.up_cam
         extent = float(np.subtract(*np.percentile(z, [98, 2])))
         if not MIN_OBJECT_HEIGHT_M <= extent <= MAX_OBJECT_HEIGHT_M:
             continue

@@ -142,3 +142,43 @@ def test_close_up_without_floor_falls_back(tmp_path):
     assert gravity and gravity[0].backend in ("vertical-planes", "camera-prior")
     lowest = min(float(np.quantile(o.points_world_m[:, 2], 0.01)) for o in p.objects)
     assert lowest == pytest.approx(0.0, abs=1e-9)
+
+
+def test_bleeding_image_masks_keep_only_the_object(tmp_path, monkeypatch):
+    """A learned segmenter's mask that spills past the object's edge onto the floor and the
+    wall behind yields only the object's points."""
+    import importlib
+
+    from perception.backends import build_registries
+    from perception.protocols import InstanceMasks
+    from scipy.ndimage import binary_dilation
+
+    truth = _camera(1.4, 12.0, 0.0, 0.0)
+    n = np.array([-1.0, 0.0, 0.0])
+    box = ((2.6, -0.3, 0.0), (3.0, 0.3, 0.6))
+    with_box = _render(truth, [box], wall=(n, 4.0))
+    without = _render(truth, [], wall=(n, 4.0))
+    on_box = np.abs(with_box - without) > 1e-6
+
+    class Bleeding:
+        def segment(self, rgb, depth_m, intrinsics, background):
+            labels = binary_dilation(on_box, iterations=8).astype(np.int32)
+            return InstanceMasks(labels, np.ones(1, np.float32))
+
+    def registries(config):
+        reg = build_registries(config)
+        reg.segmentation.register("bleeding", Bleeding, priority=1000)
+        return reg
+
+    # (``perception.perceive`` the attribute is the function; the module is in sys.modules.)
+    monkeypatch.setattr(importlib.import_module("perception.perceive"), "build_registries", registries)
+    cfg = PerceptionConfig(naming_backend="geometric-prior", segmentation_backend="bleeding")
+    p = perceive(_write(tmp_path, with_box, "bleed"), cfg)
+    assert [b.backend for b in p.backends if b.task == "segmentation"] == ["bleeding"]
+    (obj,) = p.objects
+    assert obj.mask.sum() > on_box.sum()  # the mask is the segmenter's
+    true_from_found = truth @ np.linalg.inv(p.camera.world_from_camera)
+    pts = transform_points(true_from_found, obj.points_world_m)
+    assert len(pts) <= on_box.sum()
+    assert pts[:, 0].max() < 3.0 + 0.02  # nothing from the wall at x = 4 m
+    assert np.quantile(pts[:, 2], 0.01) > 0.0  # nothing from the floor
