@@ -73,9 +73,13 @@ class VoxelGeometry:
 
 @dataclass(frozen=True, eq=False)
 class ConvexSolids:
-    """solids: closed convex meshes (asset frame) whose union is the part."""
+    """solids: closed convex meshes (asset frame) whose union is the part; they are its collision
+    pieces. visual: optional watertight mesh of the part when the union of the solids is only
+    an approximation of it (e.g. a smooth revolved mug whose walls the solids tile); mass then
+    comes from ``visual``."""
 
     solids: tuple[TriangleMesh, ...]
+    visual: TriangleMesh | None = None
 
     def __post_init__(self) -> None:
         if not self.solids:
@@ -161,6 +165,10 @@ def _visual(spec: PartSpec, config: GenerationConfig):
         solids = [to_trimesh(s).copy() for s in g.solids]
         for s in solids:
             check_watertight(s, f"part {spec.name}: solid")
+        if g.visual is not None:
+            tm = to_trimesh(g.visual).copy()
+            check_watertight(tm, f"part {spec.name}: visual")
+            return decimate(tm, config.max_visual_faces), solids
         return union_of_solids(solids), solids
     if isinstance(g, (TriangleMesh, trimesh.Trimesh)):
         tm = to_trimesh(g).copy()

@@ -106,6 +106,10 @@ def convex_pieces(
 
     coacd.set_log_level("error")
     small = decimate(tm, COACD_MAX_FACES)
+    if len(small.faces) > COACD_MAX_FACES:
+        # decimation could not keep the mesh watertight: CoACD repairs its input (preprocess
+        # "on"), so a non-manifold decimated copy is fine for it, and far faster than 100k faces
+        small = tm.simplify_quadric_decimation(face_count=COACD_MAX_FACES)
     result = coacd.run_coacd(
         coacd.Mesh(np.asarray(small.vertices, dtype=np.float64), np.asarray(small.faces, dtype=np.int32)),
         threshold=float(threshold),

@@ -1,0 +1,132 @@
+"""The default CPU generator ``"shape-prior"``: one simulation-ready asset per perceived object
+from its observed points, a category shape prior and the material table.
+
+Per object: gravity-aligned box from the points (``generation.pose``), completed to the
+category's typical depth when the camera saw only a face, then by category
+
+* articulated categories: the articulation template fitted to the box (``articulation``);
+* furniture, containers, screens, vessels: a shape prior fitted to the box (``priors``);
+* deformables (pillow, cushion, towel, blanket, soft toy): a coarse soft shape with the
+  material's soft-body settings;
+* everything else (``object``, toilet, lamp, plant): the observed shell extruded away from the
+  camera and mirrored (``completion``), marching cubes, CoACD.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from scene_builder.config import GenerationConfig
+from scene_builder.frames import pose, transform_points
+from scene_builder.model import AssetKind, GeneratedAsset, PerceivedObject, Perception
+
+__all__ = ["ShapePriorGenerator", "BACKEND_NAME", "complete_box"]
+
+BACKEND_NAME = "shape-prior"
+# a face seen head-on spans less than this fraction of the expected depth: complete the depth
+_DEPTH_COMPLETE_FRACTION = 0.6
+_MIRROR_X = {"lamp", "plant", "bottle", "bowl", "mug", "soft_toy"}
+
+
+def complete_box(fit, label: str):
+    """The box grown away from the camera to the depth expected from the category's typical
+    proportions, scaled by the measured width and height (geometric mean of both ratios),
+    when the observed depth is less than 60 % of it. Flat categories (towel, blanket) keep the
+    observed depth."""
+    from generation.pose import extend_depth
+    from scene_builder.vocabulary import category
+
+    if label in ("towel", "blanket", "book", "laptop"):
+        return fit
+    td, tw, th = category(label).typical_size_m
+    d, w, h = (float(v) for v in fit.size_m)
+    if label == "object":
+        expected = float(np.sqrt(w * h))  # unknown: as deep as the face is on average wide/high
+    else:
+        expected = td * float(np.sqrt((w / tw) * (h / th)))
+    if d < _DEPTH_COMPLETE_FRACTION * expected:
+        return extend_depth(fit, expected)
+    return fit
+
+
+def _median_rgba(colors_rgb: np.ndarray) -> tuple[float, float, float, float]:
+    c = np.median(np.asarray(colors_rgb, dtype=np.float64), axis=0) / 255.0
+    return (float(c[0]), float(c[1]), float(c[2]), 1.0)
+
+
+class ShapePriorGenerator:
+    """Category shape priors + observed-shell completion on the CPU (always available)."""
+
+    name = BACKEND_NAME
+
+    def generate(self, obj: PerceivedObject, perception: Perception, config: GenerationConfig, seed: int = 0) -> GeneratedAsset:
+        """One :class:`GeneratedAsset` for ``obj`` (asset name = ``obj.name``)."""
+        from generation.articulation import ARTICULATED_LABELS, articulated_parts
+        from generation.assembly import ConvexSolids, PartSpec, assemble_asset_with_offset, box_solid
+        from generation.completion import complete_occupancy, superellipsoid_occupancy
+        from generation.materials import category_material, deformable_settings
+        from generation.pose import fit_box
+        from generation.priors import PRIOR_LABELS, prior_parts
+        from scene_builder.vocabulary import category
+
+        label = obj.label
+        cat = category(label)
+        cam_world = perception.camera.position_m
+        fit = complete_box(fit_box(obj.points_world_m, cam_world), label)
+        box_from_world = np.linalg.inv(fit.world_from_box)
+        pts = transform_points(box_from_world, obj.points_world_m)
+        cam = transform_points(box_from_world, cam_world[None])[0]
+        size = fit.size_m.copy()
+        rgba = _median_rgba(obj.colors_rgb)
+        cm = category_material(label)
+        soft = deformable_settings(label)
+        kind = None
+        description = f"{label} fitted to measured extents {size[0]:.2f} x {size[1]:.2f} x {size[2]:.2f} m (depth x width x height)"
+        cfg = config
+
+        if label in ARTICULATED_LABELS:
+            size = np.maximum(size, 0.3 * np.asarray(cat.typical_size_m))  # templates need room for panels
+            specs = articulated_parts(label, size, rgba)
+            description += "; articulation template"
+        elif label in PRIOR_LABELS:
+            specs = prior_parts(label, size, cm.material, cm.shell_thickness_m, rgba, config.max_collision_pieces)
+            description += "; shape prior"
+        elif soft is not None:
+            kind = AssetKind.DEFORMABLE
+            cfg = replace(config, max_visual_faces=min(config.max_visual_faces, 800))
+            if label in ("towel", "blanket"):
+                size[2] = max(size[2], 2.0 * soft.thickness_m)
+                geometry = ConvexSolids((box_solid([-size[0] / 2, -size[1] / 2, 0.0], [size[0] / 2, size[1] / 2, size[2]]),))
+            elif label in ("pillow", "cushion"):
+                geometry = superellipsoid_occupancy(size, min(config.voxel_resolution, 20))
+            else:
+                geometry = complete_occupancy(pts, cam, size, min(config.voxel_resolution, 20), mirror_y=True, mirror_x=True)
+            specs = [PartSpec("body", None, geometry, cm.material, affordance_rank=2, affordance="squeeze or fold",
+                              description=f"{label}: soft body", rgba=rgba)]
+            description += "; deformable"
+        else:
+            geometry = complete_occupancy(pts, cam, size, config.voxel_resolution, mirror_y=True, mirror_x=label in _MIRROR_X)
+            specs = [PartSpec("body", None, geometry, cm.material, affordance_rank=3, affordance="pick up or push",
+                              description=f"{label}: observed shell extruded and mirrored", shell_thickness_m=cm.shell_thickness_m,
+                              rgba=rgba)]
+            description += "; completed from the observed shell"
+
+        asset, shift = assemble_asset_with_offset(
+            obj.name,
+            label,
+            specs,
+            config=cfg,
+            seed=seed,
+            kind=kind,
+            is_fixed=cat.fixed,
+            deformable=soft,
+            description=description,
+            backend=BACKEND_NAME,
+            observed_points_m=pts,
+            observed_colors_rgb=obj.colors_rgb,
+        )
+        # asset coordinates = box coordinates + shift
+        world_from_asset = fit.world_from_box @ pose(np.eye(3), -shift)
+        return GeneratedAsset(asset, world_from_asset, obj.points_world_m)
