@@ -168,7 +168,7 @@ class RoomObject:
     def kind(self) -> AssetKind:
         if self.joints:
             return AssetKind.ARTICULATED
-        return vocab_category(self.category).kind if self.category != "box" else AssetKind.RIGID
+        return vocab_category(self.category).kind
 
     @property
     def mass_kg(self) -> float:
