@@ -149,6 +149,21 @@ class _Solver:
         return float(sum(self.bodies[k].mass_kg for k in subtree(self.bodies, i)))
 
     # -- constraints ---------------------------------------------------------------------------
+    def vertical_clash(self, i: int, j: int, z: float) -> float:
+        """Penetration depth (m) of body i placed at height z against body j (state restored)."""
+        b = self.bodies[i]
+        self.world.set_position(j, self.bodies[j].position_m)  # j may have been placed already
+        old = b.position_m.copy()
+        b.position_m[2] = z
+        self.world.set_position(i, b.position_m)
+        worst = 0.0
+        for a, c in self.piece_pairs(i, j, 0.0):
+            d, _ = self.world.distance(self.world.geom_ids[i][a], self.world.geom_ids[j][c], 0.0)
+            worst = max(worst, -d)
+        b.position_m[:] = old
+        self.world.set_position(i, old)
+        return worst
+
     def piece_pairs(self, i: int, j: int, margin: float) -> np.ndarray:
         bi, bj = self.bodies[i], self.bodies[j]
         lo_i, hi_i = bi.piece_lo_rel_m + bi.position_m, bi.piece_hi_rel_m + bi.position_m
@@ -376,7 +391,7 @@ def solve_layout_with_stats(
     lap("narrowphase_setup")
     before = solver.max_penetration()
     lap("measure_before")
-    edges, _ = build_support(bodies, walls)
+    edges, _ = build_support(bodies, walls, solver.vertical_clash)
     for i, b in enumerate(bodies):
         solver.world.set_position(i, b.position_m)
     lap("support")

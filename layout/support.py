@@ -3,6 +3,8 @@ bottom-up from geometry, and the vertical placement that makes each resting cont
 
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 
 from layout.bodies import Body
@@ -18,6 +20,9 @@ SUPPORT_TOL_M = 0.05
 MIN_FOOTPRINT_OVERLAP = 0.25
 # Faces lower than this are the floor's business.
 MIN_SURFACE_HEIGHT_M = 0.02
+# A candidate face is rejected when the object set on it would sink deeper than this into the
+# rest of the support (smaller overlaps are left to the horizontal solver).
+SUPPORT_CLASH_TOL_M = 0.01
 # Fixed furniture this close to a wall and off the floor hangs on the wall.
 WALL_CONTACT_M = 0.05
 
@@ -44,7 +49,9 @@ def _near_wall(b: Body, walls: tuple[Plane, ...]) -> bool:
     return any(float(np.min(w.signed_distance_m(v))) < WALL_CONTACT_M for w in walls)
 
 
-def build_support(bodies: list[Body], walls: tuple[Plane, ...]) -> tuple[list[SupportEdge], list[int]]:
+def build_support(
+    bodies: list[Body], walls: tuple[Plane, ...], clash: Callable[[int, int, float], float] | None = None
+) -> tuple[list[SupportEdge], list[int]]:
     """Assign each body its support and set its height so that it rests exactly on it.
 
     Bodies are processed bottom-up (by initial bottom height, then name), and a body can only rest
@@ -53,6 +60,10 @@ def build_support(bodies: list[Body], walls: tuple[Plane, ...]) -> tuple[list[Su
     its footprint; else fixed furniture off the floor and against a wall hangs on the wall (its
     height is kept); else it stands on the floor. Updates ``position_m[2]``, ``parent`` and
     ``children`` in place. Returns the edges (in processing order) and the processing order.
+
+    ``clash(child, support, z)``: penetration depth (m) of the child placed at height z against the
+    support. A face that the child, set on it, would sink into the rest of the support (the top
+    of a lower convex piece buried inside the object) is skipped for the next one.
     """
     order = sorted(range(len(bodies)), key=lambda i: (bodies[i].bottom_m, bodies[i].name))
     edges: list[SupportEdge] = []
@@ -66,7 +77,7 @@ def build_support(bodies: list[Body], walls: tuple[Plane, ...]) -> tuple[list[Su
         foot = _footprint_world(b)
         lo_xy = foot.min(axis=0)
         hi_xy = foot.max(axis=0)
-        best: tuple[float, float, int, int] | None = None  # (height, overlap, body, surface)
+        candidates: list[tuple[float, float, int, int]] = []  # (height, overlap, -body, surface)
         for j in placed:
             s = bodies[j]
             s_lo = s.position_m[:2] + s.lo_rel_m[:2]
@@ -80,11 +91,15 @@ def build_support(bodies: list[Body], walls: tuple[Plane, ...]) -> tuple[list[Su
                 frac = _overlap_fraction(foot, surf.polygon_rel_m + s.position_m[:2])
                 if frac < MIN_FOOTPRINT_OVERLAP:
                     continue
-                key = (h, frac, -j)
-                if best is None or key > (best[0], best[1], -best[2]):
-                    best = (h, frac, j, k)
+                candidates.append((h, frac, -j, k))
+        best = None
+        for h, _, neg_j, k in sorted(candidates, reverse=True):
+            z = float(b.position_m[2] + h - bottom)
+            if clash is None or clash(i, -neg_j, z) <= SUPPORT_CLASH_TOL_M:
+                best = (h, -neg_j, k)
+                break
         if best is not None:
-            h, _, j, k = best
+            h, j, k = best
             b.parent, b.support_surface = j, k
             bodies[j].children.append(i)
             parent_name = bodies[j].name

@@ -75,7 +75,8 @@ def _concat(meshes) -> TriangleMesh:
     return TriangleMesh(np.concatenate(v), np.concatenate(f))
 
 
-def _asset(name: str, label: str, pieces, fixed: bool = False) -> ObjectAsset:
+def asset_from_pieces(name: str, label: str, pieces, fixed: bool = False) -> ObjectAsset:
+    """A one-part rigid asset whose collision pieces are ``pieces`` (closed convex meshes)."""
     v = np.concatenate([p.vertices_m for p in pieces])
     part = Part(name="body", parent=None, joint=None, visual=_concat(pieces), collision=tuple(pieces), material=WOOD, inertial=_mesh_props(pieces, WOOD.density_kg_m3))
     return ObjectAsset(name=name, label=label, kind=AssetKind.RIGID, parts=(part,), size_m=np.ptp(v, axis=0), is_fixed=fixed, backend="synthetic")
@@ -84,7 +85,7 @@ def _asset(name: str, label: str, pieces, fixed: bool = False) -> ObjectAsset:
 def box_asset(name: str, size_m, label: str = "box", fixed: bool = False) -> ObjectAsset:
     """A box of extents ``size_m`` (x, y, z) standing on its asset-frame origin."""
     sx, sy, sz = (float(s) for s in size_m)
-    return _asset(name, label, [box_mesh([-sx / 2, -sy / 2, 0.0], [sx / 2, sy / 2, sz])], fixed)
+    return asset_from_pieces(name, label, [box_mesh([-sx / 2, -sy / 2, 0.0], [sx / 2, sy / 2, sz])], fixed)
 
 
 def table_asset(name: str, size_m, top_m: float = 0.04, leg_m: float = 0.05) -> ObjectAsset:
@@ -94,7 +95,7 @@ def table_asset(name: str, size_m, top_m: float = 0.04, leg_m: float = 0.05) -> 
     for x in (-sx / 2, sx / 2 - leg_m):
         for y in (-sy / 2, sy / 2 - leg_m):
             pieces.append(box_mesh([x, y, 0.0], [x + leg_m, y + leg_m, sz - top_m]))
-    return _asset(name, "table", pieces)
+    return asset_from_pieces(name, "table", pieces)
 
 
 def convex_asset(name: str, rng: np.random.Generator, scale_m: float) -> ObjectAsset:
@@ -102,7 +103,7 @@ def convex_asset(name: str, rng: np.random.Generator, scale_m: float) -> ObjectA
     pts = rng.normal(size=(12, 3)) * scale_m * np.array([0.5, 0.5, 0.4])
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     pts = pts - np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]])
-    return _asset(name, "object", [hull_mesh(pts)])
+    return asset_from_pieces(name, "object", [hull_mesh(pts)])
 
 
 def surface_points(asset: ObjectAsset, world_from_asset: np.ndarray, rng: np.random.Generator, n: int, noise_m: float) -> np.ndarray:

@@ -144,8 +144,9 @@ def _simulate(m, d, scene: Scene, index: _SceneIndex, settle_s: float) -> dict[s
 
 def _render_compare(m, index: _SceneIndex, perception: Perception, scene: Scene, mjcf_path: Path) -> Fidelity:
     """Render depth and segmentation from ``input_camera`` at the solved poses and compare them
-    with the observation: depth AbsRel on perceived object pixels with valid observed depth, and
-    per-object mask IoU (geom -> body -> object; flex -> object)."""
+    with the observation: depth AbsRel on perceived object pixels with valid observed depth (and
+    some rendered geometry: object, floor or wall), and per-object mask IoU (geom -> body ->
+    object; flex -> object)."""
     import mujoco
 
     cam = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, "input_camera")
@@ -192,7 +193,9 @@ def _render_compare(m, index: _SceneIndex, perception: Perception, scene: Scene,
         rendered = label == code.get(po.name, -1)
         union = int(np.count_nonzero(perceived | rendered))
         ious.append((po.name, float(np.count_nonzero(perceived & rendered)) / union if union else 0.0))
-    valid = union_mask & (obs.depth_m > 0) & np.isfinite(depth) & (depth > 0)
+    # Pixels where the render hit no geometry hold the far clipping distance, not a depth.
+    hit = ids >= 0
+    valid = union_mask & (obs.depth_m > 0) & hit & np.isfinite(depth) & (depth > 0)
     if np.any(valid):
         d_obs = obs.depth_m[valid].astype(np.float64)
         absrel = float(np.mean(np.abs(depth[valid] - d_obs) / d_obs))

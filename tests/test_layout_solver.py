@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from layout.solver import candidate_pairs, solve_layout_with_stats
-from layout.synthetic import box_asset, clutter, empty_perception, surface_points, table_asset
+from layout.synthetic import asset_from_pieces, box_asset, box_mesh, clutter, empty_perception, surface_points, table_asset
 from scene_builder.config import LayoutConfig
 from scene_builder.frames import pose, rot_z, transform_points, yaw_of
 from scene_builder.model import GeneratedAsset, Plane
@@ -151,6 +151,20 @@ def test_support_graph_of_a_hand_made_stack():
     assert _bottom(placed["c_top"]) == pytest.approx(0.7, abs=1e-9)
     assert _bottom(placed["b_mid"]) == pytest.approx(0.4, abs=1e-9)
     assert result.max_penetration_after_m < 1e-5
+
+
+def test_buried_face_is_not_a_support():
+    # A solid cabinet decomposed into two stacked pieces: the lower piece's top face (z = 0.4)
+    # lies inside the object. A box observed at 0.45 must not be set on it.
+    cabinet = asset_from_pieces("cabinet", "cabinet", [box_mesh([-0.3, -0.4, 0.0], [0.3, 0.4, 0.4]), box_mesh([-0.3, -0.4, 0.4], [0.3, 0.4, 0.8])])
+    box = box_asset("box", (0.2, 0.2, 0.2))
+    result, _ = solve_layout_with_stats(empty_perception(), (_gen(cabinet, (0, 0, 0)), _gen(box, (0.0, 0.0, 0.45), yaw=0.5)), CFG)
+    assert {e.child: e.parent for e in result.support}["box"] == "floor"
+    assert result.max_penetration_after_m < 1e-5
+    # Observed 2 cm sunk into the real top, it rests on the top.
+    result, _ = solve_layout_with_stats(empty_perception(), (_gen(cabinet, (0, 0, 0)), _gen(box, (0.0, 0.0, 0.78), yaw=0.5)), CFG)
+    assert {e.child: e.parent for e in result.support}["box"] == "cabinet"
+    assert _bottom(result.scene.objects[1]) == pytest.approx(0.8, abs=1e-9)
 
 
 def test_minimal_horizontal_push_split_by_mass():
