@@ -123,7 +123,7 @@ def union_of_solids(solids) -> "object":
         out = meshes[0].copy()
     else:
         parts = [
-            manifold3d.Manifold(manifold3d.Mesh64(np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.uint64)))
+            manifold3d.Manifold(manifold3d.Mesh64(np.array(m.vertices, dtype=np.float64, order="C"), np.array(m.faces, dtype=np.uint64, order="C")))
             for m in meshes
         ]
         for m, part in zip(meshes, parts):
