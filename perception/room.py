@@ -256,6 +256,34 @@ def _lowest_surface(points: np.ndarray, up: np.ndarray, min_count: int) -> float
     return None
 
 
+def _is_wall(
+    pts: np.ndarray, dist: np.ndarray, thr: np.ndarray, inl: np.ndarray, n: np.ndarray, up: np.ndarray, rows: np.ndarray, height_px: int
+) -> bool:
+    """Is a vertical plane a wall of the room rather than the face of a piece of furniture?
+
+    pts: (N, 3) camera-frame points; dist: (N,) signed distance to the plane (positive towards
+    the camera); thr: (N,) inlier thresholds; inl: (N,) bool inliers; n: (3,) normal; up: (3,);
+    rows: (N,) image row of each point; height_px: image height.
+
+    A wall has little seen behind it. A wall with an open door in it, or that ends where the
+    room turns a corner, has things behind its infinite plane, but a wall also runs up out of
+    the picture (furniture shorter than the ceiling shows its top): when the plane's inliers reach
+    the top rows of the image that have depth, only what lies behind it within its own lateral
+    extent counts.
+    """
+    behind = dist < -3.0 * thr
+    if behind.sum() <= 0.5 * inl.sum():
+        return True
+    # Sensors leave the image border without depth: "the top" is the first rows with depth.
+    top_rows = rows[inl] < rows.min() + max(2, int(0.03 * height_px))
+    if top_rows.sum() < 0.02 * inl.sum():
+        return False
+    lateral = pts @ np.cross(up, n)
+    lo, hi = np.percentile(lateral[inl], [2, 98])
+    behind_within = behind & (lateral > lo) & (lateral < hi)
+    return bool(behind_within.sum() <= 0.5 * inl.sum())
+
+
 def world_from_camera_for(up_cam: np.ndarray, height_m: float, wall_normals_cam: list[np.ndarray] = ()) -> np.ndarray:
     """(4, 4) world_from_camera for a camera whose up vector is ``up_cam`` at ``height_m`` above
     the floor; X is the horizontal optical axis snapped to the nearest wall direction.
@@ -348,6 +376,9 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0) -> R
 
     # Walls (vertical, little seen behind them) and the ceiling (horizontal, above the camera).
     sin_wall = np.sin(np.radians(WALL_MAX_TILT_DEG))
+    on_floor = (np.abs(pts @ up + height) < thr) | ((pts @ up + height) < -thr) if floor_found else np.zeros(len(pts), bool)
+    rows = idx // w
+    min_wall = max(200, int(_MIN_PLANE_FRACTION * len(pts)))
     for n0, d0, count in sorted(planes, key=lambda p: -p[2]):
         if floor_found and abs(n0 @ up) < sin_wall:
             # Without a floor in view a large vertical plane is as likely a cabinet front as a wall.
@@ -358,9 +389,10 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0) -> R
             d = float(np.median(-(pts[inl] @ n)))
             n, d = _towards_camera(n, d)
             dist = pts @ n + d
-            inl = np.abs(dist) < thr
-            behind = int((dist < -3.0 * thr).sum())
-            if behind > 0.5 * inl.sum():  # a piece of furniture in front of the real wall
+            inl = (np.abs(dist) < thr) & ~on_floor
+            if inl.sum() < min_wall:
+                continue
+            if not _is_wall(pts, dist, thr, inl, n, up, rows, h):
                 continue
             if any(p.kind == "wall" and abs(p.normal @ n) > np.cos(np.radians(5.0)) and abs(p.offset_m - d) < 0.1 for p in cam_planes):
                 continue
