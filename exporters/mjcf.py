@@ -127,7 +127,6 @@ def _add_wall(spec, i: int, wall: Plane) -> None:
     import mujoco
 
     pos, quat = _plane_pose(wall)
-    pos = pos + np.array([0.0, 0.0, 0.0])
     spec.worldbody.add_geom(
         name=f"wall_{i}", type=mujoco.mjtGeom.mjGEOM_PLANE, pos=pos, quat=quat,
         size=[WALL_EXTENT_M, WALL_EXTENT_M, 0.05], rgba=[0.85, 0.85, 0.8, 0.25], group=WALL_GROUP,

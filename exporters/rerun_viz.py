@@ -74,12 +74,12 @@ def record_scene(
     # A fixed recording id keeps the output deterministic for a given build.
     rec = rr.RecordingStream(APP_ID, recording_id=f"{APP_ID}-{out_path.stem}", send_properties=False)
     blueprint = _blueprint(perception is not None)
-    rec.save(out_path, default_blueprint=blueprint)
     if spawn:
-        # Spawning connects a second sink; the saved file keeps everything too.
-        rr.spawn(connect=False)
-        rec.set_sinks(rr.FileSink(out_path), rr.GrpcSink())
-        rec.send_blueprint(blueprint)
+        # The viewer listens on 127.0.0.1 only; the file gets everything the viewer gets.
+        rr.spawn(connect=False, recording=rec)
+        rec.set_sinks(rr.FileSink(out_path), rr.GrpcSink("rerun+http://127.0.0.1:9876/proxy"), default_blueprint=blueprint)
+    else:
+        rec.save(out_path, default_blueprint=blueprint)
 
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     _log_camera(rec, scene, perception)

@@ -8,7 +8,7 @@
   link frame sits at its joint anchor (asset-frame axes); visual, collision and inertial origins
   are offset by minus the anchor. A revolute-prismatic joint has no URDF equivalent: it becomes
   a revolute joint plus a prismatic joint through a massless intermediate link, as URDF users do.
-  Ball joints become ``floating`` would be wrong, so they are refused.
+  URDF has no ball joint: ball (and free) joints inside an object are refused with ExportError.
 * Inertials: mass, origin at the centre of mass, full inertia tensor in link axes.
 * Meshes: the same .obj files as the MJCF (``meshes/``, relative paths). A ``<mujoco>`` extension
   element tells MuJoCo's URDF importer to keep the relative paths and the visual geoms.
@@ -26,7 +26,7 @@ import numpy as np
 from exporters import names
 from exporters.mjcf import MESH_DIR, mesh_files, part_rgba, write_part_meshes
 from scene_builder.errors import ExportError
-from scene_builder.model import AssetKind, JointType, ObjectAsset, Part, PlacedObject, Scene
+from scene_builder.model import JointType, ObjectAsset, Part, PlacedObject, Scene
 
 
 def _fmt(values) -> str:
@@ -48,10 +48,8 @@ def write_urdf(scene: Scene, out_dir: Path) -> Path:
     mj = ET.SubElement(robot, "mujoco")
     ET.SubElement(mj, "compiler", discardvisual="false", strippath="false", fusestatic="false", balanceinertia="false")
     ET.SubElement(robot, "link", name="world")
+    # URDF has no soft bodies: a deformable is exported as its rigid shape (its mass and meshes).
     for placed in scene.objects:
-        if placed.asset.kind is AssetKind.DEFORMABLE:
-            # URDF has no soft bodies: the deformable is exported as its rigid shape.
-            pass
         write_part_meshes(placed.asset, out_dir)
         _add_object(robot, placed)
     ET.indent(robot)
