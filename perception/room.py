@@ -257,19 +257,20 @@ def _lowest_surface(points: np.ndarray, up: np.ndarray, min_count: int) -> float
 
 
 def _is_wall(
-    pts: np.ndarray, dist: np.ndarray, thr: np.ndarray, inl: np.ndarray, n: np.ndarray, up: np.ndarray, rows: np.ndarray, height_px: int
+    lateral_m: np.ndarray, dist: np.ndarray, thr: np.ndarray, inl: np.ndarray, rows: np.ndarray, cols: np.ndarray, height_px: int, width_px: int
 ) -> bool:
     """Is a vertical plane a wall of the room rather than the face of a piece of furniture?
 
-    pts: (N, 3) camera-frame points; dist: (N,) signed distance to the plane (positive towards
-    the camera); thr: (N,) inlier thresholds; inl: (N,) bool inliers; n: (3,) normal; up: (3,);
-    rows: (N,) image row of each point; height_px: image height.
+    lateral_m: (N,) coordinate of the points along the plane's horizontal direction;
+    dist: (N,) signed distance of the points to the plane (positive towards the camera); thr:
+    (N,) inlier thresholds; inl: (N,) bool inliers; rows, cols: (N,) pixel of each point.
 
-    A wall has little seen behind it. A wall with an open door in it, or that ends where the
-    room turns a corner, has things behind its infinite plane, but a wall also runs up out of
-    the picture (furniture shorter than the ceiling shows its top): when the plane's inliers reach
-    the top rows of the image that have depth, only what lies behind it within its own lateral
-    extent counts.
+    A wall has little seen behind it. A wall with a doorway or a window has the next room behind
+    it, but seen through a hole: in the same image column the wall shows above it. A wardrobe's
+    front has the wall behind it seen over its top. So when the plane runs up out of the top of
+    the depth image (walls do, furniture shorter than the ceiling shows its top), what lies
+    behind it under its own pixels, or beyond its ends (a passage beside it, the room turning a
+    corner), does not count.
     """
     behind = dist < -3.0 * thr
     if behind.sum() <= 0.5 * inl.sum():
@@ -278,10 +279,12 @@ def _is_wall(
     top_rows = rows[inl] < rows.min() + max(2, int(0.03 * height_px))
     if top_rows.sum() < 0.02 * inl.sum():
         return False
-    lateral = pts @ np.cross(up, n)
-    lo, hi = np.percentile(lateral[inl], [2, 98])
-    behind_within = behind & (lateral > lo) & (lateral < hi)
-    return bool(behind_within.sum() <= 0.5 * inl.sum())
+    highest = np.full(width_px, np.iinfo(np.int64).max)
+    np.minimum.at(highest, cols[inl], rows[inl])
+    through_hole = rows > highest[cols]
+    lo, hi = np.percentile(lateral_m[inl], [2, 98])
+    beyond_ends = (lateral_m < lo) | (lateral_m > hi)
+    return bool((behind & ~through_hole & ~beyond_ends).sum() <= 0.5 * inl.sum())
 
 
 def world_from_camera_for(up_cam: np.ndarray, height_m: float, wall_normals_cam: list[np.ndarray] = ()) -> np.ndarray:
@@ -377,7 +380,7 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0) -> R
     # Walls (vertical, little seen behind them) and the ceiling (horizontal, above the camera).
     sin_wall = np.sin(np.radians(WALL_MAX_TILT_DEG))
     on_floor = (np.abs(pts @ up + height) < thr) | ((pts @ up + height) < -thr) if floor_found else np.zeros(len(pts), bool)
-    rows = idx // w
+    rows, cols = idx // w, idx % w
     min_wall = max(200, int(_MIN_PLANE_FRACTION * len(pts)))
     for n0, d0, count in sorted(planes, key=lambda p: -p[2]):
         if floor_found and abs(n0 @ up) < sin_wall:
@@ -392,7 +395,7 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0) -> R
             inl = (np.abs(dist) < thr) & ~on_floor
             if inl.sum() < min_wall:
                 continue
-            if not _is_wall(pts, dist, thr, inl, n, up, rows, h):
+            if not _is_wall(pts @ np.cross(up, n), dist, thr, inl, rows, cols, h, w):
                 continue
             if any(p.kind == "wall" and abs(p.normal @ n) > np.cos(np.radians(5.0)) and abs(p.offset_m - d) < 0.1 for p in cam_planes):
                 continue

@@ -35,9 +35,10 @@ def _camera(height_m, pitch_deg, roll_deg, yaw_deg):
     return t
 
 
-def _render(world_from_camera, boxes, wall=None):
-    """Planar depth (H, W) of the floor z = 0, optional wall (normal, offset) and axis-aligned
-    boxes [(min, max)], by exact ray casting."""
+def _render(world_from_camera, boxes, wall=None, doorway=None, far_wall_x=None):
+    """Planar depth (H, W) of the floor z = 0, optional wall (normal, offset) with an optional
+    doorway ((y0, y1) world y range, 2 m high, a hole in the wall), an optional far wall at
+    x = far_wall_x seen through it, and axis-aligned boxes [(min, max)], by exact ray casting."""
     u, v = np.meshgrid(np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64))
     d_cam = np.stack([(u - (W - 1) / 2) / F, (v - (H - 1) / 2) / F, np.ones_like(u)], axis=-1).reshape(-1, 3)
     d = d_cam @ world_from_camera[:3, :3].T  # t along d is planar depth (d_cam.z = 1)
@@ -49,7 +50,13 @@ def _render(world_from_camera, boxes, wall=None):
         if wall is not None:
             n, off = wall
             tw = -(o @ n + off) / (d @ n)
+            if doorway is not None:
+                hit = o + tw[:, None] * d
+                tw = np.where((hit[:, 1] > doorway[0]) & (hit[:, 1] < doorway[1]) & (hit[:, 2] < 2.0), np.inf, tw)
             t = np.where(tw > 0, np.minimum(t, tw), t)
+        if far_wall_x is not None:
+            tfar = (far_wall_x - o[0]) / d[:, 0]
+            t = np.where(tfar > 0, np.minimum(t, tfar), t)
         for lo, hi in boxes:
             t1, t2 = (np.asarray(lo) - o) / d, (np.asarray(hi) - o) / d
             tn, tx = np.nanmax(np.minimum(t1, t2), axis=1), np.nanmin(np.maximum(t1, t2), axis=1)
@@ -182,3 +189,17 @@ def test_bleeding_image_masks_keep_only_the_object(tmp_path, monkeypatch):
     assert len(pts) <= on_box.sum()
     assert pts[:, 0].max() < 3.0 + 0.02  # nothing from the wall at x = 4 m
     assert np.quantile(pts[:, 2], 0.01) > 0.0  # nothing from the floor
+
+
+def test_wall_with_a_doorway_is_a_wall_and_the_wardrobe_in_front_stays(tmp_path):
+    truth = _camera(1.4, 12.0, 0.0, 0.0)
+    wardrobe = ((3.3, -1.2, 0.0), (3.9, -0.2, 1.9))
+    depth = _render(truth, [wardrobe], wall=(np.array([-1.0, 0.0, 0.0]), 4.0), doorway=(-0.1, 3.0), far_wall_x=7.0)
+    p = perceive(_write(tmp_path, depth, "doorway"), CFG)
+    # The back wall (x = 4 m) is found although the next room is seen through its doorway.
+    dist = [w.signed_distance_m(p.camera.position_m[None])[0] for w in p.room.walls]
+    assert any(abs(d_m - 4.0) < 0.03 for d_m in dist)
+    # The wardrobe in front of it, 1.9 m tall, stays an object (its front is no wall).
+    true_from_found = truth @ np.linalg.inv(p.camera.world_from_camera)
+    tops = [np.percentile(transform_points(true_from_found, o.points_world_m)[:, 2], 99) for o in p.objects]
+    assert any(abs(t - 1.9) < 0.03 for t in tops)
