@@ -203,3 +203,16 @@ def test_wall_with_a_doorway_is_a_wall_and_the_wardrobe_in_front_stays(tmp_path)
     true_from_found = truth @ np.linalg.inv(p.camera.world_from_camera)
     tops = [np.percentile(transform_points(true_from_found, o.points_world_m)[:, 2], 99) for o in p.objects]
     assert any(abs(t - 1.9) < 0.03 for t in tops)
+
+
+def test_close_up_of_a_corner_takes_gravity_from_two_vertical_planes(tmp_path):
+    # The camera looks into the inside corner of two tall cabinets' fronts, 1.4 m away (no
+    # floor in sight): up is the intersection direction of the two vertical planes.
+    truth = _camera(1.0, 8.0, 4.0, 45.0)
+    depth = _render(truth, [((1.0, -3.0, 0.0), (2.0, 3.0, 2.2)), ((-3.0, 1.0, 0.0), (3.0, 2.0, 2.2))])
+    assert depth.min() > 0  # every pixel sees a cabinet: no floor
+    p = perceive(_write(tmp_path, depth, "corner"), CFG)
+    assert [b.backend for b in p.backends if b.task == "gravity"] == ["vertical-planes"]
+    up_true = np.linalg.inv(truth[:3, :3]) @ [0, 0, 1]
+    up_found = np.linalg.inv(p.camera.world_from_camera[:3, :3]) @ [0, 0, 1]
+    assert np.degrees(np.arccos(np.clip(up_true @ up_found, -1, 1))) < 1.0
