@@ -6,6 +6,7 @@ import numpy as np
 
 from perception.backends import build_registries
 from perception.inputs import check_depth, load_input
+from perception.naming_prior import GeometricPriorNamer
 from perception.protocols import InstanceMasks
 from perception.room import estimate_room, place_floor_under
 from scene_builder.config import InputSpec, PerceptionConfig
@@ -141,6 +142,11 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
 
     namer, name_use = registries.naming.resolve(config.naming_backend)
     backends.append(name_use)
+    # What a learned namer cannot name, the size prior may (an honest, low-confidence label is
+    # more use to generation than "object"); recorded as a second naming entry when it answers.
+    prior = None if name_use.backend == "geometric-prior" else GeometricPriorNamer()
+    named_by_prior = 0
+
     # Left to right (mask centroid column, then row) for a stable, readable numbering.
     def centroid(mp):
         rr, cc = np.nonzero(mp[0])
@@ -152,7 +158,13 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
     for object_id, (mask, pix) in enumerate(kept, start=1):
         points_w = transform_points(frame.world_from_camera, points_cam[pix])
         crop_rgb, crop_mask = _crop(loaded.rgb, mask)
-        label, conf = namer.name(crop_rgb, crop_mask, gravity_aligned_size(points_w))
+        size = gravity_aligned_size(points_w)
+        label, conf = namer.name(crop_rgb, crop_mask, size)
+        if label == "object" and prior is not None:
+            prior_label, prior_conf = prior.name(crop_rgb, crop_mask, size)
+            if prior_label != "object":
+                label, conf = prior_label, prior_conf
+                named_by_prior += 1
         per_label[label] = per_label.get(label, 0) + 1
         objects.append(
             PerceivedObject(
@@ -165,6 +177,8 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
                 colors_rgb=loaded.rgb[pix],
             )
         )
+    if named_by_prior:
+        backends.append(BackendUse("naming", "geometric-prior", f"named {named_by_prior} of {len(objects)} objects that '{name_use.backend}' left as 'object'"))
     camera = Camera(k, frame.world_from_camera)
     return Perception(observation, camera, frame.room, tuple(objects), tuple(backends))
 

@@ -216,3 +216,27 @@ def test_close_up_of_a_corner_takes_gravity_from_two_vertical_planes(tmp_path):
     up_true = np.linalg.inv(truth[:3, :3]) @ [0, 0, 1]
     up_found = np.linalg.inv(p.camera.world_from_camera[:3, :3]) @ [0, 0, 1]
     assert np.degrees(np.arccos(np.clip(up_true @ up_found, -1, 1))) < 1.0
+
+
+def test_size_prior_names_what_the_primary_namer_cannot(tmp_path, monkeypatch):
+    import importlib
+
+    from perception.backends import build_registries
+
+    class Clueless:
+        def name(self, crop_rgb, crop_mask, size_m):
+            return "object", 0.05
+
+    def registries(config):
+        reg = build_registries(config)
+        reg.naming.register("clueless", Clueless, priority=1000)
+        return reg
+
+    monkeypatch.setattr(importlib.import_module("perception.perceive"), "build_registries", registries)
+    truth = _camera(1.4, 12.0, 0.0, 0.0)
+    depth = _render(truth, [TABLE])
+    p = perceive(_write(tmp_path, depth, "named"), PerceptionConfig(segmentation_backend="depth-clusters"))
+    naming = [(b.backend, b.reason) for b in p.backends if b.task == "naming"]
+    assert naming[0][0] == "clueless"
+    assert naming[1][0] == "geometric-prior" and "1 of 1" in naming[1][1]
+    assert [o.name for o in p.objects] == ["table_1"]
