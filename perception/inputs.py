@@ -272,10 +272,13 @@ def load_input(inputs: InputSpec, config: PerceptionConfig) -> LoadedInput:
     if inputs.depth_path is not None:
         depth = load_depth(Path(inputs.depth_path), inputs.depth_scale)
         if depth.shape != (h, w):
-            raise InputError(
-                f"depth map {inputs.depth_path} is {depth.shape[1]}x{depth.shape[0]} px but the image is {w}x{h} px; "
-                "pass a depth map registered to the photo at the same size"
+            same_aspect = abs(depth.shape[1] * h - depth.shape[0] * w) <= 0.01 * w * h / max(depth.shape)
+            hint = (
+                f"it has the photo's aspect ratio: if it covers the same field of view, resize it to {w}x{h} with nearest-neighbour first"
+                if same_aspect
+                else "pass a depth map registered to the photo at the same size"
             )
+            raise InputError(f"depth map {inputs.depth_path} is {depth.shape[1]}x{depth.shape[0]} px but the image is {w}x{h} px; {hint}")
         check_depth(depth, f"depth map {inputs.depth_path}")
     k = resolve_intrinsics(inputs, config, w, h, exif, stored_size)
     rgb, depth, k, scale = _downscale(rgb, depth, k)

@@ -77,6 +77,10 @@ def test_depth_of_wrong_size_names_both_sizes(tmp_path):
     with pytest.raises(InputError) as err:
         load_input(InputSpec(_photo(tmp_path / "a.png", 64, 48), d), CFG)
     assert "32x24" in str(err.value) and "64x48" in str(err.value)
+    assert "resize it to 64x48" in str(err.value)  # same aspect ratio: say how to fix it
+    d2 = _depth_png(tmp_path / "d2.png", _ramp_mm(48, 48))
+    with pytest.raises(InputError, match="48x48 px but the image is 64x48 px; pass a depth map registered"):
+        load_input(InputSpec(tmp_path / "a.png", d2), CFG)
 
 
 def test_all_zero_depth(tmp_path):
