@@ -328,8 +328,7 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0) -> R
     valid: (H, W) bool, pixels with usable depth.
     """
     h, w = valid.shape
-    flat_valid = valid.reshape(-1)
-    idx = np.flatnonzero(flat_valid)
+    idx = np.flatnonzero(valid.reshape(-1))
     pts = points_cam.reshape(-1, 3)[idx]
     rng = np.random.default_rng(seed)
     sample = pts if len(pts) <= RANSAC_SAMPLES else pts[np.sort(rng.choice(len(pts), RANSAC_SAMPLES, replace=False))]
@@ -378,13 +377,14 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0) -> R
         height = float(-np.quantile(pts @ up, 0.005))
 
     # Walls (vertical, little seen behind them) and the ceiling (horizontal, above the camera).
+    # Without a floor in view a large vertical plane is as likely a cabinet front as a wall, and
+    # the room's planes stay unknown.
     sin_wall = np.sin(np.radians(WALL_MAX_TILT_DEG))
-    on_floor = (np.abs(pts @ up + height) < thr) | ((pts @ up + height) < -thr) if floor_found else np.zeros(len(pts), bool)
+    on_floor = (pts @ up + height) < thr  # on or under the floor
     rows, cols = idx // w, idx % w
     min_wall = max(200, int(_MIN_PLANE_FRACTION * len(pts)))
-    for n0, d0, count in sorted(planes, key=lambda p: -p[2]):
-        if floor_found and abs(n0 @ up) < sin_wall:
-            # Without a floor in view a large vertical plane is as likely a cabinet front as a wall.
+    for n0, d0, _ in sorted(planes, key=lambda p: -p[2]) if floor_found else ():
+        if abs(n0 @ up) < sin_wall:
             n = _unit(n0 - (n0 @ up) * up)
             _, _, inl = _refine(pts, thr, n, d0, seed, iterations=1)
             if inl.sum() < 3:
@@ -400,8 +400,8 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0) -> R
             if any(p.kind == "wall" and abs(p.normal @ n) > np.cos(np.radians(5.0)) and abs(p.offset_m - d) < 0.1 for p in cam_planes):
                 continue
             cam_planes.append(CameraPlane(n, d, "wall", to_image(inl)))
-        elif floor_found and -(n0 @ up) > cos_floor and (n0 @ up) * d0 < 0:
-            # A horizontal plane whose normal points down at the camera: the ceiling.
+        elif -(n0 @ up) > cos_floor:
+            # A horizontal plane whose normal (towards the camera) points down: the ceiling.
             n, d, inl = _refine(pts, thr, n0, d0, seed, iterations=1)
             above = (pts @ n + d) < -thr
             cam_planes.append(CameraPlane(n, d, "ceiling", to_image(inl | above)))
