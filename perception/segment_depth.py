@@ -200,18 +200,19 @@ class DepthClusterSegmenter:
             tree = cKDTree(points[big_pts])
             small_pts = np.flatnonzero(~big[labels])
             dist, nearest = tree.query(points[small_pts], distance_upper_bound=MERGE_RADIUS_M)
-            # A whole small piece goes to the cluster its closest point touches.
-            for c in np.unique(labels[small_pts]):
-                in_c = labels[small_pts] == c
-                j = int(np.argmin(dist[in_c]))
-                if np.isfinite(dist[in_c][j]):
-                    labels[small_pts[in_c]] = labels[big_pts[nearest[in_c][j]]]
-                else:
-                    labels[small_pts[in_c]] = -1
+            # A whole small piece goes to the cluster its closest point touches: sort by piece,
+            # then distance; the first row of each piece is its closest point.
+            piece = labels[small_pts]
+            order = np.lexsort((dist, piece))
+            first = order[np.r_[True, piece[order][1:] != piece[order][:-1]]]
+            target = np.full(int(labels.max()) + 1, -1, dtype=labels.dtype)
+            hit = np.isfinite(dist[first])
+            target[piece[first[hit]]] = labels[big_pts[nearest[first[hit]]]]
+            labels[small_pts] = target[piece]
         elif not big.any():
             labels[:] = -1
 
-        # Renumber by decreasing size (ties by first pixel index), 1-based.
+        # Renumber by decreasing size (ties by cluster id, itself deterministic), 1-based.
         keep = labels >= 0
         uniq, counts = np.unique(labels[keep], return_counts=True)
         order = sorted(range(len(uniq)), key=lambda i: (-counts[i], i))
@@ -229,5 +230,6 @@ class DepthClusterSegmenter:
             dist_px, (ri, ci) = distance_transform_edt(image == 0, return_indices=True)
             fill = ~valid & (dist_px <= radius_px)
             image[fill] = image[ri[fill], ci[fill]]
+        # Geometry gives no calibrated confidence: every cluster gets the same middling score.
         scores = np.full(len(order), 0.5, dtype=np.float32)
         return InstanceMasks(image, scores)
