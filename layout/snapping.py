@@ -10,10 +10,11 @@ import numpy as np
 from scene_builder.frames import rot_z, yaw_of
 from scene_builder.model import ObjectAsset, Room
 
-# Snap when the snapped fit cost is within 10 % (plus 2 mm of sensor noise) of the initial one.
+# Snap a turn of up to 12 deg when the snapped fit cost is within 10 % (plus 2 mm of sensor
+# noise) of the initial one; a larger turn only when the snapped pose fits at least as well.
 SNAP_COST_RATIO = 1.10
 SNAP_COST_SLACK_M = 0.002
-# With too few observed points to judge a fit, snap only small corrections.
+# With too few observed points to judge a fit, snap only small corrections (up to 12 deg).
 MIN_POINTS_FOR_FIT = 20
 SNAP_MAX_DEG_WITHOUT_EVIDENCE = 12.0
 MAX_FIT_POINTS = 300
@@ -114,10 +115,14 @@ def snap_yaw(
             idx = np.sort(np.random.default_rng(seed).choice(len(pts), MAX_FIT_POINTS, replace=False))
             pts = pts[idx]
         bounds = asset_bounds(asset)
-        cost0 = _fit_cost(pts, bounds, rotation, position)
+        # Both poses get the same freedom (a plan re-fit), so the comparison is fair.
+        cost0 = _fit_cost(pts, bounds, rotation, _refit_xy(pts, bounds, rotation, position))
         new_pos = _refit_xy(pts, bounds, new_rot, position)
         cost1 = _fit_cost(pts, bounds, new_rot, new_pos)
-        ok = cost1 <= SNAP_COST_RATIO * cost0 + SNAP_COST_SLACK_M
+        # A small turn needs the snapped pose to fit nearly as well; a large one (the initial
+        # yaw was wrong by more than a perception error) needs it to fit at least as well.
+        small = abs(np.degrees(delta)) <= SNAP_MAX_DEG_WITHOUT_EVIDENCE
+        ok = cost1 <= SNAP_COST_RATIO * cost0 + SNAP_COST_SLACK_M if small else cost1 <= cost0
     if not ok:
         return world_from_asset, YawSnap(False, 0.0, cost0, cost1)
     out = np.eye(4)
