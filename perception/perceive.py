@@ -14,11 +14,13 @@ from scene_builder.errors import EmptySceneError, InputError
 from scene_builder.frames import transform_points
 from scene_builder.model import BackendUse, Camera, CameraIntrinsics, Observation, PerceivedObject, Perception
 
-__all__ = ["MAX_OBJECT_HEIGHT_M", "MIN_OBJECT_HEIGHT_M", "gravity_aligned_size", "perceive"]
+__all__ = ["BEHIND_WALL_TOLERANCE_M", "MAX_OBJECT_HEIGHT_M", "MIN_OBJECT_HEIGHT_M", "gravity_aligned_size", "perceive"]
 
 #: Clusters lower than this (a rug, a stain of noise on the floor) or taller are not objects.
 MIN_OBJECT_HEIGHT_M = 0.03
 MAX_OBJECT_HEIGHT_M = 4.0
+#: Object points may lie this far behind a wall plane (depth noise, skirting boards).
+BEHIND_WALL_TOLERANCE_M = 0.1
 
 
 def gravity_aligned_size(points_world_m: np.ndarray) -> tuple[float, float, float]:
@@ -115,6 +117,7 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
     # a real share of the object (depth clusters are connected by construction).
     geometric = bool(getattr(segmenter, "accepts_gravity", False))
     kept: list[tuple[np.ndarray, np.ndarray]] = []
+    behind_walls = 0
     for inst in range(1, int(labels.max(initial=0)) + 1):
         mask = labels == inst
         pix = mask & valid & ~frame.background
@@ -124,11 +127,28 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
             pix = _main_clusters(pix, points_cam, k)
             if pix.sum() < config.min_object_points:
                 continue
+        if frame.room.walls:
+            # The room is the space in front of its (infinite) walls. What lies mostly behind one
+            # is in the next room, seen through a doorway or past the wall's end: not part of
+            # this scene. Stray points of a kept object behind a wall are trimmed.
+            pts_w = transform_points(frame.world_from_camera, points_cam[pix])
+            behind = np.zeros(len(pts_w), dtype=bool)
+            for wall in frame.room.walls:
+                behind |= wall.signed_distance_m(pts_w) < -BEHIND_WALL_TOLERANCE_M
+            if behind.mean() > 0.5:
+                behind_walls += 1
+                continue
+            pix = pix.copy()
+            pix[pix] = ~behind
+            if pix.sum() < config.min_object_points:
+                continue
         z = points_cam[pix] @ frame.up_cam
         extent = float(np.subtract(*np.percentile(z, [98, 2])))
         if not MIN_OBJECT_HEIGHT_M <= extent <= MAX_OBJECT_HEIGHT_M:
             continue
         kept.append((mask, pix))
+    if behind_walls:
+        backends.append(BackendUse("walls", "room-planes", f"{len(frame.room.walls)} walls; left out {behind_walls} objects behind them (in the next room)"))
     kept.sort(key=lambda mp: -int(mp[1].sum()))
     kept = kept[: config.max_objects]
     if not kept:

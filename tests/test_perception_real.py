@@ -80,6 +80,8 @@ def test_objects(sample):
         assert len(o.points_world_m) >= CFG.min_object_points
         assert np.quantile(o.points_world_m[:, 2], 0.05) > -0.03, o.name
         assert o.mask.shape == p.observation.depth_m.shape
+        for w in p.room.walls:  # the room is the space in front of its walls
+            assert w.signed_distance_m(o.points_world_m).min() > -0.1, o.name
 
 
 def test_sunrgbd_ground_truth_boxes():

@@ -194,7 +194,8 @@ def test_bleeding_image_masks_keep_only_the_object(tmp_path, monkeypatch):
 def test_wall_with_a_doorway_is_a_wall_and_the_wardrobe_in_front_stays(tmp_path):
     truth = _camera(1.4, 12.0, 0.0, 0.0)
     wardrobe = ((3.3, -1.2, 0.0), (3.9, -0.2, 1.9))
-    depth = _render(truth, [wardrobe], wall=(np.array([-1.0, 0.0, 0.0]), 4.0), doorway=(-0.1, 3.0), far_wall_x=7.0)
+    next_room_chair = ((5.5, 0.5, 0.0), (6.0, 1.0, 0.9))  # seen through the doorway
+    depth = _render(truth, [wardrobe, next_room_chair], wall=(np.array([-1.0, 0.0, 0.0]), 4.0), doorway=(-0.1, 3.0), far_wall_x=7.0)
     p = perceive(_write(tmp_path, depth, "doorway"), CFG)
     # The back wall (x = 4 m) is found although the next room is seen through its doorway.
     dist = [w.signed_distance_m(p.camera.position_m[None])[0] for w in p.room.walls]
@@ -203,6 +204,12 @@ def test_wall_with_a_doorway_is_a_wall_and_the_wardrobe_in_front_stays(tmp_path)
     true_from_found = truth @ np.linalg.inv(p.camera.world_from_camera)
     tops = [np.percentile(transform_points(true_from_found, o.points_world_m)[:, 2], 99) for o in p.objects]
     assert any(abs(t - 1.9) < 0.03 for t in tops)
+    # The chair in the next room is not part of this room's scene; nothing is behind a wall.
+    assert not any(abs(t - 0.9) < 0.03 for t in tops)
+    assert "left out 1 objects behind them" in next(b.reason for b in p.backends if b.task == "walls")
+    for o in p.objects:
+        for w in p.room.walls:
+            assert w.signed_distance_m(o.points_world_m).min() > -0.1
 
 
 def test_close_up_of_a_corner_takes_gravity_from_two_vertical_planes(tmp_path):
