@@ -96,15 +96,19 @@ class ShapePriorGenerator:
         elif soft is not None:
             kind = AssetKind.DEFORMABLE
             cfg = replace(config, max_visual_faces=min(config.max_visual_faces, 800))
+            shell = None
             if label in ("towel", "blanket"):
+                # cloth lying (maybe folded once): the mass of two layers of cloth over the
+                # footprint (the box's walls of cloth thickness), not a block of fabric
                 size[2] = max(size[2], 2.0 * soft.thickness_m)
                 geometry = ConvexSolids((box_solid([-size[0] / 2, -size[1] / 2, 0.0], [size[0] / 2, size[1] / 2, size[2]]),))
+                shell = soft.thickness_m
             elif label in ("pillow", "cushion"):
                 geometry = superellipsoid_occupancy(size, min(config.voxel_resolution, 20))
             else:
                 geometry = complete_occupancy(pts, cam, size, min(config.voxel_resolution, 20), mirror_y=True, mirror_x=True)
             specs = [PartSpec("body", None, geometry, cm.material, affordance_rank=2, affordance="squeeze or fold",
-                              description=f"{label}: soft body", rgba=rgba)]
+                              description=f"{label}: soft body", shell_thickness_m=shell, rgba=rgba)]
             description += "; deformable"
         else:
             geometry = complete_occupancy(pts, cam, size, config.voxel_resolution, mirror_y=True, mirror_x=label in _MIRROR_X)
