@@ -46,6 +46,7 @@ CLEARANCE_TOL_M = 1e-4
 CLEARANCE_TRIGGER = 0.5
 # A pair pushed apart this many times is from then on separated as a whole (see pair_push).
 ESCALATE_AFTER_PUSHES = 4
+MAX_JAM_GAP_CLEARANCES = 10
 _FAN = np.stack([np.cos(np.radians(np.arange(0.0, 180.0, 7.5))), np.sin(np.radians(np.arange(0.0, 180.0, 7.5)))], axis=1)
 # Centre of mass kept this far inside a supporting face.
 SUPPORT_INSET_M = 0.01
@@ -227,7 +228,16 @@ class _Solver:
         # Any axis gives a valid (separating) push; the pieces' own axes plus a 7.5-degree fan
         # approximate the hulls' edge normals without building the hulls.
         axes = np.concatenate([bi.pieces[a].axes_xy for a in ai] + [bj.pieces[b].axes_xy for b in aj] + [_FAN])
-        u, overlap = horizontal_mtv(xa, xb, axes)
+        # Push B away from A only (directions within 90 deg of the line between their centres):
+        # in a jam the plain MTV may push through, and three bodies then cycle.
+        c = xb.mean(axis=0) - xa.mean(axis=0)
+        if float(np.linalg.norm(c)) > 1e-9:
+            axes = np.where((axes @ c)[:, None] < 0.0, -axes, axes)
+            plus = (xa @ axes.T).max(axis=0) - (xb @ axes.T).min(axis=0)
+            k = int(np.argmin(plus))
+            u, overlap = axes[k], float(plus[k])
+        else:
+            u, overlap = horizontal_mtv(xa, xb, axes)
         worst = min(d for _, _, d in involved)
         return u, max(overlap + self.clearance, self.clearance - worst)
 
@@ -280,6 +290,11 @@ class _Solver:
             self.checked[(i, j)] = (self.version[i], self.version[j])
             return False
         self.push_count[(i, j)] = pushes + 1
+        if pushes >= ESCALATE_AFTER_PUSHES:
+            # Over-relax inside jams: each repeated push leaves a little more room (up to
+            # MAX_JAM_GAP_CLEARANCES clearances), so a dense cluster spreads out in a few sweeps
+            # instead of trading sub-millimetre overlaps around a ring.
+            amount += self.clearance * min(pushes - ESCALATE_AFTER_PUSHES + 1, MAX_JAM_GAP_CLEARANCES)
         # A body that a wall stops hands the rest of the move to the other one.
         move_j = amount * share_j
         move_i = amount - move_j

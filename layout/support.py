@@ -70,6 +70,9 @@ def build_support(
     placed: list[int] = []
     for b in bodies:
         b.parent, b.support_surface, b.children = FLOOR, -1, []
+    # Plan boxes of the bodies placed so far (vectorised prefilter of candidate supports).
+    placed_lo = np.zeros((len(bodies), 2))
+    placed_hi = np.zeros((len(bodies), 2))
     for i in order:
         b = bodies[i]
         bottom = b.bottom_m
@@ -78,12 +81,12 @@ def build_support(
         lo_xy = foot.min(axis=0)
         hi_xy = foot.max(axis=0)
         candidates: list[tuple[float, float, int, int]] = []  # (height, overlap, -body, surface)
-        for j in placed:
+        n_placed = len(placed)
+        near = np.nonzero(
+            np.all(placed_lo[:n_placed] <= hi_xy, axis=1) & np.all(placed_hi[:n_placed] >= lo_xy, axis=1)
+        )[0]
+        for j in (placed[k] for k in near):
             s = bodies[j]
-            s_lo = s.position_m[:2] + s.lo_rel_m[:2]
-            s_hi = s.position_m[:2] + s.hi_rel_m[:2]
-            if np.any(s_lo > hi_xy) or np.any(s_hi < lo_xy):
-                continue
             for k, surf in enumerate(s.surfaces):
                 h = float(s.position_m[2] + surf.height_rel_m)
                 if h < MIN_SURFACE_HEIGHT_M or h > bottom + tol:
@@ -118,6 +121,8 @@ def build_support(
             h_obs = h
         edges.append(SupportEdge(child=b.name, parent=parent_name, contact_gap_m=float(bottom - h_obs)))
         b.position_m[2] += h - bottom
+        placed_lo[len(placed)] = b.position_m[:2] + b.lo_rel_m[:2]
+        placed_hi[len(placed)] = b.position_m[:2] + b.hi_rel_m[:2]
         placed.append(i)
     return edges, order
 
