@@ -41,6 +41,9 @@ __all__ = [
 FLOOR_MAX_TILT_DEG = 30.0
 #: A wall's normal is perpendicular to up within this angle.
 WALL_MAX_TILT_DEG = 6.0
+#: A wall's inliers span at least this wide and reach at least this high above the floor.
+WALL_MIN_WIDTH_M = 1.0
+WALL_MIN_TOP_M = 1.5
 #: Downward pitch assumed when nothing in the image tells where gravity points.
 TYPICAL_PITCH_DEG = 10.0
 #: Points sampled for RANSAC (seeded); planes are refined on all points afterwards.
@@ -394,6 +397,11 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0) -> R
             dist = pts @ n + d
             inl = (np.abs(dist) < thr) & ~on_floor
             if inl.sum() < min_wall:
+                continue
+            # Walls are big and run up past head height; a chair's back or a drawer front is not.
+            lateral = pts[inl] @ np.cross(up, n)
+            top_m = float(np.percentile(pts[inl] @ up + height, 98))
+            if np.subtract(*np.percentile(lateral, [98, 2])) < WALL_MIN_WIDTH_M or top_m < WALL_MIN_TOP_M:
                 continue
             if not _is_wall(pts @ np.cross(up, n), dist, thr, inl, rows, cols, h, w):
                 continue

@@ -120,6 +120,8 @@ def _split_on_support(points: np.ndarray, up: np.ndarray, horiz: np.ndarray, min
         next_label = 1
         # Points between the layer and the pieces: the pieces' lowest centimetres.
         skirt = np.flatnonzero((h > layer_h + 1.2 * _LAYER_BIN_M) & ~above)
+        below_tree_idx = np.flatnonzero((h < layer_h - 0.02) & (h > layer_h - 0.15))
+        below_tree = cKDTree(xy[below_tree_idx]) if len(below_tree_idx) else None
         order = np.argsort(pieces, kind="stable")
         bounds = np.searchsorted(pieces[order], np.arange(int(pieces.max()) + 2))
         for p in np.flatnonzero(np.bincount(pieces) >= min_points):
@@ -127,6 +129,18 @@ def _split_on_support(points: np.ndarray, up: np.ndarray, horiz: np.ndarray, min
             inside = np.all(xy[sel] @ facets[:, :2].T + facets[:, 2] <= 0.01, axis=1)
             if inside.mean() < 0.8:
                 continue
+            # A chair's backrest, a sofa's back or a headboard rises along the seat's edge and
+            # often runs on below it (into the legs, the base). A monitor stands inside the desk
+            # top, with only the hidden desk top under its foot.
+            foot = sel[h[sel] < layer_h + 0.07]
+            if len(foot):
+                to_edge = -np.max(xy[foot] @ facets[:, :2].T + facets[:, 2], axis=1)
+                if np.mean(to_edge < 0.04) > 0.6:
+                    continue
+                if below_tree is not None:
+                    d_below, _ = below_tree.query(xy[foot], distance_upper_bound=0.03)
+                    if np.mean(d_below < np.inf) > 0.3:
+                        continue
             if len(skirt):
                 near = cKDTree(xy[sel]).query(xy[skirt], distance_upper_bound=0.02)[0] < np.inf
                 free = labels[skirt] == 0

@@ -247,3 +247,16 @@ def test_size_prior_names_what_the_primary_namer_cannot(tmp_path, monkeypatch):
     assert naming[0][0] == "clueless"
     assert naming[1][0] == "geometric-prior" and "1 of 1" in naming[1][1]
     assert [o.name for o in p.objects] == ["table_1"]
+
+
+def test_a_chair_back_is_not_split_from_its_seat(tmp_path):
+    # Seat at 0.45 m, legs below, a backrest rising from the rear edge over the rear legs.
+    x0, x1, y0, y1 = 2.5, 2.95, -0.22, 0.23
+    legs = [((x, y, 0.0), (x + 0.04, y + 0.04, 0.42)) for x in (x0, x1 - 0.04) for y in (y0, y1 - 0.04)]
+    seat = ((x0, y0, 0.42), (x1, y1, 0.47))
+    back = ((x1 - 0.04, y0, 0.47), (x1, y1, 0.95))
+    truth = _camera(1.4, 15.0, 0.0, 0.0)
+    p = perceive(_write(tmp_path, _render(truth, [*legs, seat, back]), "chair"), CFG)
+    assert len(p.objects) == 1
+    top = np.percentile(p.objects[0].points_world_m[:, 2], 99)
+    assert top == pytest.approx(0.95, abs=0.03)
