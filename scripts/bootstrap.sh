@@ -4,9 +4,9 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-# System libraries: open3d needs libusb; MuJoCo's offscreen renderer needs EGL (Mesa llvmpipe);
+# System libraries: MuJoCo's offscreen renderer needs EGL (Mesa llvmpipe);
 # rerun's headless screenshot needs Mesa's Vulkan driver.
-pkgs=(libusb-1.0-0 libegl1 libgl1 libglx-mesa0 libegl-mesa0 libgles2 mesa-vulkan-drivers libvulkan1)
+pkgs=(libegl1 libgl1 libglx-mesa0 libegl-mesa0 libgles2 mesa-vulkan-drivers libvulkan1)
 missing=()
 for p in "${pkgs[@]}"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
 if [ ${#missing[@]} -gt 0 ]; then
