@@ -1,0 +1,48 @@
+"""perceive() on procedural rooms with exact ground truth (scene_builder.procedural: MuJoCo
+renders with Kinect-like depth noise): camera frame and instance masks against the truth."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from perception import perceive
+from scene_builder.config import InputSpec, PerceptionConfig
+
+pytestmark = pytest.mark.slow
+
+CFG = PerceptionConfig(naming_backend="geometric-prior", segmentation_backend="depth-clusters")
+SEEDS = (0, 2, 8)
+
+
+@pytest.fixture(scope="module")
+def rooms(tmp_path_factory):
+    from scene_builder.procedural import load_truth, make_room, render_room
+
+    out = []
+    for seed in SEEDS:
+        d = render_room(make_room(seed, n_objects=6, noise=True), tmp_path_factory.mktemp(f"room{seed}"))
+        out.append((perceive(InputSpec(d / "rgb.png", d / "depth.png"), CFG, seed=0), load_truth(d)))
+    return out
+
+
+def test_camera_frame_matches_the_truth(rooms):
+    for p, truth in rooms:
+        up_true = truth.world_from_camera[2, :3]  # world Z in camera coordinates
+        up_found = p.camera.world_from_camera[2, :3]
+        assert np.degrees(np.arccos(np.clip(up_true @ up_found, -1, 1))) < 0.5
+        assert p.camera.position_m[2] == pytest.approx(truth.world_from_camera[2, 3], abs=0.01)
+
+
+def test_instances_match_the_truth(rooms):
+    matched = total = 0
+    for p, truth in rooms:
+        for k in np.unique(truth.instances):
+            gt = truth.instances == k
+            if k == 0 or gt.sum() < 300:
+                continue
+            total += 1
+            best = max((float((gt & o.mask).sum() / (gt | o.mask).sum()) for o in p.objects), default=0.0)
+            matched += best >= 0.5
+    # Measured: 16 of 17 visible objects (the miss: a 2 cm laptop lying on a cabinet).
+    assert total >= 15 and matched / total >= 0.75
