@@ -228,16 +228,7 @@ class _Solver:
         # Any axis gives a valid (separating) push; the pieces' own axes plus a 7.5-degree fan
         # approximate the hulls' edge normals without building the hulls.
         axes = np.concatenate([bi.pieces[a].axes_xy for a in ai] + [bj.pieces[b].axes_xy for b in aj] + [_FAN])
-        # Push B away from A only (directions within 90 deg of the line between their centres):
-        # in a jam the plain MTV may push through, and three bodies then cycle.
-        c = xb.mean(axis=0) - xa.mean(axis=0)
-        if float(np.linalg.norm(c)) > 1e-9:
-            axes = np.where((axes @ c)[:, None] < 0.0, -axes, axes)
-            plus = (xa @ axes.T).max(axis=0) - (xb @ axes.T).min(axis=0)
-            k = int(np.argmin(plus))
-            u, overlap = axes[k], float(plus[k])
-        else:
-            u, overlap = horizontal_mtv(xa, xb, axes)
+        u, overlap = horizontal_mtv(xa, xb, axes)
         worst = min(d for _, _, d in involved)
         return u, max(overlap + self.clearance, self.clearance - worst)
 

@@ -56,7 +56,6 @@ def test_broad_phase_matches_brute_force():
     assert got == want and len(want) > 50
 
 
-@pytest.mark.slow
 def test_clutter_has_no_interpenetration_and_everything_rests():
     perception, generated = clutter(40, seed=1)
     result, stats = solve_layout_with_stats(perception, generated, CFG)
