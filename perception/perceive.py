@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from perception.backends import build_registries
-from perception.inputs import check_depth, load_input
+from perception.backends import PerceptionRegistries, build_registries
+from perception.inputs import LoadedInput, check_depth, load_input
 from perception.naming_prior import GeometricPriorNamer
 from perception.protocols import InstanceMasks
-from perception.room import estimate_room, place_floor_under
+from perception.room import RoomFrame, estimate_room, place_floor_under
 from scene_builder.config import InputSpec, PerceptionConfig
 from scene_builder.errors import EmptySceneError, InputError
 from scene_builder.frames import transform_points
@@ -47,7 +47,12 @@ def gravity_aligned_size(points_world_m: np.ndarray) -> tuple[float, float, floa
     return max(best), min(best), float(hi - bottom)
 
 
-def _resolve_depth(loaded, registries, config: PerceptionConfig) -> tuple[np.ndarray, CameraIntrinsics, str, list[BackendUse]]:
+def _resolve_depth(
+    loaded: LoadedInput, registries: PerceptionRegistries, config: PerceptionConfig
+) -> tuple[np.ndarray, CameraIntrinsics, str, list[BackendUse]]:
+    """Sensor depth, or the depth registry's estimate; returns (H, W) float32 depth, the
+    intrinsics (the estimator's focal length when only the default field of view was known),
+    the depth source and the BackendUse."""
     k = loaded.intrinsics
     uses = []
     if loaded.depth_m is not None:
@@ -85,37 +90,24 @@ def _crop(rgb: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return rgb[r0:r1, c0:c1], mask[r0:r1, c0:c1]
 
 
-def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perception:
-    """Load and check the input, find gravity, floor, walls and the objects.
+def _select_instances(
+    labels: np.ndarray,
+    points_cam: np.ndarray,
+    valid: np.ndarray,
+    frame: RoomFrame,
+    k: CameraIntrinsics,
+    config: PerceptionConfig,
+    geometric: bool,
+) -> tuple[list[tuple[np.ndarray, np.ndarray]], int]:
+    """The instances of ``labels`` ((H, W) int, 0 = none) that are objects: enough observed points
+    and a plausible height, in front of the walls. Returns (mask, points' pixels) pairs, both
+    (H, W) bool, largest first and at most ``config.max_objects``, and how many instances were
+    left out for lying behind a wall.
 
-    Raises InputError for unusable input and EmptySceneError when no object is found.
+    An image-space mask (a learned segmenter's, ``geometric`` False) bleeds over object edges onto
+    the room and onto whatever is behind: its points keep the room out and only the 3D clusters
+    that hold a real share of the object (depth clusters are connected by construction).
     """
-    loaded = load_input(inputs, config)
-    registries = build_registries(config)
-    depth_m, k, depth_source, backends = _resolve_depth(loaded, registries, config)
-    backends.insert(0, BackendUse("intrinsics", k.source, f"{k.fx_px:.1f} px focal length ({k.width_px}x{k.height_px})"))
-    observation = Observation(str(loaded.image_path), loaded.rgb, depth_m, k, depth_source)
-
-    points_cam = k.unproject(depth_m)
-    valid = (depth_m > 0) & (depth_m < config.max_depth_m)
-    frame = estimate_room(points_cam, valid, seed)
-    backends.append(frame.gravity)
-
-    segmenter, seg_use = registries.segmentation.resolve(config.segmentation_backend)
-    backends.append(seg_use)
-    if getattr(segmenter, "accepts_gravity", False):
-        masks: InstanceMasks = segmenter.segment(loaded.rgb, depth_m, k, frame.background, up_cam=frame.up_cam)
-    else:
-        masks = segmenter.segment(loaded.rgb, depth_m, k, frame.background)
-    labels = np.asarray(masks.labels)
-    if labels.shape != depth_m.shape:
-        raise InputError(f"segmentation backend '{seg_use.backend}' returned masks of shape {labels.shape} for a {depth_m.shape} image; choose another --segmentation-backend")
-
-    # Instances with enough observed points and a plausible height, largest first.
-    # An image-space mask (a learned segmenter's) bleeds over object edges onto the room and
-    # onto whatever is behind: its 3D points keep the room out and only the clusters that hold
-    # a real share of the object (depth clusters are connected by construction).
-    geometric = bool(getattr(segmenter, "accepts_gravity", False))
     kept: list[tuple[np.ndarray, np.ndarray]] = []
     behind_walls = 0
     for inst in range(1, int(labels.max(initial=0)) + 1):
@@ -147,10 +139,40 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
         if not MIN_OBJECT_HEIGHT_M <= extent <= MAX_OBJECT_HEIGHT_M:
             continue
         kept.append((mask, pix))
+    kept.sort(key=lambda mp: -int(mp[1].sum()))
+    return kept[: config.max_objects], behind_walls
+
+
+def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perception:
+    """Load and check the input, find gravity, floor, walls and the objects.
+
+    Raises InputError for unusable input and EmptySceneError when no object is found.
+    """
+    loaded = load_input(inputs, config)
+    registries = build_registries(config)
+    depth_m, k, depth_source, backends = _resolve_depth(loaded, registries, config)
+    backends.insert(0, BackendUse("intrinsics", k.source, f"{k.fx_px:.1f} px focal length ({k.width_px}x{k.height_px})"))
+    observation = Observation(str(loaded.image_path), loaded.rgb, depth_m, k, depth_source)
+
+    points_cam = k.unproject(depth_m)
+    valid = (depth_m > 0) & (depth_m < config.max_depth_m)
+    frame = estimate_room(points_cam, valid, seed)
+    backends.append(frame.gravity)
+
+    segmenter, seg_use = registries.segmentation.resolve(config.segmentation_backend)
+    backends.append(seg_use)
+    geometric = bool(getattr(segmenter, "accepts_gravity", False))
+    if geometric:
+        masks: InstanceMasks = segmenter.segment(loaded.rgb, depth_m, k, frame.background, up_cam=frame.up_cam)
+    else:
+        masks = segmenter.segment(loaded.rgb, depth_m, k, frame.background)
+    labels = np.asarray(masks.labels)
+    if labels.shape != depth_m.shape:
+        raise InputError(f"segmentation backend '{seg_use.backend}' returned masks of shape {labels.shape} for a {depth_m.shape} image; choose another --segmentation-backend")
+
+    kept, behind_walls = _select_instances(labels, points_cam, valid, frame, k, config, geometric)
     if behind_walls:
         backends.append(BackendUse("walls", "room-planes", f"{len(frame.room.walls)} walls; left out {behind_walls} objects behind them (in the next room)"))
-    kept.sort(key=lambda mp: -int(mp[1].sum()))
-    kept = kept[: config.max_objects]
     if not kept:
         raise EmptySceneError(
             f"no objects found in {loaded.image_path}: nothing stands out from the floor and walls; "
