@@ -47,6 +47,7 @@ CLEARANCE_TRIGGER = 0.5
 # A pair pushed apart this many times is from then on separated as a whole (see pair_push).
 ESCALATE_AFTER_PUSHES = 4
 MAX_JAM_GAP_CLEARANCES = 10
+SHUFFLE_AFTER_ITERATIONS = 50
 _FAN = np.stack([np.cos(np.radians(np.arange(0.0, 180.0, 7.5))), np.sin(np.radians(np.arange(0.0, 180.0, 7.5)))], axis=1)
 # Centre of mass kept this far inside a supporting face.
 SUPPORT_INSET_M = 0.01
@@ -94,8 +95,9 @@ def candidate_pairs(lo_m: np.ndarray, hi_m: np.ndarray, margin_m: float) -> np.n
 
 
 class _Solver:
-    def __init__(self, bodies: list[Body], walls: tuple[Plane, ...], config: LayoutConfig) -> None:
+    def __init__(self, bodies: list[Body], walls: tuple[Plane, ...], config: LayoutConfig, seed: int = 0) -> None:
         self.bodies = bodies
+        self.rng = np.random.default_rng(seed)
         self.walls = walls
         self.clearance = float(config.clearance_m)
         self.world = ConvexWorld([b.pieces for b in bodies])
@@ -335,7 +337,12 @@ class _Solver:
         for it in range(max_iterations):
             moved = False
             lo, hi = self.boxes()
-            for i, j in candidate_pairs(lo, hi, self.clearance):
+            pairs = candidate_pairs(lo, hi, self.clearance)
+            if it >= SHUFFLE_AFTER_ITERATIONS:
+                # Late sweeps visit the pairs in a seeded random order: a jam whose pushes cancel
+                # in a fixed order is broken up (deterministic for a given seed).
+                pairs = pairs[self.rng.permutation(len(pairs))]
+            for i, j in pairs:
                 moved |= self.resolve_pair(int(i), int(j))
             moved |= self.push_out_of_walls()
             moved |= self.keep_on_support()
@@ -393,7 +400,7 @@ def solve_layout_with_stats(
         return LayoutResult(scene=scene, support=()), SolveStats(tuple(snaps), 0.0, 0.0, True, 0)
 
     walls = tuple(perception.room.walls)
-    solver = _Solver(bodies, walls, config)
+    solver = _Solver(bodies, walls, config, seed)
     lap("narrowphase_setup")
     before = solver.max_penetration()
     lap("measure_before")
@@ -429,7 +436,8 @@ def solve_layout(
     """Place the generated assets in the world: gravity-aligned, no interpenetration (objects,
     floor, walls), every object resting on its support, as close to the observation as possible.
 
-    ``seed`` only picks the subsample of observed points used for yaw snapping; the result is a
-    deterministic function of the inputs and the seed. ``scene.objects`` keeps the input order.
+    ``seed`` picks the subsample of observed points used for yaw snapping and the pair order of
+    late sweeps (after SHUFFLE_AFTER_ITERATIONS); the result is a deterministic function of the
+    inputs and the seed. ``scene.objects`` keeps the input order.
     """
     return solve_layout_with_stats(perception, generated, config, seed)[0]
