@@ -109,6 +109,13 @@ def _object_of_body(model) -> list[str]:
     return [model.body(int(model.body_rootid[b])).name for b in range(model.nbody)]
 
 
+def _flex_names(model) -> list[str]:
+    """Names of the model's flex objects, by flex id (MuJoCo 4.0 has no ``model.flex(i)`` accessor)."""
+    import mujoco
+
+    return [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_FLEX, i) or "" for i in range(model.nflex)]
+
+
 def physics_check(mjcf_path: Path, settle_s: float = 3.0, stable_drift_m: float = 0.01, stable_rotation_deg: float = 2.0) -> PhysicsCheck:
     """Load an MJCF, measure the deepest inter-object (and object-floor/wall) penetration at t = 0,
     simulate ``settle_s`` seconds and measure each free body's drift and rotation."""
@@ -118,7 +125,7 @@ def physics_check(mjcf_path: Path, settle_s: float = 3.0, stable_drift_m: float 
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     body_obj = _object_of_body(model)
-    flex_obj = [model.flex(i).name for i in range(model.nflex)]
+    flex_obj = _flex_names(model)
 
     def owner(geom: int, flex: int) -> str:
         if geom >= 0:
@@ -173,10 +180,10 @@ def render_ids_and_depth(mjcf_path: Path, width_px: int, height_px: int, camera:
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     body_obj = _object_of_body(model)
-    names = tuple(sorted({n for n in body_obj if n != "world"} | {model.flex(i).name for i in range(model.nflex)}))
+    names = tuple(sorted({n for n in body_obj if n != "world"} | set(_flex_names(model))))
     index = {n: i for i, n in enumerate(names)}
     geom_idx = np.array([index.get(body_obj[model.geom_bodyid[g]], -1) for g in range(model.ngeom)] + [-1], dtype=np.int32)
-    flex_idx = np.array([index.get(model.flex(i).name, -1) for i in range(model.nflex)] + [-1], dtype=np.int32)
+    flex_idx = np.array([index.get(n, -1) for n in _flex_names(model)] + [-1], dtype=np.int32)
     with mujoco.Renderer(model, height_px, width_px) as r:
         r.enable_depth_rendering()
         r.update_scene(data, camera=camera)
