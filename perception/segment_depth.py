@@ -11,6 +11,8 @@ Then:
 * **support split**: when a cluster has a horizontal top layer (a desk top, a bed) with a
   separate group of points standing on it whose footprint lies inside the layer's (a monitor, a
   pillow), the group becomes its own object (needs the up vector);
+* **legs**: pieces standing under a cluster's top surface and reaching up to just below it
+  join it (a table's legs, whose upper ends hide under the overhanging top);
 * **merge**: pieces too small to be objects join the nearest large cluster within
   :data:`MERGE_RADIUS_M` (a chair leg cut off by an occluder), or are dropped;
 * **masks**: pixels without depth next to an object take the label of the nearest object pixel
@@ -151,6 +153,67 @@ def _split_on_support(points: np.ndarray, up: np.ndarray, horiz: np.ndarray, min
     return None
 
 
+def _top_layer(h: np.ndarray, min_points: int) -> float | None:
+    """Height of the highest dense horizontal slab of a cluster's heights ``h`` (N,), or None."""
+    if len(h) < min_points:
+        return None
+    if np.subtract(*np.percentile(h, [98, 2])) < 0.06:  # the cluster is one slab (a table top alone)
+        return float(np.median(h))
+    edges = np.arange(h.min(), h.max() + 2 * _LAYER_BIN_M, _LAYER_BIN_M)
+    hist, _ = np.histogram(h, bins=edges)
+    counts = np.convolve(hist, np.ones(3, dtype=np.int64), mode="same")
+    dense = np.flatnonzero(counts >= max(0.5 * min_points, 3.0 * float(np.median(counts[counts > 0]))))
+    return float(edges[dense[-1]] + 0.5 * _LAYER_BIN_M) if len(dense) else None
+
+
+def _merge_legs(points: np.ndarray, labels: np.ndarray, up: np.ndarray, horiz: np.ndarray, min_points: int) -> None:
+    """Join pieces standing under a cluster's top surface and reaching up to just below it (a
+    table's legs, whose upper ends hide under the overhanging top) to that cluster, in place.
+
+    points: (N, 3) camera-frame points; labels: (N,) cluster labels (modified); up: (3,);
+    horiz: (2, 3) horizontal axes. A bin under a desk stops well below the desk top and stays.
+    """
+    from scipy.spatial import ConvexHull, QhullError
+
+    h = points @ up
+    xy = points @ horiz.T
+    order = np.argsort(labels, kind="stable")
+    bounds = np.searchsorted(labels[order], np.arange(int(labels.max()) + 2))
+    members = {c: order[bounds[c] : bounds[c + 1]] for c in range(int(labels.max()) + 1) if bounds[c + 1] > bounds[c]}
+    tops = {c: float(np.percentile(h[m], 98)) for c, m in members.items()}
+    surfaces = []  # (cluster, layer height, hull equations) of clusters with a top surface
+    for c, m in members.items():
+        layer_h = _top_layer(h[m], min_points)
+        if layer_h is None:
+            continue
+        # The footprint: the whole cluster seen from above (the top surface and its edge faces;
+        # a near leg stands under the top's front edge).
+        try:
+            hull = ConvexHull(xy[m][:: max(1, len(m) // 3000)])
+        except QhullError:
+            continue
+        if hull.volume >= 0.05:  # 2D hull: volume is the area, m^2
+            surfaces.append((c, layer_h, hull.equations))
+    # Each piece joins the surface right above it (the smallest gap), if any.
+    target = {}
+    for other, om in members.items():
+        best = None
+        for c, layer_h, eq in surfaces:
+            gap = layer_h - tops[other]
+            if c == other or not 0.01 <= gap <= 0.15 or (best is not None and gap >= best[1]):
+                continue
+            if np.mean(np.all(xy[om] @ eq[:, :2].T + eq[:, 2] <= 0.05, axis=1)) >= 0.8:
+                best = (c, gap)
+        if best is not None:
+            target[other] = best[0]
+    for other, c in sorted(target.items()):
+        seen = {other}
+        while c in target and c not in seen:  # a leg of a leg's table: follow to the top surface
+            seen.add(c)
+            c = target[c]
+        labels[members[other]] = c
+
+
 class DepthClusterSegmenter:
     """Objects as Euclidean clusters of the non-room depth points (see the module doc).
 
@@ -205,6 +268,7 @@ class DepthClusterSegmenter:
                 for s in range(1, int(split.max()) + 1):
                     labels[sel[split == s]] = next_label
                     next_label += 1
+            _merge_legs(points, labels, up, horiz, self.min_points)
 
         # Merge small pieces into the nearest large cluster, or drop them.
         sizes = np.bincount(labels)

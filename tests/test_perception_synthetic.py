@@ -260,3 +260,15 @@ def test_a_chair_back_is_not_split_from_its_seat(tmp_path):
     assert len(p.objects) == 1
     top = np.percentile(p.objects[0].points_world_m[:, 2], 99)
     assert top == pytest.approx(0.95, abs=0.03)
+
+
+def test_table_legs_hidden_under_the_top_join_the_table(tmp_path):
+    # Seen from 2 m high, the upper ends of legs set 15 cm in from the edge hide under the top:
+    # legs and top are separate point clusters, one table.
+    top = ((2.4, -0.6, 0.72), (3.4, 0.6, 0.75))
+    legs = [((x, y, 0.0), (x + 0.05, y + 0.05, 0.72)) for x in (2.55, 3.2) for y in (-0.45, 0.35)]
+    truth = _camera(2.0, 30.0, 0.0, 0.0)
+    p = perceive(_write(tmp_path, _render(truth, [top, *legs]), "table"), CFG)
+    assert len(p.objects) == 1
+    z = p.objects[0].points_world_m[:, 2]
+    assert np.percentile(z, 1) < 0.15 and np.percentile(z, 99) == pytest.approx(0.75, abs=0.02)
