@@ -1,11 +1,14 @@
 """Gravity, floor, walls and ceiling from a depth map: the world frame of the scene.
 
-The floor is found by RANSAC (:func:`ransac_plane`) on a seeded subsample of the point cloud:
-planes are peeled off one after the other, the ones whose normal lies within
-:data:`FLOOR_MAX_TILT_DEG` of the camera's image-up direction (-y of the OpenCV camera) and that
-are large enough are floor candidates, and the lowest of them wins; it is refined by least squares
-on all of its inliers. Up is the floor normal. Vertical planes with enough inliers and little seen
-behind them are walls; a horizontal plane above the camera is the ceiling.
+Planes are peeled off a seeded subsample of the point cloud by RANSAC (:func:`ransac_plane`).
+The ones whose normal lies within :data:`FLOOR_MAX_TILT_DEG` of the camera's image-up direction
+(-y of the OpenCV camera) propose an up direction; the one most other planes are parallel or
+perpendicular to wins (rooms are Manhattan), so a sloppy patch of floor cannot tilt the world.
+The floor is the lowest horizontal layer of points that spreads in two directions; it is refined
+by a tight RANSAC and least squares on all of its inliers, and up is its normal. Vertical planes
+at least a metre wide that reach past head height and have little seen behind them are walls (a
+doorway's view of the next room does not count); a horizontal plane above the camera is the
+ceiling.
 
 The world frame (see :mod:`scene_builder.model`): Z up, floor ``z = 0``, the camera above the
 origin, X the horizontal projection of the optical axis, snapped to the nearest dominant wall

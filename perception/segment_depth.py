@@ -1,16 +1,18 @@
 """Instance segmentation from depth alone: the ``"depth-clusters"`` segmentation backend.
 
 What is left after the floor, walls and ceiling are removed is split into objects by Euclidean
-clustering: points are pooled into 2 cm voxels, voxels closer than :data:`LINK_RADIUS_M` are
-linked and the connected components are the objects (scipy's KD-tree and sparse-graph connected
-components; open3d's ``cluster_dbscan`` gives the same partition for ``min_points = 1`` but is
-several times slower here). A depth discontinuity of more than the link radius separates objects.
+clustering: points are pooled into 2 cm voxels, voxels closer than their link radius
+(:func:`link_radius_m`: :data:`LINK_RADIUS_M`, wider far away where pixels are sparse on the
+surface) are linked and the connected components are the objects. scipy's KD-tree and
+sparse-graph connected components rather than open3d's ``cluster_dbscan``, whose radius is one
+constant. A depth discontinuity wider than the link radius separates objects.
 
 Then:
 
 * **support split**: when a cluster has a horizontal top layer (a desk top, a bed) with a
   separate group of points standing on it whose footprint lies inside the layer's (a monitor, a
-  pillow), the group becomes its own object (needs the up vector);
+  pillow), the group becomes its own object, unless it rises along the layer's edge or runs on
+  below it (a chair's backrest, a headboard) (needs the up vector);
 * **legs**: pieces standing under a cluster's top surface and reaching up to just below it
   join it (a table's legs, whose upper ends hide under the overhanging top);
 * **merge**: pieces too small to be objects join the nearest large cluster within
