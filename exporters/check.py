@@ -147,8 +147,12 @@ def _check_glb(path: Path, problems: list[str]) -> None:
 def _check_scene_json(path: Path, names: list[str] | None, problems: list[str]) -> list[str] | None:
     try:
         data = json.loads(path.read_text())
-        scene_names = sorted(o["asset"]["name"] for o in data["objects"])
-    except (ValueError, KeyError, TypeError) as err:
+        # scene_builder.serialize wraps the scene: {"format", "version", "scene": {..., "objects"}}.
+        # (Read as plain JSON here: exporters do not import scene_builder.serialize.)
+        if data.get("format") != "scene-builder/scene":
+            raise ValueError(f"format is {data.get('format')!r}, not 'scene-builder/scene'")
+        scene_names = sorted(o["asset"]["name"] for o in data["scene"]["objects"])
+    except (ValueError, KeyError, TypeError, AttributeError) as err:
         problems.append(f"{path.name} is not a readable scene: {err!r}")
         return names
     if names is not None and scene_names != names:

@@ -9,6 +9,7 @@ import pytest
 
 from exporters import check_output, export_scene
 from scene_builder.config import ExportConfig
+from scene_builder.serialize import scene_to_json
 from tests.fixtures_scenes import mixed_scene, pillow_scene
 
 
@@ -24,6 +25,8 @@ def good(tmp_path_factory):
         "layout": {"max_penetration_m": 0.0, "settle_max_drift_m": 0.0004},
     }
     (out / "report.json").write_text(json.dumps(report))
+    # scene.json exactly as the pipeline writes it (scene_builder.serialize).
+    (out / "scene.json").write_text(scene_to_json(scene))
     return scene, out
 
 
@@ -77,3 +80,14 @@ def test_invalid_usd_and_unstable_mjcf_are_reported(good, tmp_path):
     problems = check_output(out)
     assert any("scene.usda" in p and "door_joint" in p for p in problems)
     assert any("scene.xml" in p and "box_b" in p for p in problems)
+
+
+def test_scene_json_that_names_other_objects_is_reported(good, tmp_path):
+    out = _copy(good[1], tmp_path / "o")
+    doc = json.loads((out / "scene.json").read_text())
+    doc["scene"]["objects"] = doc["scene"]["objects"][1:]
+    (out / "scene.json").write_text(json.dumps(doc))
+    dropped = good[0].objects[0].name
+    assert any("scene.json" in p and "differ" in p and dropped in p for p in check_output(out))
+    (out / "scene.json").write_text(json.dumps({"objects": []}))
+    assert any("scene.json is not a readable scene" in p for p in check_output(out))
