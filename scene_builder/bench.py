@@ -16,12 +16,14 @@ and depth the pipeline perceived), the axis-aligned box of its depth points **in
 frame**, gravity taken along the camera's +y axis, the floor at the lowest observed point, no
 penetration handling and no settling; free box bodies of density 500 kg/m^3.
 
-Both methods go through the same checks, in this module: the exported MJCF is loaded in MuJoCo,
-the deepest penetration between different objects (or an object and the floor / walls) at t = 0
-is measured, the scene is simulated for ``settle_s`` (3 s) and every free body's drift and
-rotation recorded (stable: < 1 cm and < 2 degrees); the MJCF is rendered from ``input_camera`` for
-depth AbsRel and mask IoU. Objects are scored in the ground truth's world frame, reached through
-the camera: ``truth_from_method = truth.world_from_camera @ inv(method.world_from_camera)``.
+Both methods are :class:`~scene_builder.model.Scene` objects that go through one code path: the
+project's MJCF exporter (``exporters.write_mjcf``) and its physics check (``layout.verify_scene``:
+deepest penetration at t = 0 between different objects or an object and the floor / walls,
+``settle_s`` (3 s) of simulation, a free body is stable when it moves < 1 cm and turns < 2 deg).
+Render-and-compare (depth AbsRel, mask IoU) is ``verify_scene``'s too, against the perceived
+masks and observed depth (real photos) or the true instances and clean depth (synthetic rooms).
+Objects are scored in the ground truth's world frame, reached through the camera:
+``truth_from_method = truth.world_from_camera @ inv(method.world_from_camera)``.
 """
 
 from __future__ import annotations
@@ -43,24 +45,34 @@ import numpy as np
 from scene_builder import frames, metrics
 from scene_builder.config import BuildConfig, ExportConfig, InputSpec
 from scene_builder.errors import InputError
-from scene_builder.model import CameraIntrinsics, Perception
+from scene_builder.model import (
+    AssetKind,
+    BackendUse,
+    Camera,
+    CameraIntrinsics,
+    Fidelity,
+    ObjectAsset,
+    Observation,
+    PerceivedObject,
+    Perception,
+    PhysicsVerdict,
+    PlacedObject,
+    Plane,
+    Room,
+    Scene,
+)
 
 __all__ = [
-    "BaselineBox",
-    "BaselineScene",
     "BenchResult",
     "MethodScores",
-    "PhysicsCheck",
     "SceneResult",
     "Summary",
-    "baseline_mjcf",
+    "baseline_box_asset",
     "evaluate_baseline",
     "evaluate_sample",
     "naive_baseline",
     "oracle_perception",
-    "physics_check",
     "print_result",
-    "render_ids_and_depth",
     "run_bench",
 ]
 
@@ -77,168 +89,45 @@ DEFINITIONS = {
     "size_error_rel": "mean over the 3 axes of |built - true| / true extent, after matching horizontal axes",
     "mass_error_rel": "|built - true| / true mass (procedural rooms: density x primitive volume)",
     "box_iou_3d": "exact IoU of gravity-aligned yawed boxes (footprint polygon overlap x height overlap)",
-    "max_penetration_m": "per scene: deepest contact between different objects or an object and the floor/walls at t = 0 in MuJoCo; summary: median over scenes (worst in max_penetration_m_worst)",
-    "stable_fraction": "free objects that move < 1 cm and rotate < 2 deg over 3 s of simulation / free objects, pooled over scenes",
-    "depth_absrel": "per scene: mean |rendered - reference| / reference depth over object pixels (true instances and clean depth for synthetic rooms; perceived masks and observed depth for real photos), rendered from input_camera; summary: median over scenes",
-    "mask_iou": "per object: IoU of the object's rendered silhouette and its true instance mask (synthetic) or perceived mask (real); summary: median over objects",
-    "seconds_per_scene": "wall-clock seconds of pipeline.build (pipeline) or of baseline construction and MJCF writing (baseline)",
+    "max_penetration_m": "per scene: deepest contact between different objects or an object and the floor/walls at t = 0 (layout.verify_scene on the exported MJCF); summary: median over scenes (worst in max_penetration_m_worst)",
+    "stable_fraction": "free objects that move < 1 cm and rotate < 2 deg over 3 s of simulation (soft bodies: centroid within their sag allowance) / free objects, pooled over scenes (layout.verify_scene)",
+    "depth_absrel": "per scene: mean |rendered - reference| / reference depth over object pixels where the render hits geometry (true instances and clean depth for synthetic rooms; perceived masks and observed depth for real photos), rendered from input_camera by layout.verify_scene; summary: median over scenes",
+    "mask_iou": "per object: IoU of the object's rendered silhouette and its true instance mask (synthetic, matched objects) or perceived mask (real); summary: median over objects",
+    "seconds_per_scene": "wall-clock seconds of pipeline.build (pipeline) or of building the baseline's box assets and exporting its MJCF (baseline)",
     "peak_rss_mb": "resource.getrusage(RUSAGE_SELF).ru_maxrss of the bench process after the scene (MiB)",
 }
 
 
 # --------------------------------------------------------------------------------------------
-# Physics check and render-and-compare, shared by both methods
+# The naive baseline, as a Scene that goes through the project's exporter and physics check
 # --------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class PhysicsCheck:
-    """Physics of an MJCF scene. per_object: (name, start penetration m, drift m, rotation deg,
-    stable) for each free object."""
-
-    max_penetration_m: float
-    max_drift_m: float
-    max_rotation_deg: float
-    n_free: int
-    n_stable: int
-    per_object: tuple[tuple[str, float, float, float, bool], ...]
-
-
-def _object_of_body(model) -> list[str]:
-    """Object name of every body: the name of its root body (child of the world)."""
-    return [model.body(int(model.body_rootid[b])).name for b in range(model.nbody)]
-
-
-def _flex_names(model) -> list[str]:
-    """Names of the model's flex objects, by flex id (MuJoCo 4.0 has no ``model.flex(i)`` accessor)."""
-    import mujoco
-
-    return [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_FLEX, i) or "" for i in range(model.nflex)]
-
-
-def physics_check(mjcf_path: Path, settle_s: float = 3.0, stable_drift_m: float = 0.01, stable_rotation_deg: float = 2.0) -> PhysicsCheck:
-    """Load an MJCF, measure the deepest inter-object (and object-floor/wall) penetration at t = 0,
-    simulate ``settle_s`` seconds and measure each free body's drift and rotation."""
-    import mujoco
-
-    model = mujoco.MjModel.from_xml_path(str(mjcf_path))
-    data = mujoco.MjData(model)
-    mujoco.mj_forward(model, data)
-    body_obj = _object_of_body(model)
-    flex_obj = _flex_names(model)
-
-    def owner(geom: int, flex: int) -> str:
-        if geom >= 0:
-            return body_obj[model.geom_bodyid[geom]]
-        return flex_obj[flex] if flex >= 0 else ""
-
-    pen: dict[str, float] = {}
-    deepest = 0.0
-    for i in range(data.ncon):
-        c = data.contact[i]
-        a, b = owner(c.geom[0], c.flex[0]), owner(c.geom[1], c.flex[1])
-        if a == b:
-            continue  # parts of one object (its own joints keep them apart)
-        depth = max(0.0, -float(c.dist))
-        deepest = max(deepest, depth)
-        for n in (a, b):
-            if n not in ("world", ""):
-                pen[n] = max(pen.get(n, 0.0), depth)
-    free = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
-    adr = [int(model.jnt_qposadr[j]) for j in free]
-    q0 = data.qpos.copy()
-    steps = int(round(settle_s / model.opt.timestep))
-    for _ in range(steps):
-        mujoco.mj_step(model, data)
-    per = []
-    for j, a in zip(free, adr):
-        name = body_obj[model.jnt_bodyid[j]]
-        drift = float(np.linalg.norm(data.qpos[a : a + 3] - q0[a : a + 3]))
-        dot = abs(float(np.dot(data.qpos[a + 3 : a + 7], q0[a + 3 : a + 7])))
-        rot = float(np.degrees(2.0 * np.arccos(min(1.0, dot))))
-        if not np.isfinite(drift):
-            drift, rot = float("inf"), 180.0
-        per.append((name, pen.get(name, 0.0), drift, rot, drift < stable_drift_m and rot < stable_rotation_deg))
-    return PhysicsCheck(
-        max_penetration_m=deepest,
-        max_drift_m=max((p[2] for p in per), default=0.0),
-        max_rotation_deg=max((p[3] for p in per), default=0.0),
-        n_free=len(per),
-        n_stable=sum(1 for p in per if p[4]),
-        per_object=tuple(per),
-    )
-
-
-def render_ids_and_depth(mjcf_path: Path, width_px: int, height_px: int, camera: str = "input_camera") -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
-    """Render an MJCF from its camera: (H, W) float32 depth (0 where nothing), (H, W) int32 index
-    into the returned object names (-1 for floor, walls and background), and the names."""
-    import mujoco
-
-    model = mujoco.MjModel.from_xml_path(str(mjcf_path))
-    model.vis.global_.offwidth = max(int(model.vis.global_.offwidth), width_px)
-    model.vis.global_.offheight = max(int(model.vis.global_.offheight), height_px)
-    data = mujoco.MjData(model)
-    mujoco.mj_forward(model, data)
-    body_obj = _object_of_body(model)
-    names = tuple(sorted({n for n in body_obj if n != "world"} | set(_flex_names(model))))
-    index = {n: i for i, n in enumerate(names)}
-    geom_idx = np.array([index.get(body_obj[model.geom_bodyid[g]], -1) for g in range(model.ngeom)] + [-1], dtype=np.int32)
-    flex_idx = np.array([index.get(n, -1) for n in _flex_names(model)] + [-1], dtype=np.int32)
-    with mujoco.Renderer(model, height_px, width_px) as r:
-        r.enable_depth_rendering()
-        r.update_scene(data, camera=camera)
-        depth = r.render().astype(np.float32)
-        r.disable_depth_rendering()
-        r.enable_segmentation_rendering()
-        r.update_scene(data, camera=camera)
-        seg = r.render()
-    far = float(model.stat.extent * model.vis.map.zfar)
-    depth[depth >= 0.999 * far] = 0.0
-    ids = np.full(seg.shape[:2], -1, dtype=np.int32)
-    is_geom = seg[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM)
-    ids[is_geom] = geom_idx[seg[..., 0][is_geom]]
-    is_flex = seg[..., 1] == int(mujoco.mjtObj.mjOBJ_FLEX)
-    if is_flex.any():
-        ids[is_flex] = flex_idx[np.clip(seg[..., 0][is_flex], -1, model.nflex - 1)]
-    return depth, ids, names
-
-
-# --------------------------------------------------------------------------------------------
-# The naive baseline
-# --------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True, eq=False)
-class BaselineBox:
-    """An axis-aligned box in the camera frame. center_cam_m, size_cam_m: (3,) along camera x, y, z."""
-
-    name: str
-    label: str
-    center_cam_m: np.ndarray
-    size_cam_m: np.ndarray
-
-    @property
-    def mass_kg(self) -> float:
-        return float(BASELINE_DENSITY_KG_M3 * np.prod(self.size_cam_m))
-
-
-@dataclass(frozen=True, eq=False)
-class BaselineScene:
-    """The baseline's boxes and its world: Z = camera -y (gravity along camera +y), X = camera z,
-    floor z = 0 at the lowest observed point. world_from_camera: (4, 4)."""
-
-    boxes: tuple[BaselineBox, ...]
-    world_from_camera: np.ndarray
-    intrinsics: CameraIntrinsics
 
 
 # World X = camera z, world Y = camera -x, world Z = camera -y.
 _BASE_R_WORLD_CAM = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
 
-def naive_baseline(perception: Perception, max_depth_m: float = 10.0) -> BaselineScene:
-    """Axis-aligned camera-frame boxes of each perceived object's depth points (its mask on the
-    observed depth), floor at the lowest observed point of the whole image."""
+def baseline_box_asset(name: str, label: str, size_m) -> ObjectAsset:
+    """A free, solid, single-part box asset of extents ``size_m`` (3,) (asset frame: x, y, z),
+    density ``BASELINE_DENSITY_KG_M3``, friction of the generation table's wood; mass and inertia
+    by integration over the box (``generation.assembly``, as for every generated asset)."""
+    from generation.assembly import ConvexSolids, PartSpec, assemble_asset, box_solid
+    from generation.materials import material
+
+    half = np.asarray(size_m, dtype=np.float64) / 2.0
+    mat = dataclasses.replace(material("wood"), name="baseline", density_kg_m3=BASELINE_DENSITY_KG_M3, source="naive baseline: one density for everything")
+    part = PartSpec("body", None, ConvexSolids((box_solid([-half[0], -half[1], 0.0], [half[0], half[1], 2.0 * half[2]]),)), mat)
+    return assemble_asset(name, label, [part], kind=AssetKind.RIGID, is_fixed=False, backend="naive-baseline")
+
+
+def naive_baseline(perception: Perception, max_depth_m: float = 10.0) -> Scene:
+    """The naive placement as a :class:`Scene`: for each perceived object, the axis-aligned box of
+    its depth points (its mask on the observed depth) in the camera frame, as a free box asset.
+
+    The scene's world is the camera's axes permuted (world Z = camera -y: gravity along camera +y,
+    world X = camera z), its floor ``z = 0`` at the lowest observed point of the whole image, no
+    walls; every box stays where its camera-frame box is (no penetration handling, no settling).
+    """
     obs = perception.observation
     k = obs.intrinsics
     depth = obs.depth_m.astype(np.float64)
@@ -247,69 +136,30 @@ def naive_baseline(perception: Perception, max_depth_m: float = 10.0) -> Baselin
         raise InputError("the observation has no valid depth; the baseline needs depth")
     pts = k.unproject(depth)
     floor_y = float(pts[..., 1][valid].max())  # camera y points down: the lowest point has the largest y
-    boxes = []
+    world_from_camera = frames.pose(_BASE_R_WORLD_CAM, (0.0, 0.0, floor_y))
+    placed = []
     for o in perception.objects:
         m = o.mask & valid
         if not m.any():
             continue
         p = pts[m]
         lo, hi = p.min(axis=0), p.max(axis=0)
-        size = np.maximum(hi - lo, 0.01)  # a flat patch still makes a 1 cm box
-        boxes.append(BaselineBox(o.name, o.label, (lo + hi) / 2.0, size))
-    return BaselineScene(tuple(boxes), frames.pose(_BASE_R_WORLD_CAM, (0.0, 0.0, floor_y)), k)
+        size_cam = np.maximum(hi - lo, 0.01)  # a flat patch still makes a 1 cm box
+        # The world is a permutation of the camera axes, so the box stays axis-aligned: its
+        # extents along world X, Y, Z are the camera z, x, y sizes.
+        size_w = np.array([size_cam[2], size_cam[0], size_cam[1]])
+        center_w = frames.transform_points(world_from_camera, ((lo + hi) / 2.0)[None])[0]
+        bottom_w = center_w - np.array([0.0, 0.0, size_w[2] / 2.0])
+        placed.append(PlacedObject(baseline_box_asset(o.name, o.label, size_w), frames.pose(np.eye(3), bottom_w), "floor"))
+    return Scene(Camera(k, world_from_camera), Room(), tuple(placed))
 
 
-def baseline_boxes(base: BaselineScene, gt_from_world: np.ndarray) -> list[metrics.ObjectBox]:
-    """The baseline's boxes as scored objects in the truth's frame."""
-    out = []
-    for b in base.boxes:
-        # In the baseline's world every box is axis-aligned (its world is a permutation of the
-        # camera axes): extents along world X, Y, Z are the camera z, x, y sizes.
-        center_w = frames.transform_points(base.world_from_camera, b.center_cam_m[None])[0]
-        size_w = np.array([b.size_cam_m[2], b.size_cam_m[0], b.size_cam_m[1]])
-        pose = gt_from_world @ frames.pose(np.eye(3), center_w)
-        out.append(metrics.ObjectBox(b.name, b.label, metrics.box_from_pose(pose, size_w, origin="center"), b.mass_kg))
-    return out
-
-
-def baseline_mjcf(base: BaselineScene, path: Path) -> Path:
-    """Write the baseline as MJCF (MjSpec): floor plane ``floor`` at z = 0, a free box body per
-    object (density 500 kg/m^3, no penetration handling), the camera ``input_camera``."""
-    import mujoco
-
-    spec = mujoco.MjSpec()
-    spec.modelname = "naive_baseline"
-    spec.option.timestep = 0.002
-    k = base.intrinsics
-    spec.visual.global_.offwidth = max(640, k.width_px)
-    spec.visual.global_.offheight = max(480, k.height_px)
-    wb = spec.worldbody
-    wb.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0.0, 0.0, 0.05])
-    cam = frames.mujoco_camera(base.world_from_camera, k)
-    c = wb.add_camera(name="input_camera", pos=list(cam["pos"]), quat=list(cam["quat"]))
-    c.resolution = list(cam["resolution"])
-    c.focal_pixel = list(cam["focalpixel"])
-    c.principal_pixel = list(cam["principalpixel"])
-    c.sensor_size = list(cam["sensorsize"])
-    for b in base.boxes:
-        center_w = frames.transform_points(base.world_from_camera, b.center_cam_m[None])[0]
-        half_w = np.abs(_BASE_R_WORLD_CAM) @ (b.size_cam_m / 2.0)
-        body = wb.add_body(name=b.name, pos=list(center_w))
-        body.add_freejoint(name=f"{b.name}/free")
-        body.add_geom(name=f"{b.name}/box", type=mujoco.mjtGeom.mjGEOM_BOX, size=list(half_w), density=BASELINE_DENSITY_KG_M3)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(spec.to_xml())
-    return path
-
-
-def oracle_perception(sample_dir: Path) -> Perception:
+def oracle_perception(sample_dir: Path, clean_depth: bool = False) -> Perception:
     """A :class:`Perception` made from a procedural sample's ground truth: true instance masks,
-    the sample's depth, the true camera pose and walls. For testing the baseline and the scoring
-    without the perception stage (and as an upper bound on what perception can hand on)."""
+    the sample's depth (``clean_depth``: the noise-free depth where the sample has one), the true
+    camera pose and walls. For testing the baseline and the scoring without the perception stage,
+    and as the reference that scenes are rendered against in the synthetic suite."""
     from PIL import Image
-
-    from scene_builder.model import BackendUse, Camera, Observation, PerceivedObject, Plane, Room
 
     sample_dir = Path(sample_dir)
     meta = json.loads((sample_dir / "meta.json").read_text())
@@ -318,7 +168,8 @@ def oracle_perception(sample_dir: Path) -> Perception:
         raise InputError(f"{sample_dir} has no instance ground truth (a procedural room sample is needed)")
     s = _sample(sample_dir)
     rgb = np.asarray(Image.open(s.rgb).convert("RGB"))
-    depth = np.asarray(Image.open(s.depth)).astype(np.float32) / 1000.0
+    depth_file = sample_dir / gt["metric_depth"] if clean_depth and gt.get("metric_depth") else s.depth
+    depth = np.asarray(Image.open(depth_file)).astype(np.float32) / 1000.0
     c = json.loads((sample_dir / "camera.json").read_text())
     k = CameraIntrinsics(c["fx"], c["fy"], c["cx"], c["cy"], c["width"], c["height"], "file")
     cam = Camera(k, np.array(gt["camera"]["world_from_camera"], dtype=np.float64))
@@ -336,18 +187,17 @@ def oracle_perception(sample_dir: Path) -> Perception:
     return Perception(obs, cam, Room(walls), tuple(objects), (BackendUse("segmentation", "oracle", "ground-truth instances"),))
 
 
-def evaluate_baseline(perception: Perception, truth, work_dir: Path, config: BuildConfig) -> MethodScores:
-    """Build, check and score the naive baseline on a perception (the pipeline's, or an oracle)."""
+def evaluate_baseline(perception: Perception, truth, work_dir: Path, config: BuildConfig, reference: Perception | None = None) -> MethodScores:
+    """Build the naive baseline on a perception (the pipeline's, or an oracle), export it with
+    ``exporters.write_mjcf`` and score it with ``layout.verify_scene``, as the pipeline is.
+    reference: what to render-and-compare against (default: ``perception``)."""
+    from exporters import write_mjcf
+
     t0 = time.perf_counter()
-    base = naive_baseline(perception, config.perception.max_depth_m)
-    path = baseline_mjcf(base, Path(work_dir) / "baseline.xml")
+    scene = naive_baseline(perception, config.perception.max_depth_m)
+    path = write_mjcf(scene, Path(work_dir))
     seconds = time.perf_counter() - t0
-    pred: list[metrics.ObjectBox] = []
-    if truth is not None:
-        pred = baseline_boxes(base, truth.world_from_camera @ np.linalg.inv(base.world_from_camera))
-    lay = config.layout
-    check = physics_check(path, lay.settle_s, lay.stable_drift_m, lay.stable_rotation_deg)
-    return _score_method(pred, _match(pred, perception, truth), truth, check, path, perception, seconds)
+    return _score_scene(scene, path, None, perception, truth, config, seconds, reference)
 
 
 # --------------------------------------------------------------------------------------------
@@ -509,37 +359,68 @@ def _sample(path: Path) -> _Sample:
     return _Sample(path.name, path, rgb, path / "depth.png", k, noisy)
 
 
-def _score_method(
-    pred: list[metrics.ObjectBox],
-    match: metrics.Match | None,
-    truth,
-    physics: PhysicsCheck,
+def _n_stable(scene: Scene, verdict: PhysicsVerdict, config: BuildConfig) -> tuple[int, int]:
+    """(free objects, stable ones) by ``layout.verify_scene``'s criteria: a rigid body within
+    ``stable_drift_m`` and ``stable_rotation_deg``; a soft body's centroid within its sag allowance."""
+    from layout.verify import DEFORMABLE_SAG_FRACTION
+
+    lay = config.layout
+    tracked = {t.name for t in verdict.trajectories}
+    n_free = n_stable = 0
+    for v in verdict.objects:
+        if v.name not in tracked:
+            continue  # fixed furniture
+        n_free += 1
+        asset = scene.object(v.name).asset
+        if asset.kind is AssetKind.DEFORMABLE:
+            n_stable += v.drift_m <= max(lay.stable_drift_m, DEFORMABLE_SAG_FRACTION * float(asset.size_m[2]))
+        else:
+            n_stable += v.drift_m <= lay.stable_drift_m and v.rotation_deg <= lay.stable_rotation_deg
+    return n_free, n_stable
+
+
+def _finite_or_none(x: float) -> float | None:
+    return float(x) if np.isfinite(x) else None
+
+
+def _score_scene(
+    scene: Scene,
     mjcf: Path,
+    checked: tuple[PhysicsVerdict, Fidelity | None] | None,
     perception: Perception,
+    truth,
+    config: BuildConfig,
     seconds: float,
-    verdict: dict | None = None,
+    reference: Perception | None = None,
+    verdict_json: dict | None = None,
 ) -> MethodScores:
-    """Object scores (given a matching), physics, and render-and-compare of one method's MJCF."""
-    obs = perception.observation
-    h, w = obs.depth_m.shape
+    """Score one method's scene: boxes against the truth, physics and render-and-compare by
+    ``layout.verify_scene`` on its exported MJCF (``checked``: a verdict already measured on that
+    MJCF with ``perception``, e.g. the pipeline's own). Render-and-compare is against
+    ``reference`` when given (the ground truth's masks and clean depth), else ``perception``
+    (the perceived masks and observed depth)."""
+    from layout import verify_scene
+
+    pred: list[metrics.ObjectBox] = []
+    if truth is not None:
+        pred = metrics.scene_boxes(scene, truth.world_from_camera @ np.linalg.inv(scene.camera.world_from_camera))
+    match = _match(pred, perception, truth)
     obj_scores = metrics.score_objects(pred, truth.objects, match, truth.synonyms) if truth is not None and match is not None else None
-    depth_r, ids_r, names_r = render_ids_and_depth(mjcf, w, h)
-    index = {n: i for i, n in enumerate(names_r)}
-    ious: list[float] = []
-    if truth is not None and truth.instances is not None and truth.instances.shape == (h, w):
-        ref_depth = truth.depth_m if truth.depth_m is not None else obs.depth_m
-        region = truth.instances > 0
-        by_name = {t.name: oid for t, oid in zip(truth.objects, truth.object_ids or ())}
-        for pname, tname in obj_scores.pairs if obj_scores else ():
-            ious.append(metrics.mask_iou(ids_r == index.get(pname, -2), truth.instances == by_name[tname]))
+    verdict, fidelity = checked if checked is not None else verify_scene(mjcf, scene, config.layout, perception)
+    ious: tuple[float, ...]
+    if reference is not None:
+        # The truth's instances renamed after the method's objects they matched; unmatched true
+        # objects keep their own names (they count in the depth region, not in the IoUs).
+        renamed = dict((t, p) for p, t in obj_scores.pairs) if obj_scores else {}
+        ref = dataclasses.replace(reference, objects=tuple(dataclasses.replace(o, name=renamed.get(o.name, f"~{o.name}")) for o in reference.objects))
+        _, fidelity = verify_scene(mjcf, scene, dataclasses.replace(config.layout, settle_s=0.0), ref)
+        ious = tuple(v for n, v in fidelity.mask_iou if not n.startswith("~"))
     else:
-        ref_depth = obs.depth_m
-        region = np.zeros((h, w), bool)
-        for o in perception.objects:
-            region |= o.mask
-            ious.append(metrics.mask_iou(ids_r == index.get(o.name, -2), o.mask))
-    absrel = metrics.depth_absrel(depth_r, ref_depth, region)
-    return MethodScores(obj_scores, physics.max_penetration_m, physics.max_drift_m, physics.n_free, physics.n_stable, absrel, tuple(ious), seconds, verdict)
+        ious = tuple(v for _, v in fidelity.mask_iou)
+    n_free, n_stable = _n_stable(scene, verdict, config)
+    return MethodScores(
+        obj_scores, verdict.max_penetration_m, verdict.settle_max_drift_m, n_free, n_stable, _finite_or_none(fidelity.depth_absrel), ious, seconds, verdict_json
+    )
 
 
 def _match(pred: list[metrics.ObjectBox], perception: Perception, truth) -> metrics.Match | None:
@@ -570,16 +451,12 @@ def evaluate_sample(sample_dir: Path, work_dir: Path, config: BuildConfig) -> Sc
     result = build(inputs, work_dir / s.name, config)
     t_pipe = time.perf_counter() - t0
     perception = result.perception
+    reference = oracle_perception(s.path, clean_depth=True) if truth is not None and truth.instances is not None else None
 
-    lay = config.layout
-    pipe_pred: list[metrics.ObjectBox] = []
-    if truth is not None:
-        pipe_pred = metrics.scene_boxes(result.scene, truth.world_from_camera @ np.linalg.inv(result.scene.camera.world_from_camera))
     v = result.verdict
     verdict = {"max_penetration_m": v.max_penetration_m, "settle_max_drift_m": v.settle_max_drift_m, "stable": v.stable}
-    check = physics_check(result.files.mjcf, lay.settle_s, lay.stable_drift_m, lay.stable_rotation_deg)
-    pipe = _score_method(pipe_pred, _match(pipe_pred, perception, truth), truth, check, result.files.mjcf, perception, t_pipe, verdict)
-    bl = evaluate_baseline(perception, truth, work_dir / f"{s.name}_baseline", config)
+    pipe = _score_scene(result.scene, result.files.mjcf, (result.verdict, result.fidelity), perception, truth, config, t_pipe, reference, verdict)
+    bl = evaluate_baseline(perception, truth, work_dir / f"{s.name}_baseline", config, reference)
     return SceneResult(
         name=s.name,
         path=str(s.path),
