@@ -21,7 +21,8 @@ test-fast: setup
 bench: setup
 	$(BIN)/scene-builder bench --suite synthetic --rooms 20 --json bench.json
 	$(BIN)/scene-builder bench --suite real --json real.json
-	$(BIN)/python -m scene_builder.bench_report bench.json real.json > BENCHMARKS.md
+	$(BIN)/python -m scene_builder.bench_report bench.json real.json --extras > BENCHMARKS.md.tmp
+	mv BENCHMARKS.md.tmp BENCHMARKS.md
 
 clean:
 	rm -rf demo_scene .pytest_cache

@@ -1,17 +1,102 @@
-"""Render bench JSON files as Markdown: ``python -m scene_builder.bench_report bench.json real.json > BENCHMARKS.md``.
+"""Render bench JSON files as Markdown: ``python -m scene_builder.bench_report bench.json real.json [--extras] > BENCHMARKS.md``.
 
 For each file: the exact command, machine and date, the pipeline-versus-baseline summary table,
-median seconds per stage, and one row per scene; then the metric definitions once.
+median seconds per stage, and one row per scene; then the metric definitions once. With
+``--extras``, the stage benchmark scripts (:data:`EXTRAS`: layout solver scaling, generation
+timings and physics errors, PhysX token counts, depth backends) are run, each in its own process
+with this interpreter, and their output is pasted under its exact command, date and wall time.
 """
 
 from __future__ import annotations
 
+import datetime
 import json
+import subprocess
 import sys
+import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from scene_builder.bench import DEFINITIONS, SUMMARY_ROWS, format_value
 from scene_builder.errors import InputError
+
+__all__ = ["EXTRAS", "Extra", "main", "render", "render_extra", "run_extra"]
+
+
+@dataclass(frozen=True)
+class Extra:
+    """A stage benchmark script: its section title, what it measures, the arguments after
+    ``python`` that run it, and whether it prints Markdown (else its output goes in a code block)."""
+
+    title: str
+    about: str
+    argv: tuple[str, ...]
+    markdown: bool = False
+
+
+EXTRAS: tuple[Extra, ...] = (
+    Extra(
+        "Layout solver scaling",
+        "Random clutter of boxes, tables and convex pieces dropped overlapping (`layout.synthetic.clutter`), solved to no "
+        "penetration: wall and CPU seconds, iterations, penetration before / after, CPU seconds by phase.",
+        ("-m", "layout.bench_solver"),
+    ),
+    Extra(
+        "Generation: per-object timings and physics against analytic solids",
+        "One asset per vocabulary category from synthetic half-observed points (`generation.bench`): kind, parts, collision "
+        "pieces, mass, seconds per object; then the voxel path (completion, meshing, CoACD).",
+        ("-m", "generation.bench"),
+        markdown=True,
+    ),
+    Extra(
+        "PhysX token counts and encode / decode times",
+        "Voxel parts of the PhysX-Anything representation under each encoding (`generation.physx.bench_tokens`): units and "
+        "Qwen tokens, milliseconds to encode and decode.",
+        ("-m", "generation.physx.bench_tokens"),
+        markdown=True,
+    ),
+    Extra(
+        "Depth backends",
+        "Every available depth backend on the real RGB-D samples (`perception.bench_depth`): AbsRel, delta1 (metric and median "
+        "scaled), seconds and memory per image. Learned backends appear only where their weights are installed.",
+        ("-m", "perception.bench_depth"),
+    ),
+)
+
+
+@dataclass(frozen=True)
+class ExtraRun:
+    """One run of an :class:`Extra`: its output (stdout, or the tail of stderr on failure)."""
+
+    extra: Extra
+    returncode: int
+    output: str
+    seconds: float
+    date: str
+
+
+def run_extra(extra: Extra, timeout_s: float = 900.0) -> ExtraRun:
+    """Run one stage benchmark in its own process (this interpreter) and capture its output."""
+    date = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, *extra.argv], capture_output=True, text=True, timeout=timeout_s, check=False)
+    seconds = time.perf_counter() - t0
+    out = proc.stdout if proc.returncode == 0 else (proc.stdout + "\n" + "\n".join(proc.stderr.splitlines()[-20:]))
+    return ExtraRun(extra, proc.returncode, out.strip("\n"), seconds, date)
+
+
+def render_extra(run: ExtraRun, machine: dict) -> str:
+    """The Markdown section of one stage benchmark run."""
+    e = run.extra
+    cmd = "python " + " ".join(e.argv)
+    lines = [f"## {e.title}", "", e.about, "", f"- command: `{cmd}`", f"- machine: {_machine(machine)}", f"- date: {run.date}; {run.seconds:.0f} s wall", ""]
+    if run.returncode != 0:
+        lines += [f"**Failed (exit status {run.returncode})**:", ""]
+    if e.markdown and run.returncode == 0:
+        lines += [run.output, ""]
+    else:
+        lines += ["```", run.output, "```", ""]
+    return "\n".join(lines)
 
 
 def _load(path: Path) -> dict:
@@ -59,8 +144,8 @@ def _scene_rows(d: dict) -> list[str]:
     return rows
 
 
-def render(paths: list[Path]) -> str:
-    """The Markdown document for the bench JSON files ``paths``."""
+def render(paths: list[Path], extras: tuple[ExtraRun, ...] = ()) -> str:
+    """The Markdown document for the bench JSON files ``paths`` and stage benchmark runs ``extras``."""
     docs = [_load(p) for p in paths]
     out = ["# Benchmarks", "", "Produced by `make bench`: the pipeline and a naive baseline on the same inputs, in the same process.", ""]
     out += [
@@ -84,16 +169,31 @@ def render(paths: list[Path]) -> str:
             out.append(f"Peak memory (resident set of the bench process): {s['peak_rss_mb']:.0f} MiB.")
         out += ["", "### Per scene", ""] + _scene_rows(d) + [""]
     out += ["## Definitions", ""] + [f"- **{k}**: {v}" for k, v in DEFINITIONS.items()] + [""]
+    if extras:
+        from scene_builder.bench import machine_description
+
+        machine = machine_description()
+        out += ["# Stage benchmarks", "", "Each produced by `make bench` (`python -m scene_builder.bench_report ... --extras`) with the command shown.", ""]
+        out += [render_extra(r, machine) for r in extras]
     return "\n".join(out)
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = sys.argv[1:] if argv is None else argv
+    args = list(sys.argv[1:] if argv is None else argv)
+    with_extras = "--extras" in args
+    args = [a for a in args if a != "--extras"]
     if not args:
-        print("usage: python -m scene_builder.bench_report BENCH.json [MORE.json ...] > BENCHMARKS.md", file=sys.stderr)
+        print("usage: python -m scene_builder.bench_report BENCH.json [MORE.json ...] [--extras] > BENCHMARKS.md", file=sys.stderr)
         return 2
     try:
-        sys.stdout.write(render([Path(a) for a in args]))
+        for a in args:
+            _load(Path(a))  # check the inputs before spending minutes on the extras
+        runs = tuple(run_extra(e) for e in EXTRAS) if with_extras else ()
+        sys.stdout.write(render([Path(a) for a in args], runs))
+        failed = [r.extra.argv[-1] for r in runs if r.returncode != 0]
+        if failed:
+            print(f"error: stage benchmark(s) failed: {', '.join(failed)} (their output is in the report)", file=sys.stderr)
+            return 1
     except InputError as err:
         print(f"error: {err}", file=sys.stderr)
         return err.exit_code

@@ -39,3 +39,19 @@ def test_report_refuses_files_that_are_not_bench_results(tmp_path):
         bench_report.render([p])
     with pytest.raises(InputError):
         bench_report.render([tmp_path / "missing.json"])
+
+
+def test_stage_benchmarks_run_in_their_own_process_and_are_pasted_with_their_command(tmp_path):
+    ok = bench_report.Extra("Fake table", "prints a table", ("-c", "print('| n | s |'); print('|---|---|'); print('| 10 | 0.2 |')"), markdown=True)
+    text = bench_report.Extra("Fake text", "prints text", ("-c", "print('N = 10 took 0.2 s')"))
+    bad = bench_report.Extra("Fake failure", "fails", ("-c", "import sys; print('partial'); sys.exit('boom: no data')"))
+    runs = [bench_report.run_extra(e) for e in (ok, text, bad)]
+    assert [r.returncode for r in runs] == [0, 0, 1]
+    assert runs[0].output == "| n | s |\n|---|---|\n| 10 | 0.2 |"
+    assert "partial" in runs[2].output and "boom: no data" in runs[2].output
+    machine = bench.machine_description()
+    md = [bench_report.render_extra(r, machine) for r in runs]
+    assert md[0].startswith("## Fake table") and "\n| 10 | 0.2 |\n" in md[0] and "```" not in md[0]
+    assert "- command: `python -c print('N = 10 took 0.2 s')`" in md[1] and "```\nN = 10 took 0.2 s\n```" in md[1]
+    assert "**Failed (exit status 1)**" in md[2] and "```" in md[2]
+    assert {e.argv[-1] for e in bench_report.EXTRAS} == {"layout.bench_solver", "generation.bench", "generation.physx.bench_tokens", "perception.bench_depth"}
