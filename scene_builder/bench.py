@@ -507,6 +507,8 @@ def machine_description() -> dict:
         "numpy": np.__version__,
         "mujoco": mujoco.__version__,
         "gpu": None,
+        # Timings depend on what else runs: the 1-minute load average when the description was taken.
+        "load_avg_1m": round(os.getloadavg()[0], 1),
     }
 
 

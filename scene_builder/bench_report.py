@@ -118,7 +118,8 @@ def _fmt(v, fmt: str = "{:.3f}", scale: float = 1.0) -> str:
 
 def _machine(m: dict) -> str:
     gpu = m.get("gpu") or "no GPU"
-    return f"{m.get('cpu')}, {m.get('cores')} cores, {m.get('memory_gb')} GB RAM, {gpu}; {m.get('os')}; Python {m.get('python')}, MuJoCo {m.get('mujoco')}"
+    load = f"; load average {m['load_avg_1m']} at the end" if m.get("load_avg_1m") is not None else ""
+    return f"{m.get('cpu')}, {m.get('cores')} cores, {m.get('memory_gb')} GB RAM, {gpu}; {m.get('os')}; Python {m.get('python')}, MuJoCo {m.get('mujoco')}{load}"
 
 
 def _scene_rows(d: dict) -> list[str]:
@@ -147,7 +148,9 @@ def _scene_rows(d: dict) -> list[str]:
 def render(paths: list[Path], extras: tuple[ExtraRun, ...] = ()) -> str:
     """The Markdown document for the bench JSON files ``paths`` and stage benchmark runs ``extras``."""
     docs = [_load(p) for p in paths]
-    out = ["# Benchmarks", "", "Produced by `make bench`: the pipeline and a naive baseline on the same inputs, in the same process.", ""]
+    out = ["# Benchmarks", "", "Produced by `make bench`: the pipeline and a naive baseline on the same inputs, in the same process; "
+           "then the stage benchmarks. Every section names the command that reproduces it. Timings are wall-clock on the machine named "
+           "(shared: the load average says how busy it was).", ""]
     out += [
         "The baseline is the placement of a published scene application: an axis-aligned box in the camera frame from each perceived "
         "object's depth points, gravity along the camera's y axis, the floor at the lowest observed point, no penetration handling, no "
