@@ -91,6 +91,8 @@ class ShapePriorGenerator:
             specs = articulated_parts(label, size, rgba)
             description += "; articulation template"
         elif label in PRIOR_LABELS:
+            # panels need room: a sliver of points (a shelf seen edge-on) would leave an empty box
+            size = np.maximum(size, 0.15 * np.asarray(cat.typical_size_m))
             specs = prior_parts(label, size, cm.material, cm.shell_thickness_m, rgba, config.max_collision_pieces)
             description += "; shape prior"
         elif soft is not None:
