@@ -9,13 +9,16 @@ Entity tree (world is Z up, ``RIGHT_HAND_Z_UP``)::
     world/objects/<name>                    Transform3D world_from_asset, on the ``sim_time``
                                             timeline (the settle simulation when a verdict is given)
     world/objects/<name>/visual/<part>      Mesh3D with vertex colours, asset frame
-    world/objects/<name>/collision/<part>/piece_<k>   convex pieces (toggle the ``collision`` subtrees)
+    world/objects/<name>/collision/<part>/piece_<k>   convex pieces (hidden by the blueprint: tick the
+                                            eye of an object's ``collision`` subtree to show them)
     world/objects/<name>/label              the object's name at its centre
     world/support                           LineStrips3D child centre -> supporter centre, labelled
     world/contacts                          contact / penetration points of the physics check
     report                                  TextDocument: physics verdict and fidelity
 
-A blueprint lays out the 3D view beside the photo with masks and the depth image.
+A blueprint lays out the 3D view, seen from the input camera, beside the photo with masks and the
+depth image. The recording is deterministic for a given build: fixed recording id, no recording
+properties, and nothing on a wall-clock timeline (poses are sent as ``sim_time`` columns).
 """
 
 from __future__ import annotations
@@ -73,7 +76,7 @@ def record_scene(
     out_path.parent.mkdir(parents=True, exist_ok=True)
     # A fixed recording id keeps the output deterministic for a given build.
     rec = rr.RecordingStream(APP_ID, recording_id=f"{APP_ID}-{out_path.stem}", send_properties=False)
-    blueprint = _blueprint(perception is not None)
+    blueprint = _blueprint(scene, perception is not None)
     if spawn:
         # The viewer listens on 127.0.0.1 only; the file gets everything the viewer gets.
         rr.spawn(connect=False, recording=rec)
@@ -95,13 +98,28 @@ def record_scene(
     return out_path
 
 
-def _blueprint(with_images: bool):
+def _blueprint(scene: Scene, with_images: bool):
+    """3D view seen from the input camera beside the photo + masks, the depth and the report.
+
+    Collision pieces are hidden by a blueprint override on each object's ``collision`` subtree
+    (an ``EntityBehavior`` logged into the recording itself is ignored by the 0.41 viewer):
+    tick the eye of ``collision`` in the blueprint panel to show them.
+    """
     import rerun.blueprint as rrb
 
-    # The depth image would be drawn as a point cloud in front of everything: keep it 2D only.
-    view3d = rrb.Spatial3DView(name="scene", origin="world", contents=["+ world/**", "- world/camera/depth", "- world/camera/masks"])
+    hidden = {f"{object_entity(o.name)}/collision": rrb.EntityBehavior(visible=False) for o in scene.objects}
+    # The photo, depth and masks would be drawn on the camera's image plane, right in front of
+    # the eye: keep them in the 2D views only.
+    view3d = rrb.Spatial3DView(
+        name="scene",
+        origin="world",
+        contents=["+ world/**", "- world/camera/rgb", "- world/camera/depth", "- world/camera/masks"],
+        overrides=hidden,
+        eye_controls=_input_camera_eye(scene),
+    )
+    panels = (rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"), rrb.TimePanel(state="collapsed"))
     if not with_images:
-        return rrb.Blueprint(rrb.Horizontal(view3d, rrb.TextDocumentView(origin="report", name="report"), column_shares=[3, 1]))
+        return rrb.Blueprint(rrb.Horizontal(view3d, rrb.TextDocumentView(origin="report", name="report"), column_shares=[3, 1]), *panels)
     return rrb.Blueprint(
         rrb.Horizontal(
             view3d,
@@ -109,10 +127,34 @@ def _blueprint(with_images: bool):
                 rrb.Spatial2DView(name="photo + masks", origin="world/camera", contents=["world/camera/rgb", "world/camera/masks"]),
                 rrb.Spatial2DView(name="depth", origin="world/camera", contents=["world/camera/depth"]),
                 rrb.TextDocumentView(origin="report", name="report"),
+                row_shares=[2, 2, 1],
             ),
             column_shares=[3, 2],
         ),
-        collapse_panels=False,
+        *panels,
+    )
+
+
+EYE_BACK_M = 0.5  # the eye sits this far behind the input camera, so its (small) frustum is in view
+
+
+def _input_camera_eye(scene: Scene):
+    """Eye controls at the input camera (slightly behind it), looking along its optical axis at
+    the depth of the scene's centre, world Z up."""
+    import rerun.blueprint as rrb
+
+    t = scene.camera.world_from_camera
+    centre, forward = t[:3, 3], t[:3, 2]  # OpenCV camera: +Z is the optical axis
+    if scene.objects:
+        centres = np.array([_centre_world(o) for o in scene.objects])
+        distance = float(np.clip(np.median((centres - centre) @ forward), 1.0, 8.0))
+    else:
+        distance = 2.5
+    return rrb.EyeControls3D(
+        kind=rrb.Eye3DKind.Orbital,
+        position=centre - EYE_BACK_M * forward,
+        look_target=centre + distance * forward,
+        eye_up=[0.0, 0.0, 1.0],
     )
 
 
@@ -125,7 +167,7 @@ def _log_camera(rec, scene: Scene, perception: Perception | None) -> None:
     rec.log(
         "world/camera",
         rr.Pinhole(image_from_camera=k.matrix, resolution=[k.width_px, k.height_px], camera_xyz=rr.ViewCoordinates.RDF,
-                   image_plane_distance=0.5),
+                   image_plane_distance=0.1),
         static=True,
     )
 
@@ -165,7 +207,6 @@ def _palette(n: int) -> list[tuple[int, int, int, int]]:
 
 def _log_objects(rec, scene: Scene, verdict: PhysicsVerdict | None) -> None:
     import rerun as rr
-    import rerun.blueprint as rrb
 
     for placed in scene.objects:
         ent = object_entity(placed.name)
@@ -182,28 +223,28 @@ def _log_objects(rec, scene: Scene, verdict: PhysicsVerdict | None) -> None:
                     rr.Mesh3D(vertex_positions=piece.vertices_m, triangle_indices=piece.faces, albedo_factor=[230, 80, 80, 110]),
                     static=True,
                 )
-        # Collision pieces start hidden (they cover the visual meshes); tick them on in the viewer.
-        rec.log(f"{ent}/collision", rrb.EntityBehavior(visible=False), static=True)
         lo = np.min([p.visual.bounds_m[0] for p in placed.asset.parts], axis=0)
         hi = np.max([p.visual.bounds_m[1] for p in placed.asset.parts], axis=0)
         rec.log(f"{ent}/label", rr.Points3D([(lo + hi) / 2.0], labels=[placed.name], radii=0.005), static=True)
 
     # Poses live on the sim_time timeline: the solved pose at t = 0, then the settle simulation.
+    # They are sent as columns, never with rec.log: that would stamp a wall-clock log_time.
     trajectories = {tr.name: tr for tr in (verdict.trajectories if verdict is not None else ())}
     for placed in scene.objects:
-        ent = object_entity(placed.name)
         t = placed.world_from_asset
-        rec.set_time("sim_time", duration=0.0)
-        rec.log(ent, rr.Transform3D(translation=t[:3, 3], quaternion=_xyzw(t[:3, :3])))
+        times = [0.0]
+        positions = [t[:3, 3]]
+        quats_xyzw = [_xyzw(t[:3, :3])]
         tr = trajectories.get(placed.name)
-        if tr is None:
-            continue
-        # Trajectories give the free body's origin; the root body frame is the asset frame.
-        quats_xyzw = np.asarray(tr.quats_wxyz)[:, [1, 2, 3, 0]]
+        if tr is not None:
+            # Trajectories give the free body's origin; the root body frame is the asset frame.
+            times += list(np.asarray(tr.times_s, dtype=np.float64))
+            positions += list(np.asarray(tr.positions_m))
+            quats_xyzw += list(np.asarray(tr.quats_wxyz)[:, [1, 2, 3, 0]])
         rec.send_columns(
-            ent,
-            indexes=[rr.TimeColumn("sim_time", duration=np.asarray(tr.times_s))],
-            columns=rr.Transform3D.columns(translation=np.asarray(tr.positions_m), quaternion=quats_xyzw),
+            object_entity(placed.name),
+            indexes=[rr.TimeColumn("sim_time", duration=np.asarray(times))],
+            columns=rr.Transform3D.columns(translation=np.asarray(positions), quaternion=np.asarray(quats_xyzw)),
         )
 
 
@@ -226,7 +267,7 @@ def _log_support(rec, scene: Scene, layout: LayoutResult | None) -> None:
         strips.append([c, p])
         labels.append(f"{child} on {parent}")
     if strips:
-        rec.log("world/support", rr.LineStrips3D(np.asarray(strips), labels=labels, colors=[60, 200, 90], radii=0.006), static=True)
+        rec.log("world/support", rr.LineStrips3D(np.asarray(strips), labels=labels, show_labels=False, colors=[60, 200, 90], radii=0.006), static=True)
 
 
 def _log_report(rec, scene: Scene, layout: LayoutResult | None, verdict: PhysicsVerdict | None, fidelity: Fidelity | None) -> None:

@@ -116,3 +116,42 @@ def test_headless_screenshot_renders(recording, tmp_path):
     assert len(np.unique(img.reshape(-1, 3), axis=0)) > 500
     h, w = img.shape[:2]
     assert img[h // 10: h * 7 // 10, w // 6: w // 2].std() > 10.0
+
+
+def test_collision_pieces_hidden_by_the_blueprint_and_eye_at_the_camera(recording):
+    from rerun.chunk import RrdReader
+
+    scene, path = recording
+    reader = RrdReader(str(path))
+    bp = list(reader.store(store=reader.blueprints()[0]).stream())
+    hidden = {c.entity_path.split("/overrides/")[1].rsplit("/visualizers", 1)[0] for c in bp if "/overrides/" in c.entity_path}
+    assert hidden == {f"world/objects/{o.name}/collision" for o in scene.objects}
+    eye = next(c for c in bp if c.entity_path.endswith("/EyeControls3D")).to_record_batch()
+    position = np.asarray(eye.column("EyeControls3D:position").to_pylist()[0][0])
+    target = np.asarray(eye.column("EyeControls3D:look_target").to_pylist()[0][0])
+    cam = scene.camera.world_from_camera
+    np.testing.assert_allclose(position, cam[:3, 3] - 0.5 * cam[:3, 2], atol=1e-5)
+    assert np.dot((target - position) / np.linalg.norm(target - position), cam[:3, 2]) > 0.9999
+
+
+def test_recording_content_is_deterministic(recording, tmp_path):
+    """Same inputs, same recording (rerun's time-based row ids aside); no wall-clock timeline."""
+    import json
+
+    scene, path = recording
+    times = np.linspace(0.0, 1.0, 26)
+    start = scene.object("box_b").world_from_asset[:3, 3]
+    traj = Trajectory("box_b", times, start + np.outer(times, [0.0, 0.0, -0.001]), np.tile([1.0, 0.0, 0.0, 0.0], (26, 1)))
+    verdict = PhysicsVerdict(0.0005, 0.001, 0.1, 1.0, True, trajectories=(traj,), contact_points_m=((0.4, -0.6, 0.3),))
+    layout = LayoutResult(scene, tuple(SupportEdge(o.name, o.support) for o in scene.objects))
+    again = record_scene(tmp_path / "scene.rrd", scene=scene, perception=_perception(scene), layout=layout, verdict=verdict)
+
+    def canonical(p):
+        out = []
+        for c in _chunks(p):
+            assert set(c.timeline_names) <= {"sim_time"}, (c.entity_path, c.timeline_names)
+            rb = c.to_record_batch()
+            out.append((c.entity_path, json.dumps({n: rb.column(n).to_pylist() for n in rb.schema.names if "RowId" not in n}, default=str)))
+        return sorted(out)
+
+    assert canonical(again) == canonical(path)
