@@ -138,6 +138,8 @@ def test_recording_content_is_deterministic(recording, tmp_path):
     """Same inputs, same recording (rerun's time-based row ids aside); no wall-clock timeline."""
     import json
 
+    import pyarrow as pa
+
     scene, path = recording
     times = np.linspace(0.0, 1.0, 26)
     start = scene.object("box_b").world_from_asset[:3, 3]
@@ -151,7 +153,9 @@ def test_recording_content_is_deterministic(recording, tmp_path):
         for c in _chunks(p):
             assert set(c.timeline_names) <= {"sim_time"}, (c.entity_path, c.timeline_names)
             rb = c.to_record_batch()
-            out.append((c.entity_path, json.dumps({n: rb.column(n).to_pylist() for n in rb.schema.names if "RowId" not in n}, default=str)))
+            cols = {n: (rb.column(n).cast(pa.int64()) if pa.types.is_temporal(rb.column(n).type) else rb.column(n)).to_pylist()
+                    for n in rb.schema.names if "RowId" not in n}
+            out.append((c.entity_path, json.dumps(cols, default=str)))
         return sorted(out)
 
     assert canonical(again) == canonical(path)
