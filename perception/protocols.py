@@ -17,10 +17,12 @@ from scene_builder.model import CameraIntrinsics
 @dataclass(frozen=True, eq=False)
 class DepthEstimate:
     """depth_m: (H, W) float32 planar metric depth, 0 where unknown, at the input resolution.
-    focal_px: the focal length the model estimated (None if it does not estimate one)."""
+    focal_px: the focal length the model estimated (None if it does not estimate one).
+    note: a one-line remark for the depth BackendUse reason (e.g. how the metric scale was set)."""
 
     depth_m: np.ndarray
     focal_px: float | None = None
+    note: str | None = None
 
 
 class DepthEstimator(Protocol):
