@@ -61,6 +61,8 @@ def _resolve_depth(
     uses.append(use)
     known = None if k.source == "default-fov" else k
     est = estimator.estimate(loaded.rgb, known)
+    if est.note:
+        uses[-1] = BackendUse(use.task, use.backend, f"{use.reason}; {est.note}")
     depth = np.asarray(est.depth_m, dtype=np.float32)
     if depth.shape != loaded.rgb.shape[:2]:
         raise InputError(f"depth backend '{use.backend}' returned {depth.shape[1]}x{depth.shape[0]} depth for a {k.width_px}x{k.height_px} image; choose another --depth-backend")
