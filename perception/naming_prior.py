@@ -15,7 +15,7 @@ import numpy as np
 
 from scene_builder.vocabulary import BY_NAME
 
-__all__ = ["CANDIDATES", "GeometricPriorNamer", "MAX_CONFIDENCE"]
+__all__ = ["CANDIDATES", "GeometricPriorNamer", "MAX_CONFIDENCE", "SIZE_SIGMA_LOG", "shape_rule", "size_distance", "size_log_likelihoods"]
 
 #: The namer never claims more than this: size is weak evidence of what an object is.
 MAX_CONFIDENCE = 0.35
@@ -40,32 +40,57 @@ CANDIDATES: tuple[str, ...] = (
 _MAX_DISTANCE = 1.0
 
 
+def size_distance(label: str, size_m: tuple[float, float, float]) -> float:
+    """RMS log-size distance of the observed extents (length >= width, height) from ``label``'s
+    typical size. The unseen back makes a footprint look smaller than it is, so undershoot counts
+    0.6 of overshoot; a thin seen face (a cabinet front) is compared on width and height only."""
+    length, width, height = (max(float(s), 0.01) for s in size_m)
+    obs = np.log([length, width, height])
+    x, y, z = BY_NAME[label].typical_size_m
+    diff = obs - np.log([max(x, y), min(x, y), z])
+    diff[:2] = np.where(diff[:2] < 0, 0.6 * diff[:2], diff[:2])
+    if width < 0.15 and width < 0.3 * length:
+        diff = diff[[0, 2]]
+    return float(np.sqrt(np.mean(diff * diff)))
+
+
+def shape_rule(size_m: tuple[float, float, float]) -> str | None:
+    """What size distance alone gets wrong: tall narrow furniture is a wardrobe (long) or a shelf;
+    a large flat top at table height is a table. None when no rule applies."""
+    length, width, height = (float(s) for s in size_m)
+    if height > 1.5 and width < 0.7 * height:
+        return "wardrobe" if length > 0.9 else "shelf"
+    if 0.6 <= height <= 0.85 and length >= 0.9 and width >= 0.5:
+        return "table"
+    return None
+
+
+#: Log-size distance that costs half a nat (a factor of about 1.3 off on every axis).
+SIZE_SIGMA_LOG = 0.25
+
+
+def size_log_likelihoods(labels: tuple[str, ...], size_m: tuple[float, float, float]) -> np.ndarray:
+    """(L,) log-likelihood of the observed extents under each label's typical size:
+    -d^2 / (2 SIZE_SIGMA_LOG^2) with d = :func:`size_distance`; the label a shape rule picks is
+    scored as if it were at distance <= 0.5 (:class:`GeometricPriorNamer` does the same)."""
+    rule = shape_rule(size_m)
+    d = np.array([min(size_distance(lab, size_m), 0.5) if lab == rule else size_distance(lab, size_m) for lab in labels])
+    return -0.5 * (d / SIZE_SIGMA_LOG) ** 2
+
+
 class GeometricPriorNamer:
     """Names an object from its gravity-aligned extents (see the module doc)."""
 
     def name(self, crop_rgb: np.ndarray, crop_mask: np.ndarray, size_m: tuple[float, float, float]) -> tuple[str, float]:
         """size_m: (length, width, height) with length >= width. Returns (label, confidence)."""
-        length, width, height = (max(float(s), 0.01) for s in size_m)
-        obs = np.log([length, width, height])
-        thin = width < 0.15 and width < 0.3 * length
-        best, best_d = "object", np.inf
-        for label in CANDIDATES:
-            x, y, z = BY_NAME[label].typical_size_m
-            typ = np.log([max(x, y), min(x, y), z])
-            diff = obs - typ
-            # The unseen back makes the footprint look smaller than it is: forgive that more.
-            diff[:2] = np.where(diff[:2] < 0, 0.6 * diff[:2], diff[:2])
-            if thin:
-                # Only one face was seen (a cabinet front): its depth says nothing.
-                diff = diff[[0, 2]]
-            d = float(np.sqrt(np.mean(diff * diff)))
-            if d < best_d:
-                best, best_d = label, d
-        # Shape rules that size distance alone gets wrong.
-        if height > 1.5 and width < 0.7 * height and best not in ("wardrobe", "shelf"):
-            best, best_d = ("wardrobe" if length > 0.9 else "shelf"), min(best_d, 0.5)
-        if 0.6 <= height <= 0.85 and length >= 0.9 and width >= 0.5 and best not in ("table", "bed", "sofa"):
-            best, best_d = "table", min(best_d, 0.5)
+        dist = {label: size_distance(label, size_m) for label in CANDIDATES}
+        best = min(CANDIDATES, key=lambda lab: dist[lab])
+        best_d = dist[best]
+        rule = shape_rule(size_m)
+        # The rule stands unless the size already picked a label of the same family.
+        family = ("table", "bed", "sofa") if rule == "table" else ("wardrobe", "shelf")
+        if rule is not None and best not in family:
+            best, best_d = rule, min(best_d, 0.5)
         if best_d > _MAX_DISTANCE:
             return "object", 0.1
         return best, float(MAX_CONFIDENCE * np.exp(-2.0 * best_d))

@@ -6,7 +6,6 @@ import numpy as np
 
 from perception.backends import PerceptionRegistries, build_registries
 from perception.inputs import LoadedInput, check_depth, load_input
-from perception.naming_prior import GeometricPriorNamer
 from perception.protocols import InstanceMasks
 from perception.room import RoomFrame, estimate_room, place_floor_under
 from scene_builder.config import InputSpec, PerceptionConfig
@@ -86,9 +85,18 @@ def _main_clusters(pix: np.ndarray, points_cam: np.ndarray, k: CameraIntrinsics,
     return out.reshape(pix.shape)
 
 
-def _crop(rgb: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+#: Naming crops reach this fraction of the mask's box size past each side (min 4 px): a classifier
+#: names a chair better with some floor and table around it.
+CROP_CONTEXT = 0.15
+
+
+def _crop(rgb: np.ndarray, mask: np.ndarray, context: float = CROP_CONTEXT) -> tuple[np.ndarray, np.ndarray]:
+    """The (h, w, 3) image crop around ``mask`` ((H, W) bool), its box grown by ``context`` of
+    its size on each side and clipped to the image, and the (h, w) mask crop."""
     rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
     r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+    dr, dc = max(4, int(context * (r1 - r0))), max(4, int(context * (c1 - c0)))
+    r0, r1, c0, c1 = max(0, r0 - dr), min(mask.shape[0], r1 + dr), max(0, c0 - dc), min(mask.shape[1], c1 + dc)
     return rgb[r0:r1, c0:c1], mask[r0:r1, c0:c1]
 
 
@@ -186,10 +194,6 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
 
     namer, name_use = registries.naming.resolve(config.naming_backend)
     backends.append(name_use)
-    # What a learned namer cannot name, the size prior may (an honest, low-confidence label is
-    # more use to generation than "object"); recorded as a second naming entry when it answers.
-    prior = None if name_use.backend == "geometric-prior" else GeometricPriorNamer()
-    named_by_prior = 0
 
     # Left to right (mask centroid column, then row) for a stable, readable numbering.
     def centroid(mp):
@@ -197,18 +201,16 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
         return (float(cc.mean()), float(rr.mean()))
 
     kept.sort(key=centroid)
+    points_world = [transform_points(frame.world_from_camera, points_cam[pix]) for _, pix in kept]
+    sizes = [gravity_aligned_size(p) for p in points_world]
+    crops = [_crop(loaded.rgb, mask) for mask, _ in kept]
+    if hasattr(namer, "name_many"):  # a learned namer runs all crops in one batch
+        names = namer.name_many([c for c, _ in crops], [m for _, m in crops], sizes)
+    else:
+        names = [namer.name(c, m, s) for (c, m), s in zip(crops, sizes)]
     per_label: dict[str, int] = {}
     objects = []
-    for object_id, (mask, pix) in enumerate(kept, start=1):
-        points_w = transform_points(frame.world_from_camera, points_cam[pix])
-        crop_rgb, crop_mask = _crop(loaded.rgb, mask)
-        size = gravity_aligned_size(points_w)
-        label, conf = namer.name(crop_rgb, crop_mask, size)
-        if label == "object" and prior is not None:
-            prior_label, prior_conf = prior.name(crop_rgb, crop_mask, size)
-            if prior_label != "object":
-                label, conf = prior_label, prior_conf
-                named_by_prior += 1
+    for object_id, ((mask, pix), points_w, (label, conf)) in enumerate(zip(kept, points_world, names), start=1):
         per_label[label] = per_label.get(label, 0) + 1
         objects.append(
             PerceivedObject(
@@ -221,8 +223,6 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
                 colors_rgb=loaded.rgb[pix],
             )
         )
-    if named_by_prior:
-        backends.append(BackendUse("naming", "geometric-prior", f"named {named_by_prior} of {len(objects)} objects that '{name_use.backend}' left as 'object'"))
     camera = Camera(k, frame.world_from_camera)
     return Perception(observation, camera, frame.room, tuple(objects), tuple(backends))
 

