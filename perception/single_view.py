@@ -369,6 +369,7 @@ class SingleViewDepth:
         self.max_object_width_frac = 0.75  # wider superpixels are room surfaces
         self.last_geometry: SingleViewGeometry | None = None
         self.last_closeup: CloseUp | None = None
+        self.closeup_surroundings = False  # close-ups: depth only on the object (0 = unknown around it)
 
     def estimate(self, rgb: np.ndarray, intrinsics: CameraIntrinsics | None = None) -> DepthEstimate:
         """rgb: (H, W, 3) uint8. Returns (H, W) float32 metric depth; focal_px is set when the
@@ -409,8 +410,10 @@ class SingleViewDepth:
                        h: int, w: int) -> tuple[np.ndarray, "CloseUp"]:
         """(H, W) depth of a close-up of one object: its front face a plane facing the camera at the
         distance that gives it the typical size of the floor-standing furniture category whose
-        width/height ratio matches its box best; the floor under its bottom edge; around it a
-        backdrop 1 m behind its typical depth. Assumes a level, frontal camera (product photo)."""
+        width/height ratio matches its box best. Around it the depth is unknown (0) unless
+        ``closeup_surroundings``: then the floor under its bottom edge and a backdrop 1 m behind its
+        typical depth (off by default: the sliver of floor such a photo shows is too thin for a
+        floor fit, and the fitted plane then tilts the world). Assumes a level, frontal camera."""
         from scene_builder.vocabulary import CATEGORIES
 
         u0, v0, u1, v1 = box_px
@@ -428,7 +431,7 @@ class SingleViewDepth:
         slope = (v - cy) / fy
         floor_z = np.where(slope > 1e-6, cam_h / np.maximum(slope, 1e-6), np.inf)
         backdrop = dist_m + depth_x + 1.0
-        depth = np.where(inside, dist_m, np.minimum(floor_z, backdrop))
+        depth = np.where(inside, dist_m, np.minimum(floor_z, backdrop)) if self.closeup_surroundings else np.where(inside, dist_m, 0.0)
         note = (f"close-up of one object (frame-aligned lines filling the image): scaled to a typical {cat.name} "
                 f"({width_y:.2f} m wide, {height_z:.2f} m high) at {dist_m:.2f} m")
         return depth, CloseUp(cat.name, box_px, dist_m, cam_h, note)
