@@ -6,8 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from layout.geometry import Piece, SupportSurface, footprint, object_pieces, top_surfaces
-from scene_builder.model import ObjectAsset
+from layout.geometry import Piece, SupportSurface, box_piece, footprint, object_pieces, top_surfaces
+from scene_builder.model import AssetKind, ObjectAsset
 
 
 @dataclass(eq=False)
@@ -65,7 +65,13 @@ def make_body(asset: ObjectAsset, world_from_asset: np.ndarray) -> Body:
     """Working state of ``asset`` placed at ``world_from_asset`` (4, 4)."""
     rotation = np.array(world_from_asset[:3, :3], dtype=np.float64)
     position = np.array(world_from_asset[:3, 3], dtype=np.float64)
-    pieces = object_pieces(asset, rotation)
+    if asset.kind is AssetKind.DEFORMABLE:
+        # The flex fills the bounding box of the visual meshes (exporters.mjcf.flex_grid).
+        lo_a = np.min([p.visual.bounds_m[0] for p in asset.parts], axis=0)
+        hi_a = np.max([p.visual.bounds_m[1] for p in asset.parts], axis=0)
+        pieces: tuple[Piece, ...] = (box_piece(lo_a, hi_a, rotation),)
+    else:
+        pieces = object_pieces(asset, rotation)
     lo = np.min([p.lo_rel_m for p in pieces], axis=0)
     hi = np.max([p.hi_rel_m for p in pieces], axis=0)
     band = max(0.01, 0.05 * float(hi[2] - lo[2]))

@@ -128,6 +128,25 @@ def object_pieces(asset: ObjectAsset, rotation: np.ndarray) -> tuple[Piece, ...]
     return tuple(out)
 
 
+# Corner k of a box has x = hi when k & 4, y = hi when k & 2, z = hi when k & 1; faces outward.
+_BOX_FACES = np.array(
+    [[0, 1, 2], [1, 3, 2], [4, 6, 5], [5, 6, 7], [0, 4, 1], [1, 4, 5], [2, 3, 6], [3, 7, 6], [0, 2, 4], [2, 6, 4], [1, 5, 3], [3, 5, 7]],
+    dtype=np.int64,
+)
+
+
+def box_piece(lo_m: np.ndarray, hi_m: np.ndarray, rotation: np.ndarray) -> Piece:
+    """The box ``lo_m..hi_m`` (3,), (3,) of the asset frame as one piece rotated by ``rotation`` (3, 3).
+
+    A deformable is simulated as a flex grid filling its bounding box (``exporters.mjcf.flex_grid``),
+    so the solver must reserve that box, not the rounded collision pieces of the rest shape.
+    """
+    corners = np.array([[x, y, z] for x in (lo_m[0], hi_m[0]) for y in (lo_m[1], hi_m[1]) for z in (lo_m[2], hi_m[2])], dtype=np.float64)
+    rel = corners @ np.asarray(rotation, dtype=np.float64).T
+    edges = _unique_edges(_BOX_FACES)
+    return Piece(rel, edges, rel.min(axis=0), rel.max(axis=0), separating_axes(rel, edges, _BOX_FACES))
+
+
 def convex_hull_2d(points: np.ndarray) -> np.ndarray:
     """(N, 2) -> (H, 2) convex hull, counter-clockwise, collinear points dropped (monotone chain).
 
@@ -256,6 +275,29 @@ def clip_convex_polygons(subject: np.ndarray, clip: np.ndarray) -> np.ndarray:
                 res.append(p + t * (q - p))
         out = np.array(res) if res else np.zeros((0, 2))
     return out
+
+
+def placements_inside(poly: np.ndarray, footprint_rel: np.ndarray, inset_m: float = 0.0) -> np.ndarray:
+    """(K, 2) convex CCW polygon of the offsets p for which ``footprint_rel + p`` (H, 2) lies inside
+    ``poly`` (convex, CCW) shrunk by ``inset_m``: the Minkowski difference, the intersection of
+    ``poly - f`` over the footprint's vertices f. Empty (0, 2) when the footprint does not fit.
+
+    Written here (a few lines of clipping) because shapely has no Minkowski difference and the
+    polygons are small and convex.
+    """
+    region = np.asarray(poly, dtype=np.float64)
+    if inset_m > 0.0:
+        c = region.mean(axis=0)
+        radius = float(np.min(np.linalg.norm(region - c, axis=1)))
+        if radius <= inset_m:
+            return np.zeros((0, 2))
+        region = c + (region - c) * (1.0 - inset_m / radius)
+    out = region - footprint_rel[0]
+    for f in footprint_rel[1:]:
+        out = clip_convex_polygons(out, region - f)
+        if len(out) < 3 or polygon_area(out) <= 1e-10:
+            return np.zeros((0, 2))
+    return convex_hull_2d(out)
 
 
 def closest_point_in_polygon(point: np.ndarray, poly: np.ndarray, inset_m: float) -> np.ndarray:

@@ -27,13 +27,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from layout.bodies import Body, make_body
-from layout.geometry import clip_to_slab_xy, closest_point_in_polygon, horizontal_mtv
+from layout.geometry import clip_to_slab_xy, closest_point_in_polygon, horizontal_mtv, placements_inside
 from layout.narrowphase import ConvexWorld
 from layout.snapping import YawSnap, reference_yaw, snap_yaw
 from layout.support import build_support, subtree
 from scene_builder.config import LayoutConfig
 from scene_builder.errors import InputError
-from scene_builder.model import GeneratedAsset, LayoutResult, Perception, PlacedObject, Plane, Scene
+from scene_builder.model import AssetKind, GeneratedAsset, LayoutResult, Perception, PlacedObject, Plane, Scene
 
 # Signed distances above -PENETRATION_TOL_M count as touching (resting contacts are exact up to
 # floating point).
@@ -49,8 +49,15 @@ ESCALATE_AFTER_PUSHES = 4
 MAX_JAM_GAP_CLEARANCES = 10
 SHUFFLE_AFTER_ITERATIONS = 50
 _FAN = np.stack([np.cos(np.radians(np.arange(0.0, 180.0, 7.5))), np.sin(np.radians(np.arange(0.0, 180.0, 7.5)))], axis=1)
-# Centre of mass kept this far inside a supporting face.
+# Centre of mass of a rigid object kept this far inside its supporting face: at least
+# SUPPORT_INSET_M, and SUPPORT_INSET_FRACTION of the object's narrowest footprint width (a lamp
+# whose centre of mass is 1 cm inside a sofa's back edge topples at the first nudge).
 SUPPORT_INSET_M = 0.01
+SUPPORT_INSET_FRACTION = 0.2
+# A soft body sags over an edge until it slides off: its whole footprint is kept on the face
+# (shrunk by SUPPORT_INSET_M); when it does not fit, its footprint is scaled about its centre by
+# these factors in turn (0: the footprint's centre over the face's).
+DEFORMABLE_FIT_SCALES = (1.0, 0.75, 0.5, 0.25, 0.0)
 
 
 @dataclass(frozen=True)
@@ -67,6 +74,12 @@ class SolveStats:
     converged: bool
     iterations: int
     phase_cpu_s: tuple[tuple[str, float], ...] = ()
+
+
+def support_inset_m(b: Body) -> float:
+    """How far inside its supporting face a rigid body's centre of mass is kept (m)."""
+    extent = np.ptp(b.footprint_rel_m, axis=0) if len(b.footprint_rel_m) else np.zeros(2)
+    return max(SUPPORT_INSET_M, SUPPORT_INSET_FRACTION * float(np.min(extent)))
 
 
 def candidate_pairs(lo_m: np.ndarray, hi_m: np.ndarray, margin_m: float) -> np.ndarray:
@@ -115,6 +128,7 @@ class _Solver:
         self.version = np.zeros(len(bodies), dtype=np.int64)
         self.checked: dict[tuple[int, int], tuple[int, int]] = {}
         self.push_count: dict[tuple[int, int], int] = {}
+        self._regions: dict[int, tuple[tuple[int, int], np.ndarray]] = {}
 
     # -- state -------------------------------------------------------------------------------
     def boxes(self) -> tuple[np.ndarray, np.ndarray]:
@@ -318,16 +332,42 @@ class _Solver:
                 moved = True
         return moved
 
+    def support_region(self, i: int) -> np.ndarray:
+        """(K, 2) convex polygon, relative to the supporting body's position, of the positions
+        (x, y) at which body i rests stably on its supporting face: a rigid body's centre of mass
+        inside the face by its stability inset, a soft body's footprint on the face. Cached: it
+        depends only on the two bodies' shapes."""
+        b = self.bodies[i]
+        key = (b.parent, b.support_surface)
+        cached = self._regions.get(i)
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        face = self.bodies[b.parent].surfaces[b.support_surface].polygon_rel_m
+        region = np.zeros((0, 2))
+        if b.asset.kind is AssetKind.DEFORMABLE:
+            centre = b.footprint_rel_m.mean(axis=0)
+            for scale in DEFORMABLE_FIT_SCALES:
+                region = placements_inside(face, centre + (b.footprint_rel_m - centre) * scale, SUPPORT_INSET_M)
+                if len(region):
+                    break
+        else:
+            region = placements_inside(face, b.com_rel_m[None, :2], support_inset_m(b))
+        if not len(region):
+            # Nothing fits (a face smaller than the inset): centre of mass over the face's centre.
+            region = (face.mean(axis=0) - b.com_rel_m[:2])[None]
+        self._regions[i] = (key, region)
+        return region
+
     def keep_on_support(self) -> bool:
         moved = False
         for i, b in enumerate(self.bodies):
             if b.parent < 0 or b.fixed:
                 continue
             s = self.bodies[b.parent]
-            poly = s.surfaces[b.support_surface].polygon_rel_m + s.position_m[:2]
-            com = b.position_m[:2] + b.com_rel_m[:2]
-            target = closest_point_in_polygon(com, poly, SUPPORT_INSET_M)
-            delta = target - com
+            region = self.support_region(i) + s.position_m[:2]
+            here = b.position_m[:2]
+            target = region[0] if len(region) < 3 else closest_point_in_polygon(here, region, 0.0)
+            delta = target - here
             if float(np.linalg.norm(delta)) > 1e-6:
                 self.move_tree(i, delta)
                 moved = True

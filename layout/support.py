@@ -9,7 +9,7 @@ import numpy as np
 
 from layout.bodies import Body
 from layout.geometry import clip_convex_polygons, polygon_area
-from scene_builder.model import Plane, SupportEdge
+from scene_builder.model import AssetKind, Plane, SupportEdge
 
 FLOOR, WALL = -1, -2
 # A top face counts as a support when it lies below the object's bottom + this tolerance
@@ -23,6 +23,9 @@ MIN_SURFACE_HEIGHT_M = 0.02
 # A candidate face is rejected when the object set on it would sink deeper than this into the
 # rest of the support (smaller overlaps are left to the horizontal solver).
 SUPPORT_CLASH_TOL_M = 0.01
+# A soft body rests on a face only when the face has at least this share of its footprint's area
+# (a pillow draped over a narrower pillow or a sofa's arm slides off in simulation).
+DEFORMABLE_MIN_FACE_AREA = 0.5
 # Fixed furniture this close to a wall and off the floor hangs on the wall.
 WALL_CONTACT_M = 0.05
 
@@ -78,6 +81,8 @@ def build_support(
         bottom = b.bottom_m
         tol = SUPPORT_TOL_M
         foot = _footprint_world(b)
+        soft = b.asset.kind is AssetKind.DEFORMABLE
+        min_face_area = DEFORMABLE_MIN_FACE_AREA * polygon_area(foot) if soft else 0.0
         lo_xy = foot.min(axis=0)
         hi_xy = foot.max(axis=0)
         candidates: list[tuple[float, float, int, int]] = []  # (height, overlap, -body, surface)
@@ -89,7 +94,7 @@ def build_support(
             s = bodies[j]
             for k, surf in enumerate(s.surfaces):
                 h = float(s.position_m[2] + surf.height_rel_m)
-                if h < MIN_SURFACE_HEIGHT_M or h > bottom + tol:
+                if h < MIN_SURFACE_HEIGHT_M or h > bottom + tol or polygon_area(surf.polygon_rel_m) < min_face_area:
                     continue
                 frac = _overlap_fraction(foot, surf.polygon_rel_m + s.position_m[:2])
                 if frac < MIN_FOOTPRINT_OVERLAP:
