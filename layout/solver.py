@@ -30,10 +30,10 @@ from layout.bodies import Body, make_body
 from layout.geometry import clip_to_slab_xy, closest_point_in_polygon, horizontal_mtv, placements_inside
 from layout.narrowphase import ConvexWorld
 from layout.snapping import YawSnap, reference_yaw, snap_yaw
-from layout.support import build_support, subtree
+from layout.support import FLOOR, build_support, is_ancestor, subtree
 from scene_builder.config import LayoutConfig
 from scene_builder.errors import InputError
-from scene_builder.model import AssetKind, GeneratedAsset, LayoutResult, Perception, PlacedObject, Plane, Scene
+from scene_builder.model import AssetKind, GeneratedAsset, LayoutResult, Perception, PlacedObject, Plane, Scene, SupportEdge
 
 # Signed distances above -PENETRATION_TOL_M count as touching (resting contacts are exact up to
 # floating point).
@@ -48,6 +48,10 @@ CLEARANCE_TRIGGER = 0.5
 ESCALATE_AFTER_PUSHES = 4
 MAX_JAM_GAP_CLEARANCES = 10
 SHUFFLE_AFTER_ITERATIONS = 50
+# Nearest-free-spot search (after the pushes stall): radii (m) and directions per ring.
+RELOCATE_RADII_M = np.concatenate([np.arange(0.01, 0.5, 0.01), np.arange(0.5, 3.0, 0.05)])
+RELOCATE_ANGLES = 32
+RELOCATE_ROUNDS = 3
 _FAN = np.stack([np.cos(np.radians(np.arange(0.0, 180.0, 7.5))), np.sin(np.radians(np.arange(0.0, 180.0, 7.5)))], axis=1)
 # Centre of mass of a rigid object kept this far inside its supporting face: at least
 # SUPPORT_INSET_M, and SUPPORT_INSET_FRACTION of the object's narrowest footprint width (a lamp
@@ -129,6 +133,7 @@ class _Solver:
         self.checked: dict[tuple[int, int], tuple[int, int]] = {}
         self.push_count: dict[tuple[int, int], int] = {}
         self._regions: dict[int, tuple[tuple[int, int], np.ndarray]] = {}
+        self.dropped: list[int] = []  # bodies moved from an object's top to the floor
 
     # -- state -------------------------------------------------------------------------------
     def boxes(self) -> tuple[np.ndarray, np.ndarray]:
@@ -390,6 +395,106 @@ class _Solver:
                 return it + 1, True
         return max_iterations, False
 
+    # -- last resort: the nearest free spot ---------------------------------------------------
+    def penetrating_pairs(self) -> list[tuple[int, int]]:
+        """Pairs of bodies whose pieces overlap by more than PENETRATION_TOL_M."""
+        out = []
+        lo, hi = self.boxes()
+        for i, j in candidate_pairs(lo, hi, 0.0):
+            i, j = int(i), int(j)
+            for a, b in self.piece_pairs(i, j, 0.0):
+                d, _ = self.world.distance(self.world.geom_ids[i][a], self.world.geom_ids[j][b], 0.0)
+                if d < -PENETRATION_TOL_M:
+                    out.append((i, j))
+                    break
+        return out
+
+    def tree_is_free(self, tree: list[int]) -> bool:
+        """Whether the bodies of ``tree`` (a body and what rests on it) keep half the clearance
+        from every other body (touching their supports) and the full clearance from the walls."""
+        inside = set(tree)
+        lo, hi = self.boxes()
+        margin = CLEARANCE_TRIGGER * self.clearance
+        for k in tree:
+            if len(self.wall_n) and float(np.min(self.wall_gaps(k))) < self.clearance - CLEARANCE_TOL_M:
+                return False
+            near = np.nonzero(np.all(lo <= hi[k] + margin, axis=1) & np.all(lo[k] <= hi + margin, axis=1))[0]
+            for j in near:
+                j = int(j)
+                if j in inside:
+                    continue
+                need = -PENETRATION_TOL_M if is_ancestor(self.bodies, j, k) else margin
+                for a, b in self.piece_pairs(k, j, margin):
+                    d, _ = self.world.distance(self.world.geom_ids[k][a], self.world.geom_ids[j][b], margin + 1e-3)
+                    if d < need:
+                        return False
+        return True
+
+    def relocate(self, i: int) -> bool:
+        """Move body i (with what rests on it) to the nearest free spot on its support: rings of
+        RELOCATE_ANGLES candidate moves at growing radii, the first free one wins (the smallest
+        move that the greedy pushes could not find). Returns whether a spot was found."""
+        b = self.bodies[i]
+        tree = subtree(self.bodies, i)
+        region = None
+        if b.parent >= 0:
+            region = self.support_region(i) + self.bodies[b.parent].position_m[:2]
+        start = b.position_m[:2].copy()
+        angles = np.radians(np.arange(RELOCATE_ANGLES) * 360.0 / RELOCATE_ANGLES)
+        ring = np.stack([np.cos(angles), np.sin(angles)], axis=1)
+        for r in RELOCATE_RADII_M:
+            for u in ring:
+                target = start + r * u
+                if region is not None and len(region) >= 3 and not np.allclose(closest_point_in_polygon(target, region, 0.0), target):
+                    continue
+                self.move_tree(i, target - b.position_m[:2])
+                if self.tree_is_free(tree):
+                    return True
+        self.move_tree(i, start - b.position_m[:2])
+        return False
+
+    def relocate_remaining(self) -> bool:
+        """For every pair still interpenetrating, move the lighter movable side to its nearest
+        free spot. Returns whether anything moved."""
+        moved = False
+        for i, j in self.penetrating_pairs():
+            if not self.penetrating_pair(i, j):
+                continue  # an earlier relocation fixed it
+            mi, mj = self.movers(i, j)
+            sides = [m for m in (mi, mj) if m >= 0 and not self.bodies[m].fixed]
+            ordered = sorted(sides, key=lambda k: (self.tree_mass(k), self.bodies[k].name))
+            if any(self.relocate(m) for m in ordered):
+                moved = True
+                continue
+            # No room left on the support (two cabinets on one cabinet's top): the lighter side
+            # that rests on an object comes down to the floor, to its nearest free spot there.
+            on_object = [m for m in ordered if self.bodies[m].parent >= 0]
+            if on_object:
+                self.drop_to_floor(on_object[0])
+                self.relocate(on_object[0])
+                moved = True
+        return moved
+
+    def drop_to_floor(self, i: int) -> None:
+        """Re-parent body i (with what rests on it) from its supporting object to the floor."""
+        b = self.bodies[i]
+        self.bodies[b.parent].children.remove(i)
+        b.parent, b.support_surface = FLOOR, -1
+        self._regions.pop(i, None)
+        dz = -b.bottom_m
+        for k in subtree(self.bodies, i):
+            self.bodies[k].position_m[2] += dz
+            self.world.set_position(k, self.bodies[k].position_m)
+            self.version[k] += 1
+        self.dropped.append(i)
+
+    def penetrating_pair(self, i: int, j: int) -> bool:
+        for a, b in self.piece_pairs(i, j, 0.0):
+            d, _ = self.world.distance(self.world.geom_ids[i][a], self.world.geom_ids[j][b], 0.0)
+            if d < -PENETRATION_TOL_M:
+                return True
+        return False
+
     # -- measurement ---------------------------------------------------------------------------
     def max_penetration(self) -> float:
         """Deepest overlap (m) between pieces of distinct objects, and of objects with the floor
@@ -449,9 +554,20 @@ def solve_layout_with_stats(
         solver.world.set_position(i, b.position_m)
     lap("support")
     iterations, converged = solver.run(int(config.max_iterations))
+    for _ in range(RELOCATE_ROUNDS):
+        # Pushes that stall (a table jammed between a shelf and a wall) leave overlaps: the
+        # movable side goes to its nearest free spot, then the pushes tidy the clearances.
+        if converged or not solver.relocate_remaining():
+            break
+        more, converged = solver.run(int(config.max_iterations) // 2)
+        iterations += more
     lap("solve")
     after = solver.max_penetration()
     lap("measure_after")
+    for i in solver.dropped:
+        b = bodies[i]
+        k = next(n for n, e in enumerate(edges) if e.child == b.name)
+        edges[k] = SupportEdge(child=b.name, parent="floor", contact_gap_m=float(b.initial_position_m[2] + b.lo_rel_m[2]))
 
     by_name = {b.name: b for b in bodies}
     parent_of = {e.child: e.parent for e in edges}
