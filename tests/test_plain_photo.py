@@ -93,3 +93,23 @@ def test_cabinet_photo_builds_an_articulated_asset(tmp_path):
             assert np.radians(60.0) < hi <= np.pi, (j.get("name"), hi)
     stable = obj["physics"]
     assert stable["start_penetration_m"] < 1e-3 and not stable["toppled"]
+
+
+@pytest.mark.slow
+def test_room_photo_with_camera_json_builds_offline(tmp_path):
+    """Issue 7: a plain room photo (intrinsics from the camera.json beside it) builds a full scene
+    with no weights, and report.json names the backends that ran."""
+    from exporters.check import check_output
+    from scene_builder.config import BuildConfig, ExportConfig, InputSpec
+    from scene_builder.pipeline import build
+
+    d = require(PHOTOS / "sunrgbd_total3d_demo_1")
+    out = tmp_path / "room_scene"
+    build(InputSpec(next(d.glob("rgb.*"))), out, BuildConfig(export=ExportConfig(usd=False, urdf=False, gltf=False, viz="off")))
+    report = json.loads((out / "report.json").read_text())
+    uses = {b["task"]: b for b in report["backends"]}
+    assert uses["intrinsics"]["backend"] == "file"
+    assert uses["depth"]["backend"] == "single-view-geometry" and "close-up" not in uses["depth"]["reason"]
+    assert {"gravity", "segmentation", "naming", "generation"} <= set(uses)
+    assert len(report["objects"]) >= 1
+    assert check_output(out) == ()
