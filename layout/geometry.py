@@ -277,6 +277,32 @@ def clip_convex_polygons(subject: np.ndarray, clip: np.ndarray) -> np.ndarray:
     return out
 
 
+def inset_polygon(poly: np.ndarray, inset_m: float) -> np.ndarray:
+    """(K, 2) the convex CCW polygon ``poly`` (H, 2) with every edge moved inwards by ``inset_m``
+    (the points at least ``inset_m`` inside it); (0, 2) when nothing is left."""
+    out = np.asarray(poly, dtype=np.float64)
+    if inset_m <= 0.0 or len(out) < 3:
+        return out
+    for a, b in zip(poly, np.roll(poly, -1, axis=0)):
+        e = b - a
+        length = float(np.hypot(e[0], e[1]))
+        if length <= 1e-12:
+            continue
+        # Signed distance to the left of the edge (inside a CCW polygon), minus the inset.
+        side = (e[0] * (out[:, 1] - a[1]) - e[1] * (out[:, 0] - a[0])) / length - inset_m
+        nxt, side_n = np.roll(out, -1, axis=0), np.roll(side, -1)
+        res = []
+        for p, q, sp, sq in zip(out, nxt, side, side_n):
+            if sp >= 0:
+                res.append(p)
+            if (sp >= 0) != (sq >= 0):
+                res.append(p + sp / (sp - sq) * (q - p))
+        if len(res) < 3:
+            return np.zeros((0, 2))
+        out = np.array(res)
+    return out
+
+
 def placements_inside(poly: np.ndarray, footprint_rel: np.ndarray, inset_m: float = 0.0) -> np.ndarray:
     """(K, 2) convex CCW polygon of the offsets p for which ``footprint_rel + p`` (H, 2) lies inside
     ``poly`` (convex, CCW) shrunk by ``inset_m``: the Minkowski difference, the intersection of
@@ -285,13 +311,9 @@ def placements_inside(poly: np.ndarray, footprint_rel: np.ndarray, inset_m: floa
     Written here (a few lines of clipping) because shapely has no Minkowski difference and the
     polygons are small and convex.
     """
-    region = np.asarray(poly, dtype=np.float64)
-    if inset_m > 0.0:
-        c = region.mean(axis=0)
-        radius = float(np.min(np.linalg.norm(region - c, axis=1)))
-        if radius <= inset_m:
-            return np.zeros((0, 2))
-        region = c + (region - c) * (1.0 - inset_m / radius)
+    region = inset_polygon(np.asarray(poly, dtype=np.float64), inset_m)
+    if len(region) < 3:
+        return np.zeros((0, 2))
     out = region - footprint_rel[0]
     for f in footprint_rel[1:]:
         out = clip_convex_polygons(out, region - f)

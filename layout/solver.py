@@ -473,7 +473,29 @@ class _Solver:
                 self.drop_to_floor(on_object[0])
                 self.relocate(on_object[0])
                 moved = True
+        for k in self.wall_violators():
+            if not len(self.wall_violators([k])):
+                continue
+            # Its support's stable region reaches through the wall: move the body, else what it
+            # rests on, else bring it down to the floor.
+            chain = [k]
+            while self.bodies[chain[-1]].parent >= 0:
+                chain.append(self.bodies[chain[-1]].parent)
+            if any(self.relocate(m) for m in chain if not self.bodies[m].fixed):
+                moved = True
+            elif self.bodies[k].parent >= 0 and not self.bodies[k].fixed:
+                self.drop_to_floor(k)
+                self.relocate(k)
+                moved = True
         return moved
+
+    def wall_violators(self, which: list[int] | None = None) -> list[int]:
+        """Bodies (of ``which``, default all) that reach through a wall by more than
+        PENETRATION_TOL_M."""
+        if not len(self.wall_n):
+            return []
+        which = list(range(len(self.bodies))) if which is None else which
+        return [k for k in which if float(np.min(self.wall_gaps(k))) < -PENETRATION_TOL_M]
 
     def drop_to_floor(self, i: int) -> None:
         """Re-parent body i (with what rests on it) from its supporting object to the floor."""
