@@ -81,12 +81,13 @@ def test_cabinet_photo_builds_an_articulated_asset(tmp_path):
     assert 0.5 < height_z < 1.5 and 0.5 < width_y < 1.5  # a cabinet's size, not a room's or a toy's
 
     root = ET.parse(out / "scene.xml").getroot()
-    joints = [j for j in root.iter("joint") if j.get("name", "").startswith(obj["name"] + "/") and j.get("type") in ("hinge", "slide")]
+    # MJCF's default joint type is hinge
+    joints = [j for j in root.iter("joint") if j.get("name", "").startswith(obj["name"] + "/") and j.get("type", "hinge") in ("hinge", "slide")]
     assert joints, "no hinge or slide joint in the MJCF"
     for j in joints:
         lo, hi = (float(x) for x in j.get("range").split())
         assert lo == 0.0 and hi > 0.0
-        if j.get("type") == "slide":
+        if j.get("type", "hinge") == "slide":
             # a drawer travels out less than the carcass is deep, and at least a third of it
             assert depth_x / 3.0 < hi < depth_x, (j.get("name"), hi, depth_x)
         else:
