@@ -48,14 +48,15 @@ def gravity_aligned_size(points_world_m: np.ndarray) -> tuple[float, float, floa
 
 def _resolve_depth(
     loaded: LoadedInput, registries: PerceptionRegistries, config: PerceptionConfig
-) -> tuple[np.ndarray, CameraIntrinsics, str, list[BackendUse]]:
+) -> tuple[np.ndarray, CameraIntrinsics, str, list[BackendUse], np.ndarray | None]:
     """Sensor depth, or the depth registry's estimate; returns (H, W) float32 depth, the
     intrinsics (the estimator's focal length when only the default field of view was known),
-    the depth source and the BackendUse."""
+    the depth source, the BackendUse and the estimator's (3,) up direction in the camera frame
+    (None unless it measured one)."""
     k = loaded.intrinsics
     uses = []
     if loaded.depth_m is not None:
-        return loaded.depth_m, k, "sensor", [BackendUse("depth", "sensor", "sensor depth given")]
+        return loaded.depth_m, k, "sensor", [BackendUse("depth", "sensor", "sensor depth given")], None
     estimator, use = registries.depth.resolve(config.depth_backend)
     uses.append(use)
     known = None if k.source == "default-fov" else k
@@ -69,7 +70,7 @@ def _resolve_depth(
     check_depth(depth, f"depth estimated by '{use.backend}'")
     if known is None and est.focal_px is not None and np.isfinite(est.focal_px) and est.focal_px > 0:
         k = CameraIntrinsics(float(est.focal_px), float(est.focal_px), k.cx_px, k.cy_px, k.width_px, k.height_px, "depth-model")
-    return depth, k, use.backend, uses
+    return depth, k, use.backend, uses, est.up_cam
 
 
 def _main_clusters(pix: np.ndarray, points_cam: np.ndarray, k: CameraIntrinsics, share: float = 0.1) -> np.ndarray:
@@ -160,13 +161,13 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
     """
     loaded = load_input(inputs, config)
     registries = build_registries(config)
-    depth_m, k, depth_source, backends = _resolve_depth(loaded, registries, config)
+    depth_m, k, depth_source, backends, up_hint = _resolve_depth(loaded, registries, config)
     backends.insert(0, BackendUse("intrinsics", k.source, f"{k.fx_px:.1f} px focal length ({k.width_px}x{k.height_px})"))
     observation = Observation(str(loaded.image_path), loaded.rgb, depth_m, k, depth_source)
 
     points_cam = k.unproject(depth_m)
     valid = (depth_m > 0) & (depth_m < config.max_depth_m)
-    frame = estimate_room(points_cam, valid, seed)
+    frame = estimate_room(points_cam, valid, seed, up_hint=up_hint)
     backends.append(frame.gravity)
 
     segmenter, seg_use = registries.segmentation.resolve(config.segmentation_backend)

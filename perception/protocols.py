@@ -18,11 +18,14 @@ from scene_builder.model import CameraIntrinsics
 class DepthEstimate:
     """depth_m: (H, W) float32 planar metric depth, 0 where unknown, at the input resolution.
     focal_px: the focal length the model estimated (None if it does not estimate one).
-    note: a one-line remark for the depth BackendUse reason (e.g. how the metric scale was set)."""
+    note: a one-line remark for the depth BackendUse reason (e.g. how the metric scale was set).
+    up_cam: (3,) unit up direction in the OpenCV camera frame when the estimator measured one and
+    the depth relies on it (perception uses it when no floor is visible)."""
 
     depth_m: np.ndarray
     focal_px: float | None = None
     note: str | None = None
+    up_cam: np.ndarray | None = None
 
 
 class DepthEstimator(Protocol):

@@ -327,11 +327,13 @@ def _world_walls(world_from_camera: np.ndarray, planes: list[CameraPlane]) -> tu
     return tuple(walls)
 
 
-def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0) -> RoomFrame:
+def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0, up_hint: np.ndarray | None = None) -> RoomFrame:
     """Find gravity, floor, walls and ceiling.
 
     points_cam: (H, W, 3) float64 camera-frame points (from ``CameraIntrinsics.unproject``).
     valid: (H, W) bool, pixels with usable depth.
+    up_hint: (3,) up in the camera frame measured by the depth estimator (vanishing points), used
+    when no floor is visible (before the vertical-planes and camera-prior fallbacks).
     """
     h, w = valid.shape
     idx = np.flatnonzero(valid.reshape(-1))
@@ -370,7 +372,10 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0) -> R
             ((a, b) for i, a in enumerate(verticals) for b in verticals[i + 1 :] if np.linalg.norm(np.cross(a[0], b[0])) > np.sin(np.radians(30.0))),
             None,
         )
-        if pair is not None:
+        if up_hint is not None:
+            up = _unit(np.asarray(up_hint, dtype=np.float64))
+            gravity = BackendUse("gravity", "vanishing-points", "no floor visible; up from the photo's vertical vanishing point, floor put under the lowest object point")
+        elif pair is not None:
             up = _unit(np.cross(pair[0][0], pair[1][0]))
             up = up if up @ image_up > 0 else -up
             gravity = BackendUse("gravity", "vertical-planes", "no floor visible; up from the intersection of two vertical planes, floor put under the lowest object point")

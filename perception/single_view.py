@@ -403,8 +403,11 @@ class SingleViewDepth:
         closeup = closeup_box_px(geo.segments, h, w)
         if closeup is not None:
             depth, self.last_closeup = self._closeup_depth(closeup, fx, fy, cx, cy, h, w)
-        note = self.last_closeup.note if self.last_closeup is not None else None
-        return DepthEstimate(depth_m=depth.astype(np.float32), focal_px=focal, note=note)
+        note = up = None
+        if self.last_closeup is not None:
+            # the close-up has no floor to fit; its gravity is the vertical vanishing point's
+            note, up = self.last_closeup.note, -geo.gravity_cam
+        return DepthEstimate(depth_m=depth.astype(np.float32), focal_px=focal, note=note, up_cam=up)
 
     def _closeup_depth(self, box_px: tuple[float, float, float, float], fx: float, fy: float, cx: float, cy: float,
                        h: int, w: int) -> tuple[np.ndarray, "CloseUp"]:
