@@ -25,6 +25,13 @@ The chain, each step a classical single-view-metrology result:
 7. **Objects**: superpixels right above the boundary that are bounded above (they end below the
    image top and are narrower than 3/4 of it) stand as vertical billboards on their column's
    floor contact, when that is in front of the room box.
+8. **Close-ups** (``closeup_box_px``): a head-on photo of one large object (>= 60 % of the line
+   length frame-aligned, >= 25 % horizontal, the lines' box covering >= 40 % of the image; true
+   on all 10 URDFormer cabinet photos, false on the room photos) has no floor to scale by: its
+   front face becomes a plane at the distance that gives it the typical width and height of the
+   floor-standing articulated category whose proportions match best (``vocabulary``), the
+   depth around it stays unknown, and the estimate carries the vertical vanishing point's up
+   direction and a note saying how the scale was set (into the depth BackendUse reason).
 
 Measured with ``python -m perception.bench_depth`` (12 real RGB-D samples, mean): AbsRel 0.263,
 delta1 0.518, median-scaled 0.253 / 0.586; a constant 2.5 m scores 0.277 / 0.481 / 0.282 / 0.559.

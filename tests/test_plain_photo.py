@@ -74,6 +74,8 @@ def test_cabinet_photo_builds_an_articulated_asset(tmp_path):
     report = json.loads((out / "report.json").read_text())
     depth_use = next(b for b in report["backends"] if b["task"] == "depth")
     assert depth_use["backend"] == "single-view-geometry" and "close-up" in depth_use["reason"]
+    # no floor in view: gravity from the photo's vertical vanishing point, not a pitched-camera guess
+    assert next(b for b in report["backends"] if b["task"] == "gravity")["backend"] == "vanishing-points"
     articulated = [o for o in report["objects"] if o["kind"] == "articulated"]
     assert len(articulated) == 1, [(o["name"], o["label"]) for o in report["objects"]]
     obj = articulated[0]
