@@ -6,6 +6,7 @@ import numpy as np
 
 from perception.backends import PerceptionRegistries, build_registries
 from perception.inputs import LoadedInput, check_depth, load_input
+from perception.naming_prior import GeometricPriorNamer
 from perception.protocols import InstanceMasks
 from perception.room import RoomFrame, estimate_room, place_floor_under
 from scene_builder.config import InputSpec, PerceptionConfig
@@ -13,11 +14,15 @@ from scene_builder.errors import EmptySceneError, InputError
 from scene_builder.frames import transform_points
 from scene_builder.model import BackendUse, Camera, CameraIntrinsics, Observation, PerceivedObject, Perception
 
-__all__ = ["BEHIND_WALL_TOLERANCE_M", "MAX_OBJECT_HEIGHT_M", "MIN_OBJECT_HEIGHT_M", "gravity_aligned_size", "perceive"]
+__all__ = ["BEHIND_WALL_TOLERANCE_M", "CROP_CONTEXT", "MAX_OBJECT_HEIGHT_M", "MIN_OBJECT_HEIGHT_M", "MIN_RAISED_OBJECT_HEIGHT_M", "RAISED_M", "gravity_aligned_size", "perceive"]
 
 #: Clusters lower than this (a rug, a stain of noise on the floor) or taller are not objects.
 MIN_OBJECT_HEIGHT_M = 0.03
 MAX_OBJECT_HEIGHT_M = 4.0
+#: Clusters whose bottom is this far above the floor lie on something; they need only be
+#: MIN_RAISED_OBJECT_HEIGHT_M tall (a 2 cm laptop on a cabinet).
+RAISED_M = 0.1
+MIN_RAISED_OBJECT_HEIGHT_M = 0.01
 #: Object points may lie this far behind a wall plane (depth noise, skirting boards).
 BEHIND_WALL_TOLERANCE_M = 0.1
 
@@ -146,12 +151,35 @@ def _select_instances(
             if pix.sum() < config.min_object_points:
                 continue
         z = points_cam[pix] @ frame.up_cam
-        extent = float(np.subtract(*np.percentile(z, [98, 2])))
-        if not MIN_OBJECT_HEIGHT_M <= extent <= MAX_OBJECT_HEIGHT_M:
+        lo, hi = np.percentile(z, [2, 98])
+        # Thin stuff on the floor is a rug or noise; a thin thing lying on furniture (a laptop,
+        # a book) is an object.
+        on_furniture = frame.floor_found and float(lo + frame.world_from_camera[2, 3]) > RAISED_M
+        if not (MIN_RAISED_OBJECT_HEIGHT_M if on_furniture else MIN_OBJECT_HEIGHT_M) <= hi - lo <= MAX_OBJECT_HEIGHT_M:
             continue
         kept.append((mask, pix))
     kept.sort(key=lambda mp: -int(mp[1].sum()))
     return kept[: config.max_objects], behind_walls
+
+
+def _fill_silhouettes(kept: list[tuple[np.ndarray, np.ndarray]], labels: np.ndarray, free: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Each mask with its enclosed holes filled where the hole is ``free`` ((H, W) bool: room or
+    no depth) and in no instance of ``labels``; a pixel goes to the first (largest) mask only.
+
+    A bookcase's back panel lies in the wall plane and so is taken for wall; the wall seen through
+    an open back or between a chair's slats is inside the object's silhouette too. The object's
+    mask is its silhouette (what render-and-compare scores); its points stay as observed.
+    """
+    from scipy.ndimage import binary_fill_holes
+
+    claimed = labels > 0
+    out = []
+    for mask, pix in kept:
+        add = binary_fill_holes(mask) & ~mask & free & ~claimed
+        mask = mask | add
+        claimed |= add
+        out.append((mask, pix))
+    return out
 
 
 def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perception:
@@ -182,6 +210,7 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
         raise InputError(f"segmentation backend '{seg_use.backend}' returned masks of shape {labels.shape} for a {depth_m.shape} image; choose another --segmentation-backend")
 
     kept, behind_walls = _select_instances(labels, points_cam, valid, frame, k, config, geometric)
+    kept = _fill_silhouettes(kept, labels, frame.background | ~valid)
     if behind_walls:
         backends.append(BackendUse("walls", "room-planes", f"{len(frame.room.walls)} walls; left out {behind_walls} objects behind them (in the next room)"))
     if not kept:
@@ -209,6 +238,17 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
         names = namer.name_many([c for c, _ in crops], [m for _, m in crops], sizes)
     else:
         names = [namer.name(c, m, s) for (c, m), s in zip(crops, sizes)]
+    # A namer that weighs no size evidence (a plug-in classifier) may leave objects as "object":
+    # the size prior names those (an honest, low-confidence label is more use to generation than
+    # "object"), recorded as a second naming entry. The learned namers here already combine
+    # both into one posterior and answer "object" only where the prior would too.
+    named_by_prior = 0
+    if name_use.backend != "geometric-prior":
+        prior = GeometricPriorNamer()
+        for i, ((c, m), s) in enumerate(zip(crops, sizes)):
+            if names[i][0] == "object" and (guess := prior.name(c, m, s))[0] != "object":
+                names[i] = guess
+                named_by_prior += 1
     per_label: dict[str, int] = {}
     objects = []
     for object_id, ((mask, pix), points_w, (label, conf)) in enumerate(zip(kept, points_world, names), start=1):
@@ -224,6 +264,8 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
                 colors_rgb=loaded.rgb[pix],
             )
         )
+    if named_by_prior:
+        backends.append(BackendUse("naming", "geometric-prior", f"named {named_by_prior} of {len(objects)} objects that '{name_use.backend}' left as 'object'"))
     camera = Camera(k, frame.world_from_camera)
     return Perception(observation, camera, frame.room, tuple(objects), tuple(backends))
 

@@ -15,6 +15,8 @@ Then:
   below it (a chair's backrest, a headboard) (needs the up vector);
 * **legs**: pieces standing under a cluster's top surface and reaching up to just below it
   join it (a table's legs, whose upper ends hide under the overhanging top);
+* **colour**: a thing lying on a cluster's surface in another colour (a laptop, a bowl on a
+  shelf board: too thin for the support split) becomes its own object (:func:`_split_by_colour`);
 * **merge**: pieces too small to be objects join the nearest large cluster within
   :data:`MERGE_RADIUS_M` (a chair leg cut off by an occluder), or are dropped;
 * **masks**: pixels without depth next to an object take the label of the nearest object pixel
@@ -30,11 +32,15 @@ import numpy as np
 from perception.protocols import InstanceMasks
 from scene_builder.model import CameraIntrinsics
 
-__all__ = ["DepthClusterSegmenter", "LINK_RADIUS_M", "MERGE_RADIUS_M", "VOXEL_M", "cluster_points", "link_radius_m"]
+__all__ = ["DepthClusterSegmenter", "LINK_RADIUS_M", "MERGE_RADIUS_M", "VOXEL_M", "COLOUR_DELTA_E", "cluster_points", "link_radius_m"]
 
 VOXEL_M = 0.02
 LINK_RADIUS_M = 0.045
 MERGE_RADIUS_M = 0.10
+#: CIE Lab distance (Delta E 76) from a cluster's median colour that makes a pixel another object's
+#: candidate (about 2.3 is a just-noticeable difference; 15 is a plainly different colour).
+COLOUR_DELTA_E = 15.0
+_LAB_WEIGHTS = np.array([1.0, 1.0, 1.0])
 _LAYER_BIN_M = 0.01
 
 
@@ -216,19 +222,94 @@ def _merge_legs(points: np.ndarray, labels: np.ndarray, up: np.ndarray, horiz: n
         labels[members[other]] = c
 
 
+def _split_by_colour(
+    points: np.ndarray,
+    pixels: np.ndarray,
+    lab: np.ndarray,
+    labels: np.ndarray,
+    shape: tuple[int, int],
+    up: np.ndarray,
+    min_points: int,
+) -> None:
+    """Split off what lies on a surface of a cluster and differs from it in colour, in place.
+
+    Depth alone cannot separate a thing lower than the support split's 4 cm (a laptop, a pillow
+    sunk into a seat, a bowl on a shelf board) from the surface it lies on. Per cluster: pixels
+    farther than :data:`COLOUR_DELTA_E` (CIE Lab, lightness at half weight: shading) from the
+    cluster's median colour are "foreign";
+    each 4-connected image region of foreign pixels with ``min_points`` points that is colour
+    homogeneous (Lab spread under half the delta) and lies on the rest becomes its own cluster.
+    "On the rest": among the rest's points within 3 cm horizontally (and from 10 cm below the
+    piece to 5 cm over it), those under the piece's bottom form a thin layer (1.5 cm spread)
+    within 2 cm of its bottom and at least 1 cm below its median height, and at most a tenth are
+    over its top. The top face of a box over its (differently lit) front face fails the first test. A checker-textured seat or a two-coloured cabinet
+    front fails: its colour regions lie in the surface, not on it.
+
+    points: (N, 3) camera-frame points; pixels: (N,) flat pixel index of each; lab: (N, 3) Lab
+    colour of each; labels: (N,) cluster labels (modified); shape: image (H, W); up: (3,) unit up.
+    """
+    from scipy.ndimage import binary_opening
+    from scipy.ndimage import label as connected
+    from scipy.spatial import cKDTree
+
+    h_all = points @ up
+    a = np.cross(up, [0.0, 0.0, 1.0]) if abs(up[2]) < 0.9 else np.cross(up, [1.0, 0.0, 0.0])
+    a /= np.linalg.norm(a)
+    xy = points @ np.stack([a, np.cross(up, a)]).T
+    next_label = int(labels.max()) + 1
+    for c in np.flatnonzero(np.bincount(labels) >= 2 * min_points):
+        sel = np.flatnonzero(labels == c)
+        # Lightness counts half: faces of one object turned to or from the light differ in L.
+        dist = np.linalg.norm((lab[sel] - np.median(lab[sel], axis=0)) * _LAB_WEIGHTS, axis=1)
+        foreign = dist > COLOUR_DELTA_E
+        if foreign.sum() < min_points:
+            continue
+        image = np.zeros(shape[0] * shape[1], dtype=bool)
+        image[pixels[sel[foreign]]] = True
+        # An opening drops the thin rims that shading and anti-aliasing leave along edges.
+        regions, n = connected(binary_opening(image.reshape(shape), iterations=2))
+        if n == 0:
+            continue
+        region_of = regions.reshape(-1)[pixels[sel]]
+        counts = np.bincount(region_of, minlength=n + 1)
+        for r in np.flatnonzero(counts[1:] >= min_points) + 1:
+            piece = sel[region_of == r]
+            if np.linalg.norm(lab[piece].std(axis=0) * _LAB_WEIGHTS) > 0.5 * COLOUR_DELTA_E:
+                continue
+            rest = sel[(region_of != r) & (labels[sel] == c)]
+            if len(rest) < min_points:
+                continue
+            lo, mid, hi = np.percentile(h_all[piece], [5, 50, 98])
+            near = cKDTree(xy[rest]).query_ball_point(xy[piece][:: max(1, len(piece) // 400)], 0.03)
+            near_idx = np.unique(np.concatenate([np.asarray(n_, dtype=np.int64) for n_ in near]))
+            near_h = h_all[rest[near_idx]]
+            near_h = near_h[(near_h > lo - 0.10) & (near_h < hi + 0.05)]
+            below = near_h[near_h < lo + 0.005]
+            # On the rest: a horizontal surface around its foot (not a face running down from
+            # it), lower than its middle, and nothing of the rest over it.
+            if len(below) < 10 or float(np.median(below)) < lo - 0.02 or float(np.std(below)) > 0.015:
+                continue
+            if mid - float(np.median(below)) < 0.01 or float(np.mean(near_h > hi + 0.01)) > 0.1:
+                continue
+            labels[piece] = next_label
+            next_label += 1
+
+
 class DepthClusterSegmenter:
     """Objects as Euclidean clusters of the non-room depth points (see the module doc).
 
     min_points: clusters with fewer valid-depth pixels are merged into a neighbour or dropped.
-    max_depth_m: farther depth is ignored.
+    max_depth_m: farther depth is ignored. colour_split: split off what lies on a surface in
+    another colour (:func:`_split_by_colour`; needs the up vector).
     """
 
     #: ``segment`` accepts the up vector (``perceive`` passes it to backends that say so).
     accepts_gravity = True
 
-    def __init__(self, min_points: int = 150, max_depth_m: float = 10.0) -> None:
+    def __init__(self, min_points: int = 150, max_depth_m: float = 10.0, colour_split: bool = True) -> None:
         self.min_points = int(min_points)
         self.max_depth_m = float(max_depth_m)
+        self.colour_split = bool(colour_split)
 
     def segment(
         self,
@@ -238,7 +319,7 @@ class DepthClusterSegmenter:
         background: np.ndarray,
         up_cam: np.ndarray | None = None,
     ) -> InstanceMasks:
-        """rgb: (H, W, 3) uint8 (unused: depth alone decides); depth_m: (H, W) float32;
+        """rgb: (H, W, 3) uint8 (colour splits things lying on a surface); depth_m: (H, W) float32;
         background: (H, W) bool room pixels; up_cam: (3,) unit up in the camera frame or None.
         Returns instance labels (H, W) int32 numbered by decreasing size."""
         from scipy.ndimage import distance_transform_edt
@@ -271,6 +352,11 @@ class DepthClusterSegmenter:
                     labels[sel[split == s]] = next_label
                     next_label += 1
             _merge_legs(points, labels, up, horiz, self.min_points)
+            if rgb is not None and self.colour_split:
+                from skimage.color import rgb2lab
+
+                lab = rgb2lab(np.asarray(rgb, dtype=np.uint8).reshape(-1, 1, 3)[idx]).reshape(-1, 3)
+                _split_by_colour(points, idx, lab, labels, (h, w), up, self.min_points)
 
         # Merge small pieces into the nearest large cluster, or drop them.
         sizes = np.bincount(labels)

@@ -112,10 +112,10 @@ def test_combined_score_weighs_classifier_against_size():
     # Size alone: a table-sized flat-topped object is a table; the scores are a distribution.
     post = combined_label_posterior(None, (1.2, 0.8, 0.75))
     assert best(post) == "table" and sum(post.values()) == pytest.approx(1.0)
-    # The classifier settles what size cannot tell apart (a drawer unit is cabinet-sized) ...
+    # A sure classifier settles what size cannot tell apart (a drawer unit is cabinet-sized) ...
     size = (0.6, 0.5, 0.8)
     assert best(combined_label_posterior(None, size)) != "drawer_unit"
-    assert best(combined_label_posterior({"drawer_unit": 0.4, "cabinet": 0.05}, size)) == "drawer_unit"
+    assert best(combined_label_posterior({"drawer_unit": 0.9, "cabinet": 0.05}, size)) == "drawer_unit"
     # ... but cannot make a 1.5 m tall thing a laptop.
     assert best(combined_label_posterior({"laptop": 0.9}, (0.6, 0.5, 1.5))) != "laptop"
     # More classifier evidence, more confidence.
