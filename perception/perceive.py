@@ -175,9 +175,13 @@ def _fill_silhouettes(kept: list[tuple[np.ndarray, np.ndarray]], labels: np.ndar
     claimed = labels > 0
     out = []
     for mask, pix in kept:
-        add = binary_fill_holes(mask) & ~mask & free & ~claimed
-        mask = mask | add
-        claimed |= add
+        rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+        box = (slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1))  # holes lie inside it
+        m = mask[box]
+        add = binary_fill_holes(m) & ~m & free[box] & ~claimed[box]
+        mask = mask.copy()
+        mask[box] |= add
+        claimed[box] |= add
         out.append((mask, pix))
     return out
 

@@ -264,13 +264,19 @@ def _split_by_colour(
         foreign = dist > COLOUR_DELTA_E
         if foreign.sum() < min_points:
             continue
-        image = np.zeros(shape[0] * shape[1], dtype=bool)
-        image[pixels[sel[foreign]]] = True
+        # Work in the foreign pixels' bounding box (a margin of 3 for the opening).
+        rr, cc = np.divmod(pixels[sel], shape[1])
+        r0, c0 = max(int(rr[foreign].min()) - 3, 0), max(int(cc[foreign].min()) - 3, 0)
+        r1, c1 = min(int(rr[foreign].max()) + 4, shape[0]), min(int(cc[foreign].max()) + 4, shape[1])
+        inside = (rr >= r0) & (rr < r1) & (cc >= c0) & (cc < c1)
+        image = np.zeros((r1 - r0, c1 - c0), dtype=bool)
+        image[rr[foreign] - r0, cc[foreign] - c0] = True
         # An opening drops the thin rims that shading and anti-aliasing leave along edges.
-        regions, n = connected(binary_opening(image.reshape(shape), iterations=2))
+        regions, n = connected(binary_opening(image, iterations=2))
         if n == 0:
             continue
-        region_of = regions.reshape(-1)[pixels[sel]]
+        region_of = np.zeros(len(sel), dtype=np.int32)
+        region_of[inside] = regions[rr[inside] - r0, cc[inside] - c0]
         counts = np.bincount(region_of, minlength=n + 1)
         for r in np.flatnonzero(counts[1:] >= min_points) + 1:
             piece = sel[region_of == r]
