@@ -154,8 +154,9 @@ def render(paths: list[Path], extras: tuple[ExtraRun, ...] = ()) -> str:
     out += [
         "The baseline is the placement of a published scene application: an axis-aligned box in the camera frame from each perceived "
         "object's depth points, gravity along the camera's y axis, the floor at the lowest observed point, no penetration handling, no "
-        "settling. Both are scored by the same code (`scene_builder.bench`): MuJoCo contacts at t = 0, 3 s of simulation, rendering "
-        "from the input camera, and box metrics against ground truth.",
+        "settling; its boxes are solid 500 kg/m^3 assets built by `generation.assembly`. Both methods are `Scene`s that go through one "
+        "code path: the MJCF exporter (`exporters.write_mjcf`) and the physics check (`layout.verify_scene`: MuJoCo contacts at t = 0, "
+        "3 s of simulation, rendering from the input camera); box metrics against ground truth come from `scene_builder.metrics`.",
         "",
     ]
     for d in docs:
