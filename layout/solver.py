@@ -13,8 +13,13 @@ Method
    pushed apart along the horizontal minimum-translation vector of the pieces clipped to their
    common height band (``layout.geometry.horizontal_mtv``) plus ``clearance_m``, the move split
    by mass (fixed furniture does not move); an object carries everything resting on it. Walls
-   push objects back to the room side; an object resting on another keeps its centre of mass
-   over the supporting face.
+   push objects back to the room side; an object resting on another stays where it rests
+   stably: a rigid body's centre of mass 20 % of its footprint width inside the supporting face,
+   a soft body's whole footprint on it (``support_region``).
+4. When the pushes stall (a table jammed between a shelf and a wall, two cabinets observed on one
+   small top), the lighter side of each pair still overlapping, and any body that its support
+   region holds inside a wall, goes to its nearest free spot (rings of candidate moves); with
+   no room left on its support it comes down to the floor.
 Since every move is the minimum that removes a violation, the result is the nearest feasible
 layout that the greedy scheme reaches, i.e. the least deviation from the observation it can find.
 """
