@@ -280,6 +280,36 @@ def flex_radius(placed: PlacedObject) -> float:
     return float(min(0.005, 0.1 * size.min()))
 
 
+# Conditioning bound of the ``discrete`` integrator's effective metric M + h*D + h^2*K for a flex:
+# MuJoCo 4.0 solves it iteratively with a per-vertex 3x3 block preconditioner, which stops
+# converging ("Flex stiffness is too ill-conditioned ...", counted as mjWARN_INERTIA every step)
+# once (h*damping + h^2) * young * spacing / vertex_mass passes ~70 (measured on the real
+# nyuv2_metric3d_00050 pillows and blanket: 63 converges, 88 does not). 30 leaves a margin.
+FLEX_METRIC_RATIO_MAX = 30.0
+
+
+def flex_elasticity(placed: PlacedObject) -> tuple[float, float]:
+    """Young's modulus (Pa) and Rayleigh damping (s) written for a deformable's flex.
+
+    The grid is a coarse volumetric proxy (a few dozen nodes), so a vertex carries
+    ``mass / nodes`` and spans the mean grid spacing ``L``. The settings are kept when
+    ``(h*damping + h^2) * young * L / m_vertex <= FLEX_METRIC_RATIO_MAX``; otherwise damping is
+    lowered first (not below one timestep, the low end of MuJoCo's recommended 2--50 ms), then
+    the modulus is capped: a stiffer grid than that cannot be resolved at this timestep anyway
+    (e.g. a folded blanket given fabric's in-plane 5 MPa is capped to ~0.3 MPa)."""
+    s = placed.asset.deformable
+    assert s is not None
+    count, spacing, _ = flex_grid(placed)
+    m_vertex = placed.asset.mass_kg / float(np.prod(count))
+    length_m = float(np.mean(spacing))
+    h = TIMESTEP_S
+    budget = FLEX_METRIC_RATIO_MAX * m_vertex / length_m  # bound on (h*damping + h^2) * young
+    young = float(s.youngs_modulus_pa)
+    damping = float(min(s.damping, max(h, budget / (young * h) - h)))
+    young = float(min(young, budget / (h * damping + h * h)))
+    return young, damping
+
+
 def _add_flex(spec, placed: PlacedObject) -> None:
     import mujoco
 
@@ -292,9 +322,10 @@ def _add_flex(spec, placed: PlacedObject) -> None:
         asset.name, type="grid", dim=3, count=count, spacing=spacing, radius=flex_radius(placed),
         mass=asset.mass_kg, pos=centre, quat=quat_wxyz_from_matrix(placed.world_from_asset[:3, :3]),
     )
-    f.young = s.youngs_modulus_pa
+    young_pa, damping_s = flex_elasticity(placed)
+    f.young = young_pa
     f.poisson = s.poisson_ratio
-    f.damping = s.damping
+    f.damping = damping_s
     f.friction = [mat.dynamic_friction, TORSIONAL_FRICTION, ROLLING_FRICTION]
     f.condim = 3
     f.solref = list(SOLREF)
