@@ -77,8 +77,7 @@ def build_spec(scene: Scene, out_dir: Path, objects: tuple[PlacedObject, ...] | 
     spec.visual.global_.offwidth = max(640, scene.camera.intrinsics.width_px)
     spec.visual.global_.offheight = max(480, scene.camera.intrinsics.height_px)
 
-    world = spec.worldbody
-    world.add_light(name="sun", pos=[0.0, 0.0, 4.0], dir=[0.0, 0.0, -1.0], diffuse=[0.7, 0.7, 0.7], castshadow=False)
+    _add_lights(spec)
     _add_floor(spec)
     for i, wall in enumerate(scene.room.walls):
         _add_wall(spec, i, wall)
@@ -94,12 +93,28 @@ def build_spec(scene: Scene, out_dir: Path, objects: tuple[PlacedObject, ...] | 
 # ---------------------------------------------------------------------------------------------
 
 
+def _add_lights(spec) -> None:
+    """Indoor light rig: a soft headlight (ambient fill, as from room walls) and two directional
+    ceiling lights, the key one casting shadows, so rendered views have the photo's brightness
+    (visual only: lights do not touch the physics)."""
+    import mujoco
+
+    spec.visual.headlight.ambient = [0.35, 0.35, 0.35]
+    spec.visual.headlight.diffuse = [0.35, 0.35, 0.35]
+    spec.visual.headlight.specular = [0.05, 0.05, 0.05]
+    directional = mujoco.mjtLightType.mjLIGHT_DIRECTIONAL
+    spec.worldbody.add_light(name="key", type=directional, pos=[0.0, 0.0, 3.0], dir=[0.3, 0.2, -1.0],
+                             diffuse=[0.45, 0.43, 0.4], specular=[0.1, 0.1, 0.1], castshadow=True)
+    spec.worldbody.add_light(name="fill", type=directional, pos=[0.0, 0.0, 3.0], dir=[-0.4, -0.3, -1.0],
+                             diffuse=[0.2, 0.2, 0.2], specular=[0.0, 0.0, 0.0], castshadow=False)
+
+
 def _add_floor(spec) -> None:
     import mujoco
 
     spec.add_texture(
         name="floor_grid", type=mujoco.mjtTexture.mjTEXTURE_2D, builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER,
-        rgb1=[0.55, 0.55, 0.55], rgb2=[0.45, 0.45, 0.45], width=256, height=256,
+        rgb1=[0.62, 0.58, 0.52], rgb2=[0.57, 0.53, 0.47], width=256, height=256,
     )
     mat = spec.add_material(name="floor", texrepeat=[8.0, 8.0], reflectance=0.0)
     mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "floor_grid"
@@ -122,14 +137,15 @@ def _plane_pose(plane: Plane) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _add_wall(spec, i: int, wall: Plane) -> None:
-    """A wall is a collision half-space (MuJoCo plane geom); drawn faintly, and planes are only
-    drawn from their front side, which faces into the room, so they never hide the scene."""
+    """A wall is a collision half-space (MuJoCo plane geom), drawn in an off-white paint colour;
+    planes are only drawn from their front side, which faces into the room, so they never hide
+    the scene from a camera inside it."""
     import mujoco
 
     pos, quat = _plane_pose(wall)
     spec.worldbody.add_geom(
         name=f"wall_{i}", type=mujoco.mjtGeom.mjGEOM_PLANE, pos=pos, quat=quat,
-        size=[WALL_EXTENT_M, WALL_EXTENT_M, 0.05], rgba=[0.85, 0.85, 0.8, 0.25], group=WALL_GROUP,
+        size=[WALL_EXTENT_M, WALL_EXTENT_M, 0.05], rgba=[0.86, 0.84, 0.78, 1.0], group=WALL_GROUP,
         friction=[FLOOR_DYNAMIC_FRICTION, TORSIONAL_FRICTION, ROLLING_FRICTION], condim=CONDIM,
         solref=list(SOLREF), solimp=list(SOLIMP),
     )
