@@ -41,6 +41,9 @@ class Body:
     parent: int = -1  # index of the supporting body; -1 floor, -2 wall
     support_surface: int = -1  # index into the parent's ``surfaces`` when parent >= 0
     children: list[int] = field(default_factory=list)
+    # Hung on a wall by the support graph (``support.wall_mountable``): exported welded, yet the
+    # solver may still slide it like any movable body.
+    wall_mounted: bool = False
 
     @property
     def bottom_m(self) -> float:

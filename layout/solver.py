@@ -26,6 +26,7 @@ layout that the greedy scheme reaches, i.e. the least deviation from the observa
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 
@@ -38,7 +39,7 @@ from layout.snapping import YawSnap, reference_yaw, snap_yaw
 from layout.support import FLOOR, build_support, is_ancestor, subtree
 from scene_builder.config import LayoutConfig
 from scene_builder.errors import InputError
-from scene_builder.model import AssetKind, GeneratedAsset, LayoutResult, Perception, PlacedObject, Plane, Scene, SupportEdge
+from scene_builder.model import AssetKind, GeneratedAsset, LayoutResult, ObjectAsset, Perception, PlacedObject, Plane, Scene, SupportEdge
 
 # Signed distances above -PENETRATION_TOL_M count as touching (resting contacts are exact up to
 # floating point).
@@ -540,6 +541,10 @@ class _Solver:
         return worst
 
 
+def _welded(asset: ObjectAsset, wall_mounted: bool) -> ObjectAsset:
+    return dataclasses.replace(asset, is_fixed=True) if wall_mounted and not asset.is_fixed else asset
+
+
 def solve_layout_with_stats(
     perception: Perception, generated: tuple[GeneratedAsset, ...], config: LayoutConfig, seed: int = 0
 ) -> tuple[LayoutResult, SolveStats]:
@@ -598,8 +603,9 @@ def solve_layout_with_stats(
 
     by_name = {b.name: b for b in bodies}
     parent_of = {e.child: e.parent for e in edges}
+    # Bodies that the support graph hung on a wall are welded there (``support.wall_mountable``).
     placed = tuple(
-        PlacedObject(asset=g.asset, world_from_asset=by_name[g.asset.name].world_from_asset(), support=parent_of[g.asset.name])
+        PlacedObject(asset=_welded(g.asset, by_name[g.asset.name].wall_mounted), world_from_asset=by_name[g.asset.name].world_from_asset(), support=parent_of[g.asset.name])
         for g in generated
     )
     scene = Scene(camera=perception.camera, room=perception.room, objects=placed)

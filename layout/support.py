@@ -28,6 +28,12 @@ SUPPORT_CLASH_TOL_M = 0.01
 DEFORMABLE_MIN_FACE_AREA = 0.5
 # Fixed furniture this close to a wall and off the floor hangs on the wall.
 WALL_CONTACT_M = 0.05
+# A rigid object seen with nothing under it, its bottom this high and within WALL_MOUNT_REACH_M
+# of a wall (or reaching into it), is wall-mounted (a picture, a window frame, a TV, a sconce):
+# it is welded where it was seen instead of falling to the floor, metres from its pixels. Below
+# this height an unsupported object is more likely standing on furniture perception missed.
+WALL_MOUNT_MIN_BOTTOM_M = 1.0
+WALL_MOUNT_REACH_M = 0.35
 
 
 def _footprint_world(b: Body) -> np.ndarray:
@@ -45,11 +51,22 @@ def _overlap_fraction(foot: np.ndarray, poly: np.ndarray) -> float:
     return polygon_area(clip_convex_polygons(foot, poly)) / area
 
 
-def _near_wall(b: Body, walls: tuple[Plane, ...]) -> bool:
+def _near_wall(b: Body, walls: tuple[Plane, ...], reach_m: float = WALL_CONTACT_M) -> bool:
     if not walls:
         return False
     v = b.world_vertices()
-    return any(float(np.min(w.signed_distance_m(v))) < WALL_CONTACT_M for w in walls)
+    return any(float(np.min(w.signed_distance_m(v))) < reach_m for w in walls)
+
+
+def wall_mountable(b: Body, walls: tuple[Plane, ...]) -> bool:
+    """Whether a movable body with no object under it hangs on a wall instead of falling: rigid
+    (soft bodies drape; articulated furniture stands), bottom at least WALL_MOUNT_MIN_BOTTOM_M
+    above the floor, within WALL_MOUNT_REACH_M of a wall."""
+    return (
+        b.asset.kind is AssetKind.RIGID
+        and b.bottom_m >= WALL_MOUNT_MIN_BOTTOM_M
+        and _near_wall(b, walls, WALL_MOUNT_REACH_M)
+    )
 
 
 def build_support(
@@ -60,8 +77,9 @@ def build_support(
     Bodies are processed bottom-up (by initial bottom height, then name), and a body can only rest
     on a body processed before it, so the graph has no cycles. A body rests on the highest top
     face (of an earlier body) that lies below its bottom + tolerance and under at least 25 % of
-    its footprint; else fixed furniture off the floor and against a wall hangs on the wall (its
-    height is kept); else it stands on the floor. Updates ``position_m[2]``, ``parent`` and
+    its footprint; else fixed furniture off the floor and against a wall, or a rigid object high
+    up near a wall (``wall_mountable``; it becomes fixed), hangs on the wall (its height is kept; ``wall_mounted`` is set on the latter);
+    else it stands on the floor. Updates ``position_m[2]``, ``parent`` and
     ``children`` in place. Returns the edges (in processing order) and the processing order.
 
     ``clash(child, support, z)``: penetration depth (m) of the child placed at height z against the
@@ -72,7 +90,7 @@ def build_support(
     edges: list[SupportEdge] = []
     placed: list[int] = []
     for b in bodies:
-        b.parent, b.support_surface, b.children = FLOOR, -1, []
+        b.parent, b.support_surface, b.children, b.wall_mounted = FLOOR, -1, [], False
     # Plan boxes of the bodies placed so far (vectorised prefilter of candidate supports).
     placed_lo = np.zeros((len(bodies), 2))
     placed_hi = np.zeros((len(bodies), 2))
@@ -111,8 +129,8 @@ def build_support(
             b.parent, b.support_surface = j, k
             bodies[j].children.append(i)
             parent_name = bodies[j].name
-        elif b.fixed and bottom > tol and _near_wall(b, walls):
-            b.parent = WALL
+        elif (b.fixed and bottom > tol and _near_wall(b, walls)) or (not b.fixed and wall_mountable(b, walls)):
+            b.parent, b.wall_mounted = WALL, not b.fixed
             h = bottom
             parent_name = "wall"
         else:

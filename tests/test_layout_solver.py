@@ -247,3 +247,26 @@ def test_yaw_snapping_follows_the_evidence():
     np.testing.assert_array_equal(placed["chair"].world_from_asset[:3, :3], turned[:3, :3])
     # Geometry is never changed.
     assert placed["cabinet"].asset is cabinet
+
+
+def test_unsupported_rigid_object_high_on_a_wall_is_hung_there():
+    """A picture seen 1.5 m up against a wall is welded where it was seen, not dropped metres
+    from its pixels; the same box away from walls, or low, still falls to the floor; two
+    overlapping hung objects are still pushed apart."""
+    walls = (Plane(np.array([1.0, 0.0, 0.0]), 1.0, "wall", 100),)  # x = -1, room at x > -1
+    gen = (
+        _gen(box_asset("picture", (0.04, 0.6, 0.4)), (-0.95, 0.0, 1.5)),
+        _gen(box_asset("frame", (0.04, 0.6, 0.4)), (-0.95, 0.4, 1.6)),  # overlaps the picture
+        _gen(box_asset("floating", (0.04, 0.6, 0.4)), (0.5, 0.0, 1.5)),
+        _gen(box_asset("low", (0.04, 0.6, 0.4)), (-0.95, 2.0, 0.6)),
+    )
+    result, stats = solve_layout_with_stats(empty_perception(walls), gen, CFG)
+    placed = {o.name: o for o in result.scene.objects}
+    for name in ("picture", "frame"):
+        assert placed[name].support == "wall" and placed[name].asset.is_fixed
+        assert _bottom(placed[name]) == pytest.approx(_bottom(GeneratedAsset(gen[0].asset, gen[0].world_from_asset, np.zeros((0, 3)))) + (0.1 if name == "frame" else 0.0), abs=1e-9)
+    for name in ("floating", "low"):
+        assert placed[name].support == "floor" and not placed[name].asset.is_fixed
+        assert _bottom(placed[name]) == pytest.approx(0.0, abs=1e-9)
+    assert result.max_penetration_after_m < 1e-5
+    assert _max_intersection_volume(result.scene) < 1e-9
