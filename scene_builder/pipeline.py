@@ -105,7 +105,7 @@ def build(inputs: InputSpec, out_dir: Path, config: BuildConfig = BuildConfig(),
     from generation import generate_assets
     from layout import settled_scene, solve_layout, verify_scene
     from perception import perceive
-    from scene_builder.report import write_report
+    from scene_builder.report import build_report, write_report
 
     out_dir = Path(out_dir)
     _check_out_dir(out_dir)
@@ -145,7 +145,8 @@ def build(inputs: InputSpec, out_dir: Path, config: BuildConfig = BuildConfig(),
                 )
             files = dataclasses.replace(files, rerun=rrd)
         log.timings.append(("total", time.perf_counter() - total_start))
-        write_report(staging, inputs, config, perceived, layout, scene, verdict, fidelity, tuple(log.timings))
+        report = build_report(inputs, config, perceived, layout, scene, verdict, fidelity, tuple(log.timings))
+        write_report(staging, scene, report)
         _move_into_place(staging, out_dir)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)

@@ -112,20 +112,10 @@ def build_report(
     }
 
 
-def write_report(
-    out_dir: Path,
-    inputs: InputSpec,
-    config: BuildConfig,
-    perception: Perception,
-    layout: LayoutResult,
-    scene: Scene,
-    verdict: PhysicsVerdict,
-    fidelity: Fidelity | None,
-    timings_s: tuple[tuple[str, float], ...],
-) -> Path:
-    """Write ``scene.json`` and ``report.json`` into ``out_dir``; returns the report's path."""
+def write_report(out_dir: Path, scene: Scene, report: dict) -> Path:
+    """Write ``scene.json`` and ``report.json`` (from :func:`build_report`) into ``out_dir``;
+    returns the report's path."""
     (out_dir / "scene.json").write_text(scene_to_json(scene))
-    report = build_report(inputs, config, perception, layout, scene, verdict, fidelity, timings_s)
     path = out_dir / "report.json"
     path.write_text(json.dumps(report, indent=2) + "\n")
     return path
