@@ -12,13 +12,17 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["convex_pieces", "is_convex_enough", "CONVEX_VOLUME_RATIO", "COACD_MAX_FACES"]
+__all__ = ["convex_pieces", "voxel_convex_pieces", "is_convex_enough", "CONVEX_VOLUME_RATIO", "COACD_MAX_FACES", "VOXEL_FILL_RATIO"]
 
 # A part whose convex hull has at most 1 / 0.95 of its volume collides as its hull.
 CONVEX_VOLUME_RATIO = 0.95
 # CoACD cost grows with the face count (NOTES: 19 s at 20k faces, 5 s at 2k): decimate first.
 COACD_MAX_FACES = 2000
 _CACHE_VERSION = "coacd-1.0.14-v1"
+# A voxel region whose voxels fill at least this share of their convex hull is one piece.
+VOXEL_FILL_RATIO = 0.9
+# the 8 corners of a unit cube, in voxel units
+_CUBE_CORNERS = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=np.int64)
 
 
 def _hull(points: np.ndarray):
@@ -135,4 +139,90 @@ def convex_pieces(
     pieces = _merge_smallest(pieces, max_pieces)
     if cache_path is not None:
         _save_cache(cache_path, pieces)
+    return pieces
+
+
+def _region_hull(ijk: np.ndarray, dims_yz: tuple[int, int], voxel_size_m: float, origin_m: np.ndarray):
+    """Convex hull (trimesh, asset frame) of the voxel cubes ``ijk`` (R, 3) int, sorted
+    lexicographically. Only the lowest and highest voxel of each (i, j) column can carry a hull
+    vertex (any other is between those two), so only their corners go to qhull."""
+    key = ijk[:, 0] * dims_yz[0] + ijk[:, 1]
+    change = np.flatnonzero(np.diff(key)) + 1
+    first = np.concatenate([[0], change])
+    last = np.concatenate([change - 1, [len(ijk) - 1]])
+    ends = ijk[np.unique(np.concatenate([first, last]))]
+    corners = np.unique((ends[:, None, :] + _CUBE_CORNERS[None]).reshape(-1, 3), axis=0)
+    return _hull(np.asarray(origin_m, dtype=np.float64) + corners * float(voxel_size_m))
+
+
+def _best_split(ijk: np.ndarray) -> tuple[int, int] | None:
+    """(axis, t): split ``ijk`` (R, 3) into index <= t and > t along ``axis``, at the plane where
+    the cross-section changes most (voxels in one slice and not the next, or the reverse): where
+    a table's top meets its legs, a lamp's pole its shade. A bounding-box or hull volume score
+    cannot see this cut one plane at a time (top + legs and left + right halves of a table have
+    the same box volumes). None when the region is a single voxel."""
+    lo = ijk.min(axis=0)
+    dims = ijk.max(axis=0) - lo + 1
+    grid = np.zeros(tuple(int(d) for d in dims), dtype=bool)
+    rel = ijk - lo
+    grid[rel[:, 0], rel[:, 1], rel[:, 2]] = True
+    best = None
+    for axis in range(3):
+        if dims[axis] < 2:
+            continue
+        g = np.moveaxis(grid, axis, 0)
+        change = np.logical_xor(g[1:], g[:-1]).reshape(int(dims[axis]) - 1, -1).sum(axis=1)
+        i = int(np.argmax(change))
+        if best is None or change[i] > best[0]:
+            best = (int(change[i]), axis, int(lo[axis]) + i)
+    return None if best is None else (best[1], best[2])
+
+
+def voxel_convex_pieces(
+    occupancy: np.ndarray,
+    voxel_size_m: float,
+    origin_m: np.ndarray,
+    *,
+    max_pieces: int = 12,
+    fill_ratio: float = VOXEL_FILL_RATIO,
+) -> list:
+    """Convex pieces (list of ``trimesh.Trimesh``) covering the voxel cubes of an occupancy grid,
+    by recursive axis-aligned splitting of the voxels: an approximate convex decomposition
+    straight from the grid, for parts that come as voxels (completed scans, PhysX-Omni grids).
+
+    occupancy: (X, Y, Z) bool; voxel_size_m; origin_m (3,) min corner of voxel (0, 0, 0) (the
+    ``generation.meshing`` convention). Each piece is the convex hull of its voxels' cubes, so
+    the pieces cover every occupied voxel (and so the marching-cubes mesh of the grid, which
+    passes through the voxel faces). Best-first: the piece with the most empty hull volume is
+    split (at the largest cross-section change, :func:`_best_split`) until every piece's voxels fill ``fill_ratio`` of its
+    hull or there are ``max_pieces``. Why not CoACD here: it re-discovers from a decimated
+    surface what the grid already says, at 3-50 s per real lamp under load (this: ~0.1 s).
+    Deterministic (no randomness; ties broken by axis and index order).
+    """
+    occ = np.asarray(occupancy, dtype=bool)
+    if occ.ndim != 3 or not occ.any():
+        raise ValueError("voxel_convex_pieces: the occupancy grid is empty; nothing to decompose")
+    dims_yz = (occ.shape[1], occ.shape[2])
+    cell = float(voxel_size_m) ** 3
+
+    def make(ijk):
+        hull = _region_hull(ijk, dims_yz, voxel_size_m, origin_m)
+        empty = float(hull.volume) - len(ijk) * cell
+        return [ijk, hull, empty, len(ijk) * cell / max(float(hull.volume), 1e-30)]
+
+    regions = [make(np.argwhere(occ))]
+    while len(regions) < max_pieces:
+        order = sorted(range(len(regions)), key=lambda r: -regions[r][2])
+        target = next((r for r in order if regions[r][3] < fill_ratio and len(regions[r][0]) > 1), None)
+        if target is None:
+            break
+        ijk = regions[target][0]
+        split = _best_split(ijk)
+        if split is None:
+            break
+        axis, t = split
+        below = ijk[:, axis] <= t
+        regions[target : target + 1] = [make(ijk[below]), make(ijk[~below])]
+    pieces = [r[1] for r in regions]
+    pieces.sort(key=lambda p: tuple(np.round(p.centroid, 9)))
     return pieces

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from generation.collision import convex_pieces
+from generation.collision import convex_pieces, voxel_convex_pieces
 from generation.completion import complete_occupancy
 from generation.meshing import mesh_from_occupancy
 from generation.pose import fit_box, min_area_rectangle
@@ -134,3 +134,53 @@ def test_coacd_deterministic_without_cache():
     b = convex_pieces(mesh, threshold=0.05, max_pieces=6, seed=7)
     assert len(a) == len(b)
     assert all(np.array_equal(x.vertices, y.vertices) for x, y in zip(a, b))
+
+
+def _covered(mesh, pieces, n: int = 4000) -> float:
+    import trimesh
+
+    samples = trimesh.sample.volume_mesh(mesh, n)
+    inside = np.zeros(len(samples), dtype=bool)
+    for p in pieces:
+        inside |= p.contains(samples)
+    return float(inside.mean())
+
+
+@pytest.mark.parametrize("shape", ["l", "table", "lamp"])
+def test_voxel_pieces_convex_cover_tight_and_bounded(shape):
+    occ = np.zeros((40, 40, 40), dtype=bool)
+    if shape == "l":
+        occ[2:38, 2:12, 2:38] = True
+        occ[2:38, 2:38, 2:12] = True
+    elif shape == "table":  # top and four legs: 5 boxes
+        occ[2:38, 2:38, 32:36] = True
+        for i in (2, 33):
+            for j in (2, 33):
+                occ[i : i + 5, j : j + 5, 2:32] = True
+    else:  # base, pole, wider shade: a lamp from a completed scan
+        z, y, x = np.meshgrid(np.arange(40), np.arange(40), np.arange(40), indexing="ij")
+        r2 = (x - 19.5) ** 2 + (y - 19.5) ** 2
+        occ = ((r2 <= 64) & (z >= 2) & (z < 5)) | ((r2 <= 4) & (z >= 5) & (z < 26)) | ((r2 <= 225) & (z >= 26) & (z < 38))
+        occ = occ.transpose(2, 1, 0)
+    mesh = mesh_from_occupancy(occ, 0.01, np.array([0.1, -0.2, 0.0]), max_faces=3000)
+    pieces = voxel_convex_pieces(occ, 0.01, np.array([0.1, -0.2, 0.0]), max_pieces=8)
+    assert 2 <= len(pieces) <= 8
+    for p in pieces:
+        assert p.is_watertight and p.volume > 0
+        assert p.volume == pytest.approx(p.convex_hull.volume, rel=1e-6)  # convex
+    assert _covered(mesh, pieces) >= 0.97
+    voxels_m3 = occ.sum() * 0.01**3
+    # no hull over a concavity: the pieces' volume stays close to the voxels'
+    assert sum(p.volume for p in pieces) < 1.15 * voxels_m3
+    again = voxel_convex_pieces(occ, 0.01, np.array([0.1, -0.2, 0.0]), max_pieces=8)
+    assert all(np.array_equal(a.vertices, b.vertices) for a, b in zip(pieces, again))
+
+
+def test_voxel_pieces_stop_when_convex_and_reject_empty():
+    occ = np.zeros((10, 12, 8), dtype=bool)
+    occ[1:9, 2:10, 0:6] = True
+    (piece,) = voxel_convex_pieces(occ, 0.02, np.zeros(3))
+    assert piece.volume == pytest.approx(occ.sum() * 0.02**3, rel=1e-9)
+    assert np.allclose(piece.bounds, [[0.02, 0.04, 0.0], [0.18, 0.2, 0.12]])
+    with pytest.raises(ValueError, match="empty"):
+        voxel_convex_pieces(np.zeros((4, 4, 4), dtype=bool), 0.01, np.zeros(3))
