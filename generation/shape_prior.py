@@ -2,7 +2,7 @@
 from its observed points, a category shape prior and the material table.
 
 Per object: gravity-aligned box from the points (``generation.pose``), completed to the
-category's typical depth when the camera saw only a face, then by category
+category's typical depth when the camera saw only a face (never through a wall), then by category
 
 * articulated categories: the articulation template fitted to the box (``articulation``);
 * furniture, containers, screens, vessels: a shape prior fitted to the box (``priors``);
@@ -22,7 +22,7 @@ from scene_builder.config import GenerationConfig
 from scene_builder.frames import pose, transform_points
 from scene_builder.model import AssetKind, GeneratedAsset, PerceivedObject, Perception
 
-__all__ = ["ShapePriorGenerator", "BACKEND_NAME", "complete_box"]
+__all__ = ["ShapePriorGenerator", "BACKEND_NAME", "complete_box", "depth_to_walls"]
 
 BACKEND_NAME = "shape-prior"
 # a face seen head-on spans less than this fraction of the expected depth: complete the depth
@@ -30,11 +30,30 @@ _DEPTH_COMPLETE_FRACTION = 0.6
 _MIRROR_X = {"lamp", "plant", "bottle", "bowl", "mug", "soft_toy"}
 
 
-def complete_box(fit, label: str):
+def depth_to_walls(fit, walls) -> float:
+    """How deep (m) ``fit`` can grow away from the camera, its observed front face fixed, before
+    its back reaches a wall of ``walls`` (inf when no wall is behind it). A picture or a pillar
+    seen against a wall, completed to a table's or a chair's depth, would otherwise reach up to a
+    metre into the wall, and the layout would push it (and what it bumps into) that far into the
+    room, off its pixels."""
+    rot = fit.world_from_box[:3, :3]
+    back = -rot[:, 0]  # the box's +x faces the camera
+    d, w, h = (float(v) for v in fit.size_m)
+    front = np.array([[d / 2, sy * w / 2, z] for sy in (-1.0, 1.0) for z in (0.0, h)])
+    front_world = transform_points(fit.world_from_box, front)
+    limit = np.inf
+    for wall in walls:
+        rate = float(np.asarray(wall.normal, dtype=np.float64) @ back)  # signed distance per metre of depth
+        if rate < -1e-6:
+            limit = min(limit, float(np.min(wall.signed_distance_m(front_world))) / -rate)
+    return limit
+
+
+def complete_box(fit, label: str, walls=()):
     """The box grown away from the camera to the depth expected from the category's typical
     proportions, scaled by the measured width and height (geometric mean of both ratios),
-    when the observed depth is less than 60 % of it. Flat categories (towel, blanket) keep the
-    observed depth."""
+    when the observed depth is less than 60 % of it; never past a wall of ``walls`` (the room's
+    walls, :func:`depth_to_walls`). Flat categories (towel, blanket) keep the observed depth."""
     from generation.pose import extend_depth
     from scene_builder.vocabulary import category
 
@@ -47,7 +66,7 @@ def complete_box(fit, label: str):
     else:
         expected = td * float(np.sqrt((w / tw) * (h / th)))
     if d < _DEPTH_COMPLETE_FRACTION * expected:
-        return extend_depth(fit, expected)
+        return extend_depth(fit, min(expected, depth_to_walls(fit, walls)))
     return fit
 
 
@@ -74,7 +93,7 @@ class ShapePriorGenerator:
         label = obj.label
         cat = category(label)
         cam_world = perception.camera.position_m
-        fit = complete_box(fit_box(obj.points_world_m, cam_world), label)
+        fit = complete_box(fit_box(obj.points_world_m, cam_world), label, perception.room.walls)
         box_from_world = np.linalg.inv(fit.world_from_box)
         pts = transform_points(box_from_world, obj.points_world_m)
         cam = transform_points(box_from_world, cam_world[None])[0]
