@@ -1,7 +1,7 @@
 """Perception benchmark on procedural rooms with ground truth: instance recall at IoU 0.5, mean
 best IoU, category accuracy of the matched objects, and wall time of ``perceive`` per frame.
 
-    .venv/bin/python -m perception.bench_perceive --seeds 0 1 2 3 4 5 --naming auto
+    .venv/bin/python -m scene_builder.bench_perception --seeds 0 1 2 3 4 5 --naming auto
 
 Speed numbers belong in BENCHMARKS.md, never in tests.
 """

@@ -50,7 +50,7 @@ def test_instances_match_the_truth(rooms):
 
 
 def test_matched_objects_are_named_by_category(rooms):
-    from perception.bench_perceive import score_room
+    from scene_builder.bench_perception import score_room
 
     scores = [score_room(p, truth) for p, truth in rooms]
     matched = sum(s.matched for s in scores)
