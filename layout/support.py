@@ -29,10 +29,12 @@ DEFORMABLE_MIN_FACE_AREA = 0.5
 # Fixed furniture this close to a wall and off the floor hangs on the wall.
 WALL_CONTACT_M = 0.05
 # A rigid object seen with nothing under it, its bottom this high and within WALL_MOUNT_REACH_M
-# of a wall (or reaching into it), is wall-mounted (a picture, a window frame, a TV, a sconce):
-# it is welded where it was seen instead of falling to the floor, metres from its pixels. Below
-# this height an unsupported object is more likely standing on furniture perception missed.
-WALL_MOUNT_MIN_BOTTOM_M = 1.0
+# of a wall (or reaching into it), is welded where it was seen instead of falling to the floor,
+# up to metres from its pixels: it hangs on the wall (a picture, a window frame, a TV, a sconce)
+# or stands on something against the wall that perception did not separate from it (a shelf
+# board, a counter). Lower objects (a pillow by a sofa, a box by a bed) still fall: they more
+# likely rest on furniture in front of the wall whose shape the prior got too low.
+WALL_MOUNT_MIN_BOTTOM_M = 0.6
 WALL_MOUNT_REACH_M = 0.35
 
 

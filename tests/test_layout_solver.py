@@ -250,7 +250,7 @@ def test_yaw_snapping_follows_the_evidence():
 
 
 def test_unsupported_rigid_object_high_on_a_wall_is_hung_there():
-    """A picture seen 1.5 m up against a wall is welded where it was seen, not dropped metres
+    """A picture seen 1.5 m up against a wall is welded where it was seen, not dropped
     from its pixels; the same box away from walls, or low, still falls to the floor; two
     overlapping hung objects are still pushed apart."""
     walls = (Plane(np.array([1.0, 0.0, 0.0]), 1.0, "wall", 100),)  # x = -1, room at x > -1
@@ -258,7 +258,7 @@ def test_unsupported_rigid_object_high_on_a_wall_is_hung_there():
         _gen(box_asset("picture", (0.04, 0.6, 0.4)), (-0.95, 0.0, 1.5)),
         _gen(box_asset("frame", (0.04, 0.6, 0.4)), (-0.95, 0.4, 1.6)),  # overlaps the picture
         _gen(box_asset("floating", (0.04, 0.6, 0.4)), (0.5, 0.0, 1.5)),
-        _gen(box_asset("low", (0.04, 0.6, 0.4)), (-0.95, 2.0, 0.6)),
+        _gen(box_asset("low", (0.04, 0.6, 0.4)), (-0.95, 2.0, 0.4)),
     )
     result, stats = solve_layout_with_stats(empty_perception(walls), gen, CFG)
     placed = {o.name: o for o in result.scene.objects}
