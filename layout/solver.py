@@ -6,7 +6,9 @@ Method
 1. Start from each ``GeneratedAsset.world_from_asset`` (the pose that best explains the observed
    points); snap its yaw to the walls when the points agree (``layout.snapping``).
 2. Build the support graph bottom-up and set each object's height so that its bottom touches its
-   support exactly (``layout.support``). Heights never change after this.
+   support exactly (``layout.support``); a rigid object seen with nothing under it, 0.6 m or more
+   up and against a wall, is welded where it was seen instead of falling to the floor
+   (``support.wall_mountable``). Heights never change after this.
 3. Remove interpenetration by the smallest horizontal moves, Gauss-Seidel over the colliding
    pairs until nothing moves: broad phase by a sort-and-sweep of object boxes, exact narrow
    phase between convex pieces by MuJoCo's GJK/EPA (``layout.narrowphase``); a colliding pair is
