@@ -218,3 +218,20 @@ def test_two_cabinets_on_one_small_top_one_comes_down():
     down = next(n for n in ("cab_a", "cab_b") if parents[n] == "floor")
     placed = {o.name: o for o in result.scene.objects}
     assert placed[down].world_from_asset[2, 3] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_rigid_object_on_a_pillow_rests_on_the_floor_instead(tmp_path):
+    """open3d_TUM: a chair observed with its feet on a cushion took the cushion as its support and
+    tipped 11 deg as the flex sagged. A rigid object never rests on a soft body: it goes to the
+    next support below and the two are pushed apart."""
+    gen = (
+        _gen(pillow_asset("cushion", (0.45, 0.65, 0.13)), (0.0, 0.0, 0.0)),
+        _gen(box_asset("crate", (0.5, 0.6, 0.6)), (0.05, 0.0, 0.13)),
+    )
+    result, _ = solve_layout_with_stats(empty_perception(), gen, CFG)
+    placed = {o.name: o for o in result.scene.objects}
+    assert placed["crate"].support == "floor"
+    assert abs(placed["crate"].world_from_asset[2, 3]) < 1e-9
+    verdict = _export_and_verify(result, tmp_path)
+    assert verdict.max_penetration_m < 1e-3
+    assert verdict.stable, _unstable(verdict)
