@@ -86,14 +86,16 @@ class ShapePriorGenerator:
         from generation.assembly import ConvexSolids, PartSpec, assemble_asset_with_offset, box_solid
         from generation.completion import complete_occupancy, superellipsoid_occupancy
         from generation.materials import category_material, deformable_settings
-        from generation.pose import fit_box
+        from generation.pose import fit_box, floor_snap_height_m
         from generation.priors import PRIOR_LABELS, prior_parts
         from scene_builder.vocabulary import category
 
         label = obj.label
         cat = category(label)
         cam_world = perception.camera.position_m
-        fit = complete_box(fit_box(obj.points_world_m, cam_world), label, perception.room.walls)
+        others = [o.points_world_m for o in perception.objects if o.name != obj.name]
+        snap_m = floor_snap_height_m(obj.points_world_m, others)
+        fit = complete_box(fit_box(obj.points_world_m, cam_world, floor_snap_m=snap_m), label, perception.room.walls)
         box_from_world = np.linalg.inv(fit.world_from_box)
         pts = transform_points(box_from_world, obj.points_world_m)
         cam = transform_points(box_from_world, cam_world[None])[0]

@@ -44,3 +44,32 @@ def test_wall_in_front_or_beside_does_not_limit_depth():
     side = Plane(np.array([0.0, 1.0, 0.0]), 2.0, "wall", 10)  # y = -2, parallel to the depth axis
     assert depth_to_walls(fit, (behind_camera, side)) == np.inf
     np.testing.assert_allclose(complete_box(fit, "table", (behind_camera, side)).size_m, complete_box(fit, "table").size_m)
+
+
+def _slab(lo, hi, n, rng):
+    return rng.uniform(lo, hi, size=(n, 3))
+
+
+def test_unseen_legs_extend_the_box_to_the_floor_unless_something_is_under_it():
+    from generation.pose import floor_snap_height_m
+
+    rng = np.random.default_rng(0)
+    camera = np.array([-3.0, 0.0, 1.6])
+    # a chair seen from above: seat and backrest, the legs hidden (lowest point 0.12 m up)
+    chair = np.vstack([_slab([0.0, 0.0, 0.12], [0.5, 0.5, 0.45], 400, rng), _slab([0.45, 0.0, 0.45], [0.5, 0.5, 0.85], 400, rng)])
+    snap = floor_snap_height_m(chair, [])
+    fit = fit_box(chair, camera, floor_snap_m=snap)
+    assert fit.on_floor
+    assert abs(fit.world_from_box[2, 3]) < 1e-9
+    assert abs(fit.size_m[2] - chair[:, 2].max()) < 1e-9
+    # a low box under it (top at 0.12 m): the chair's points rest on it, its bottom stays seen
+    low_box = _slab([0.1, 0.1, 0.0], [0.4, 0.4, 0.12], 300, rng)
+    snap = floor_snap_height_m(chair, [low_box])
+    fit = fit_box(chair, camera, floor_snap_m=snap)
+    assert not fit.on_floor
+    assert abs(fit.world_from_box[2, 3] - chair[:, 2].min()) < 0.01
+    # the same box beside the chair supports nothing
+    assert floor_snap_height_m(chair, [low_box + np.array([2.0, 0.0, 0.0])]) >= chair[:, 2].min()
+    # a laptop on a table 0.75 m up is never dropped to the floor by the box fit
+    laptop = _slab([0.0, 0.0, 0.75], [0.3, 0.3, 0.77], 200, rng)
+    assert floor_snap_height_m(laptop, []) < 0.75
