@@ -38,3 +38,21 @@ def real_samples(with_intrinsics: bool = True) -> list[Path]:
             continue
         out.append(d)
     return out
+
+
+@pytest.fixture(scope="session")
+def newton():
+    """NVIDIA Newton, the independent UsdPhysics consumer (its kernels are cached under .cache/warp)."""
+    os.environ.setdefault("WARP_CACHE_PATH", str(REPO / ".cache" / "warp"))
+    newton = pytest.importorskip("newton")
+    import warp as wp
+
+    wp.config.quiet = True
+    return newton
+
+
+def load_newton_model(newton, usd_path: Path):
+    """A finalised Newton model of the USD file, on the CPU."""
+    builder = newton.ModelBuilder()
+    builder.add_usd(str(usd_path))
+    return builder.finalize(device="cpu")

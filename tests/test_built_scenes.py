@@ -13,13 +13,12 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from .conftest import REAL_DATA, require
+from .conftest import REAL_DATA, load_newton_model, require
 
 pytestmark = pytest.mark.slow
 
@@ -178,22 +177,6 @@ def test_recording_is_deterministic(real_built, tmp_path):
 # --------------------------------------------------------------------------------------------
 
 
-@pytest.fixture(scope="module")
-def newton():
-    os.environ.setdefault("WARP_CACHE_PATH", str(Path(__file__).resolve().parents[1] / ".cache" / "warp"))
-    newton = pytest.importorskip("newton")
-    import warp as wp
-
-    wp.config.quiet = True
-    return newton
-
-
-def _newton_model(newton, usd_path: Path):
-    builder = newton.ModelBuilder()
-    builder.add_usd(str(usd_path))
-    return builder.finalize(device="cpu")
-
-
 def _usd_body_names(usd_path: Path) -> dict[str, str]:
     """USD rigid-body prim path -> MJCF body name (``NAME`` or ``NAME/PART``)."""
     from pxr import Usd, UsdPhysics
@@ -213,7 +196,7 @@ def _usd_body_names(usd_path: Path) -> dict[str, str]:
 @pytest.mark.newton
 def test_newton_masses_match_mujoco(built, newton):
     usd = built.out_dir / "scene.usda"
-    model = _newton_model(newton, usd)
+    model = load_newton_model(newton, usd)
     mj = _mjcf_masses(built.out_dir / "scene.xml")
     prims = _usd_body_names(usd)
     scene = built.scene

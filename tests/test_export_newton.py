@@ -8,33 +8,16 @@ minute per solver); the cache lives under the repository's ignored ``.cache/warp
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from exporters import write_mjcf, write_usd
+from tests.conftest import load_newton_model
 from tests.fixtures_scenes import DOOR_RANGE_RAD, DRAWER_RANGE_M, boxes_scene, cabinet_scene
 
 pytestmark = [pytest.mark.newton, pytest.mark.slow]
 DT = 0.002
-
-
-@pytest.fixture(scope="module")
-def newton():
-    os.environ.setdefault("WARP_CACHE_PATH", str(Path(__file__).resolve().parents[1] / ".cache" / "warp"))
-    newton = pytest.importorskip("newton")
-    import warp as wp
-
-    wp.config.quiet = True
-    return newton
-
-
-def _load(newton, usd_path):
-    builder = newton.ModelBuilder()
-    builder.add_usd(str(usd_path))
-    return builder.finalize(device="cpu")
 
 
 def _mujoco(path):
@@ -48,7 +31,7 @@ def test_door_pushed_open_matches_mujoco(newton, tmp_path):
     import mujoco
 
     scene = cabinet_scene(is_fixed=True)
-    model = _load(newton, write_usd(scene, tmp_path))
+    model = load_newton_model(newton, write_usd(scene, tmp_path))
     mj, data = _mujoco(write_mjcf(scene, tmp_path))
 
     labels = list(model.body_label)
@@ -98,7 +81,7 @@ def test_boxes_rest_where_mujoco_rests_them(newton, tmp_path):
     import mujoco
 
     scene = boxes_scene()
-    model = _load(newton, write_usd(scene, tmp_path))
+    model = load_newton_model(newton, write_usd(scene, tmp_path))
     mj, data = _mujoco(write_mjcf(scene, tmp_path))
     free = [o for o in scene.objects if not o.asset.is_fixed]
     labels = list(model.body_label)
