@@ -261,12 +261,16 @@ def assemble_asset_with_offset(
             )
         collisions[spec.name] = tuple(to_model_mesh(p) for p in pieces)
         fallback = np.round(np.asarray(spec.rgba or mat.rgba)[:3] * 255).astype(np.uint8)
-        if pts is not None and observed_colors_rgb is not None and spec.parent is None:
-            colors = vertex_colors(v.vertices, pts, observed_colors_rgb, color_distance)
-        elif pts is not None and observed_colors_rgb is not None:
-            colors = vertex_colors(v.vertices, pts, observed_colors_rgb, color_distance, fallback)
-        else:
-            colors = vertex_colors(v.vertices, None, None, color_distance, fallback)
+        observed = pts is not None and observed_colors_rgb is not None
+        # Far from observed points the root part takes the object's median observed colour, other
+        # parts (doors, handles) their material's colour.
+        colors = vertex_colors(
+            v.vertices,
+            pts if observed else None,
+            observed_colors_rgb if observed else None,
+            color_distance,
+            None if observed and spec.parent is None else fallback,
+        )
         meshes[spec.name] = to_model_mesh(v, colors)
 
     children: dict[str, list[str]] = {}
