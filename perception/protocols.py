@@ -60,6 +60,16 @@ class InstanceSegmenter(Protocol):
         ...
 
 
+class BoxPromptSegmenter(Protocol):
+    """One instance mask per box prompt (Grounded-SAM style: a detector's boxes prompt a
+    segmenter). A learned backend (SAM2) or a classical one (GrabCut) answers."""
+
+    def segment_boxes(self, rgb: np.ndarray, boxes_xyxy_px: np.ndarray) -> np.ndarray:
+        """rgb: (H, W, 3) uint8; boxes_xyxy_px: (K, 4) float (x1, y1, x2, y2) in pixels.
+        Returns (K, H, W) bool, mask k for box k (may overlap; the caller resolves overlaps)."""
+        ...
+
+
 class ObjectNamer(Protocol):
     """Names an object crop with a label of ``scene_builder.vocabulary``."""
 
