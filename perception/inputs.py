@@ -3,35 +3,50 @@
 Everything that is wrong with the input raises :class:`scene_builder.errors.InputError` with one
 line saying what is wrong and what to do. Only numpy and PIL are used (PIL is light to import).
 
-Intrinsics are looked up in this order (``CameraIntrinsics.source`` says which answered):
+Intrinsics are looked up in this order (``CameraIntrinsics.source`` says which answered); what
+the user typed wins over what is found beside or inside the image, and when a lower source is
+present and disagrees (focal length more than 5 % apart) an :class:`InputWarning` says which won:
 
-1. ``InputSpec.intrinsics`` (``"flag"``), given for the image as stored on disk (after EXIF
+1. ``InputSpec.intrinsics`` (``"flag"``), given for the image as displayed (after EXIF
    orientation);
-2. ``camera.json`` next to the image (``"file"``): ``{"fx", "fy", "cx", "cy", "width",
+2. ``InputSpec.fov_deg`` (``"flag"``), horizontal field of view with a centred principal point;
+3. ``camera.json`` next to the image (``"file"``): ``{"fx", "fy", "cx", "cy", "width",
    "height"}``, scaled when its size differs from the image's;
-3. the EXIF focal length (``"exif"``): ``FocalLengthIn35mmFilm``, else ``FocalLength`` with the
+4. the EXIF focal length (``"exif"``): ``FocalLengthIn35mmFilm``, else ``FocalLength`` with the
    focal-plane resolution (sensor size);
-4. ``InputSpec.fov_deg`` (``"flag"``) or ``PerceptionConfig.default_fov_deg`` (``"default-fov"``),
-   horizontal field of view with a centred principal point.
+5. ``PerceptionConfig.default_fov_deg`` (``"default-fov"``).
+
+Images: any mode PIL reads (grey, 16-bit grey, palette, CMYK, RGBA...) becomes 8-bit RGB; an alpha
+channel with transparent pixels is dropped with a warning; images over :data:`MAX_IMAGE_PIXELS`
+(including decompression bombs: a small file that declares a huge image) are refused before
+their pixels are decoded.
+
+Depth units (:func:`load_depth`): integer images are millimetres and float images / ``.npy``
+arrays metres unless ``InputSpec.depth_scale`` says otherwise; 8-bit images are refused without an
+explicit scale, and a depth map whose median is not that of a room (:data:`ROOM_MEDIAN_DEPTH_M`)
+is refused with the scale that would make it one.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from scene_builder.config import InputSpec, PerceptionConfig
-from scene_builder.errors import InputError
+from scene_builder.errors import InputError, InputWarning
 from scene_builder.model import CameraIntrinsics
 
 __all__ = [
     "LoadedInput",
+    "MAX_IMAGE_PIXELS",
     "MAX_SIDE_PX",
     "MIN_VALID_DEPTH_FRACTION",
+    "ROOM_MEDIAN_DEPTH_M",
     "check_depth",
     "load_depth",
     "load_input",
@@ -41,8 +56,22 @@ __all__ = [
 
 #: Longest image side kept; larger inputs are downscaled (perception does not need more).
 MAX_SIDE_PX = 1280
+#: Largest image (and depth map) read, in pixels: 100 MP is above any phone's default mode
+#: (48-108 MP sensors); a larger file is refused from its header, before it is decoded.
+MAX_IMAGE_PIXELS = 100_000_000
 #: A depth map must measure at least this fraction of the pixels to be usable.
 MIN_VALID_DEPTH_FRACTION = 0.05
+#: The median of a room's measured depth lies in this range (metres) when the depth scale is
+#: inferred from the file; with an explicit ``depth_scale`` the wider range
+#: :data:`_EXPLICIT_MEDIAN_DEPTH_M` applies (the user said what the units are).
+ROOM_MEDIAN_DEPTH_M = (0.3, 15.0)
+_EXPLICIT_MEDIAN_DEPTH_M = (0.05, 100.0)
+#: Focal lengths giving a horizontal field of view outside this range (degrees) are no camera's.
+_FOV_RANGE_DEG = (2.0, 170.0)
+#: fx / fy beyond this ratio (either way) is not a camera's pixel aspect.
+_MAX_PIXEL_ASPECT = 2.0
+#: Two intrinsics sources disagree when their focal lengths differ by more than this fraction.
+_DISAGREE = 0.05
 #: The principal point may lie at most this fraction of the image size outside the image.
 _PRINCIPAL_POINT_MARGIN = 0.1
 
@@ -74,76 +103,183 @@ class LoadedInput:
     scale: float = 1.0
 
 
+def _open_checked(path: Path, what: str, hint: str):
+    """Open ``path`` with PIL (header only), refusing images over :data:`MAX_IMAGE_PIXELS`.
+    Returns the open image; the caller closes it."""
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with warnings.catch_warnings():
+            # PIL warns above 89 MP and raises above twice that; our own limit is checked below.
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            im = Image.open(path)
+    except Image.DecompressionBombError as err:
+        raise InputError(f"{what} {path} is too large to read ({err}); pass an image of at most {MAX_IMAGE_PIXELS // 1_000_000} MP") from err
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError, TypeError, EOFError) as err:
+        raise InputError(f"cannot read {path} as {hint} ({_short(err)}); pass a JPEG or PNG file") from err
+    w, h = im.size
+    if w * h > MAX_IMAGE_PIXELS:
+        im.close()
+        raise InputError(
+            f"{what} {path} is {w}x{h} px ({w * h / 1e6:.0f} MP); scene-builder reads images of at most "
+            f"{MAX_IMAGE_PIXELS // 1_000_000} MP: downscale it first"
+        )
+    return im
+
+
+def _short(err: BaseException) -> str:
+    """One line of an exception's message (PIL's can span lines)."""
+    text = " ".join(str(err).split()) or type(err).__name__
+    return text if len(text) <= 160 else text[:157] + "..."
+
+
+def _to_rgb(im, path: Path) -> np.ndarray:
+    """(H, W, 3) uint8 RGB of any PIL mode: 16/32-bit grey and float grey scaled to 8 bits, an
+    alpha channel dropped (with a warning when some pixels are transparent)."""
+    mode = im.mode
+    if mode.startswith("I") or mode == "F":
+        a = np.asarray(im).astype(np.float64)
+        finite = a[np.isfinite(a)]
+        top = float(finite.max()) if finite.size else 0.0
+        scale = 1.0 if top <= 255.0 else (255.0 / 65535.0 if top <= 65535.0 else 255.0 / top)
+        if mode == "F" and 0.0 < top <= 1.0:
+            scale = 255.0
+        grey = np.clip(np.nan_to_num(a * scale), 0.0, 255.0).round().astype(np.uint8)
+        warnings.warn(
+            f"{path} is a {mode} grey image (not a photo's 8-bit colour); read as grey. Is it a depth map? Pass it with --depth",
+            InputWarning,
+            stacklevel=3,
+        )
+        return np.repeat(grey[:, :, None], 3, axis=2)
+    has_alpha = mode in ("RGBA", "LA", "PA", "La", "RGBa") or (mode == "P" and "transparency" in im.info)
+    if has_alpha:
+        rgba = np.asarray(im.convert("RGBA"))
+        if (rgba[:, :, 3] < 255).any():
+            warnings.warn(
+                f"{path} has an alpha channel with transparent pixels; it is dropped (transparent pixels show their RGB values)",
+                InputWarning,
+                stacklevel=3,
+            )
+        return np.ascontiguousarray(rgba[:, :, :3])
+    return np.asarray(im.convert("RGB"), dtype=np.uint8)
+
+
 def load_rgb(path: Path) -> tuple[np.ndarray, dict[int, object], tuple[int, int]]:
     """Read a photo as RGB with its EXIF orientation applied.
 
     Returns rgb (H, W, 3) uint8, the EXIF tags (main IFD merged with the Exif IFD) and the size
     (width, height) of the image as stored before the orientation was applied.
     """
-    from PIL import Image, ImageOps, UnidentifiedImageError
+    from PIL import ImageOps
 
     path = Path(path)
     if not path.is_file():
         raise InputError(f"image not found: {path} (check the path)")
+    im = _open_checked(path, "image", "an image")
     try:
-        with Image.open(path) as im:
+        with im:
             im.load()
             stored_size = im.size
-            exif = im.getexif()
-            tags: dict[int, object] = dict(exif)
-            tags.update(exif.get_ifd(_EXIF_IFD))
-            rgb_image = ImageOps.exif_transpose(im).convert("RGB")
-    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as err:
-        raise InputError(f"cannot read {path} as an image ({err}); pass a JPEG or PNG photo") from err
-    rgb = np.asarray(rgb_image, dtype=np.uint8)
+            tags: dict[int, object] = {}
+            try:
+                exif = im.getexif()
+                tags.update(exif)
+                tags.update(exif.get_ifd(_EXIF_IFD))
+                oriented = ImageOps.exif_transpose(im)
+            except Exception as err:  # noqa: BLE001 - any broken EXIF: go on without it, and say so
+                warnings.warn(f"{path}: unreadable EXIF data ignored ({_short(err)}); orientation and focal length not read", InputWarning, stacklevel=2)
+                tags, oriented = {}, im
+            rgb = _to_rgb(oriented, path)
+    except InputError:
+        raise
+    except (OSError, SyntaxError, ValueError, TypeError, EOFError, MemoryError) as err:
+        raise InputError(f"cannot read {path} as an image ({_short(err)}); pass a JPEG or PNG photo") from err
     if rgb.shape[0] < 16 or rgb.shape[1] < 16:
         raise InputError(f"image {path} is only {rgb.shape[1]}x{rgb.shape[0]} px; pass a photo of at least 16x16 px")
     return rgb, tags, stored_size
 
 
-def load_depth(path: Path, depth_scale: float) -> np.ndarray:
+def load_depth(path: Path, depth_scale: float | None = None) -> np.ndarray:
     """Read a depth map as (H, W) float32 metres with 0 where invalid.
 
-    Integer images (8-, 16- or 32-bit single channel, e.g. a uint16 PNG in millimetres) are
-    multiplied by ``depth_scale`` (metres per unit). Floating-point images (32-bit TIFF, mode
-    ``F``) and ``.npy`` float arrays are metres already; integer ``.npy`` arrays are scaled like
-    images. NaN, infinite and negative values are invalid (0).
-    """
-    from PIL import Image, UnidentifiedImageError
+    ``depth_scale`` is metres per unit of the file. None (the default) infers it: integer images
+    (16- or 32-bit single channel, e.g. a uint16 PNG) and integer ``.npy`` arrays are millimetres,
+    floating-point images (32-bit TIFF, mode ``F``) and float ``.npy`` arrays metres. NaN,
+    infinite and negative values are invalid (0).
 
+    Raises InputError for an unreadable file, an 8-bit image without an explicit scale (8 bits
+    hold 0-255 mm: such files are visualisations, not measurements), and a median depth outside
+    :data:`ROOM_MEDIAN_DEPTH_M` (naming the ``--depth-scale`` that would make it a room's).
+    """
     path = Path(path)
-    if not (np.isfinite(depth_scale) and depth_scale > 0):
+    explicit = depth_scale is not None
+    if explicit and not (isinstance(depth_scale, (int, float)) and math.isfinite(depth_scale) and depth_scale > 0):
         raise InputError(f"depth scale must be a positive number of metres per depth unit, got {depth_scale} (0.001 for millimetre PNGs)")
     if not path.is_file():
         raise InputError(f"depth map not found: {path} (check the path, or leave depth out to estimate it)")
+    eight_bit = False
     if path.suffix.lower() == ".npy":
         try:
             raw = np.load(path, allow_pickle=False)
-        except (ValueError, OSError, EOFError) as err:
-            raise InputError(f"cannot read {path} as a .npy depth array ({err}); save it with numpy.save") from err
+        except (ValueError, OSError, EOFError, TypeError, MemoryError) as err:
+            raise InputError(f"cannot read {path} as a .npy depth array ({_short(err)}); save it with numpy.save") from err
         if raw.ndim == 3 and raw.shape[2] == 1:
             raw = raw[:, :, 0]
-        if raw.ndim != 2 or not (np.issubdtype(raw.dtype, np.floating) or np.issubdtype(raw.dtype, np.integer)):
+        kind = raw.dtype.kind
+        if raw.ndim != 2 or kind not in "fiu" or raw.dtype.itemsize > 8:
             raise InputError(f"depth array {path} has shape {raw.shape} and dtype {raw.dtype}; expected an (H, W) array of metres")
-        is_float = np.issubdtype(raw.dtype, np.floating)
+        if raw.size > MAX_IMAGE_PIXELS:
+            raise InputError(f"depth array {path} is {raw.shape[1]}x{raw.shape[0]}; at most {MAX_IMAGE_PIXELS // 1_000_000} MP is read")
+        is_float = kind == "f"
+        eight_bit = raw.dtype.itemsize == 1
     else:
+        im = _open_checked(path, "depth map", "a depth image")
         try:
-            with Image.open(path) as im:
-                im.load()
+            with im:
                 mode = im.mode
-                if mode not in ("L", "I", "I;16", "I;16B", "I;16L", "F"):
+                if mode not in ("L", "I", "I;16", "I;16B", "I;16L", "I;16N", "F"):
                     raise InputError(
-                        f"depth image {path} has mode {mode}; expected one channel (uint16 PNG in millimetres, 8/32-bit grey, or a float32 TIFF)"
+                        f"depth image {path} has mode {mode}; expected one channel (uint16 PNG in millimetres, 32-bit grey, or a float32 TIFF)"
                     )
+                im.load()
                 raw = np.asarray(im)
-        except (UnidentifiedImageError, OSError, SyntaxError) as err:
-            raise InputError(f"cannot read {path} as a depth image ({err}); pass a uint16 PNG or a .npy of metres") from err
+        except InputError:
+            raise
+        except (OSError, SyntaxError, ValueError, TypeError, EOFError, MemoryError) as err:
+            raise InputError(f"cannot read {path} as a depth image ({_short(err)}); pass a uint16 PNG or a .npy of metres") from err
         is_float = mode == "F"
-    depth = raw.astype(np.float64)
-    if not is_float:
-        depth = depth * float(depth_scale)
+        eight_bit = mode == "L"
+    if eight_bit and not explicit:
+        raise InputError(
+            f"depth map {path} is an 8-bit image (values 0-255): it cannot hold a room's depth in millimetres and is most likely a "
+            "visualisation; pass the 16-bit depth PNG, or --depth-scale METRES_PER_STEP if its values really are depth"
+        )
+    scale = float(depth_scale) if explicit else (1.0 if is_float else 0.001)
+    with np.errstate(all="ignore"):
+        depth = raw.astype(np.float64) * scale
     depth[~np.isfinite(depth) | (depth < 0.0)] = 0.0
+    _check_depth_units(depth, path, scale, explicit, is_float)
     return depth.astype(np.float32)
+
+
+def _check_depth_units(depth_m: np.ndarray, path: Path, scale: float, explicit: bool, is_float: bool) -> None:
+    """Refuse depth whose median is no room's, naming the scale that would make it one."""
+    valid = depth_m[depth_m > 0.0]
+    if valid.size == 0:
+        return  # check_depth says "no valid depth"
+    median = float(np.median(valid))
+    lo, hi = _EXPLICIT_MEDIAN_DEPTH_M if explicit else ROOM_MEDIAN_DEPTH_M
+    if lo <= median <= hi:
+        return
+    raw_median = median / scale
+    fits = [s for s in (1.0, 0.1, 0.01, 0.001, 0.0001, 1e-5) if ROOM_MEDIAN_DEPTH_M[0] <= raw_median * s <= ROOM_MEDIAN_DEPTH_M[1]]
+    unit = {1.0: "metres", 0.1: "decimetres", 0.01: "centimetres", 0.001: "millimetres", 0.0001: "tenths of a millimetre"}
+    read_as = f"--depth-scale {scale:g}" if explicit else ("metres (a float file)" if is_float else "millimetres (an integer file)")
+    what = f"depth map {path}: median depth {median:.4g} m when read as {read_as}, which is no room's ({ROOM_MEDIAN_DEPTH_M[0]:g}-{ROOM_MEDIAN_DEPTH_M[1]:g} m)"
+    if fits:
+        best = min(fits, key=lambda s: abs(math.log(raw_median * s / 2.5)))
+        raise InputError(f"{what}; if the file stores {unit.get(best, f'units of {best:g} m')}, pass --depth-scale {best:g}")
+    raise InputError(f"{what}; check the file, or pass --depth-scale with its metres per unit")
 
 
 def check_depth(depth_m: np.ndarray, what: str) -> None:
@@ -166,14 +302,26 @@ def _checked(k: CameraIntrinsics, what: str) -> CameraIntrinsics:
             f"{what}: principal point ({k.cx_px:.1f}, {k.cy_px:.1f}) px lies far outside the "
             f"{k.width_px}x{k.height_px} image; were the intrinsics given for another resolution?"
         )
+    fov = math.degrees(2.0 * math.atan(k.width_px / (2.0 * k.fx_px)))
+    if not _FOV_RANGE_DEG[0] <= fov <= _FOV_RANGE_DEG[1]:
+        raise InputError(
+            f"{what}: focal length {k.fx_px:.4g} px gives a {fov:.3g} degree field of view over {k.width_px} px, which no camera has; "
+            "give fx, fy in pixels of this image (not millimetres, not another resolution)"
+        )
+    if not 1.0 / _MAX_PIXEL_ASPECT <= k.fx_px / k.fy_px <= _MAX_PIXEL_ASPECT:
+        raise InputError(f"{what}: fx {k.fx_px:.4g} px and fy {k.fy_px:.4g} px differ more than {_MAX_PIXEL_ASPECT:g}x; give fx,fy,cx,cy in that order")
     return k
 
 
 def _make(fx, fy, cx, cy, width: int, height: int, source: str, what: str) -> CameraIntrinsics:
-    try:
-        values = [float(v) for v in (fx, fy, cx, cy)]
-    except (TypeError, ValueError) as err:
-        raise InputError(f"{what}: fx, fy, cx, cy must be numbers ({err})") from err
+    values = []
+    for v in (fx, fy, cx, cy):
+        if isinstance(v, bool) or not isinstance(v, (int, float, str)):
+            raise InputError(f"{what}: fx, fy, cx, cy must be numbers, got {type(v).__name__} {str(v)[:30]!r}")
+        try:
+            values.append(float(v))
+        except (TypeError, ValueError, OverflowError) as err:
+            raise InputError(f"{what}: fx, fy, cx, cy must be numbers ({_short(err)})") from err
     if not all(math.isfinite(v) for v in values) or values[0] <= 0 or values[1] <= 0:
         raise InputError(f"{what}: need finite fx, fy > 0 and finite cx, cy in pixels, got {tuple(values)}")
     return _checked(CameraIntrinsics(*values, int(width), int(height), source), what)
@@ -182,11 +330,17 @@ def _make(fx, fy, cx, cy, width: int, height: int, source: str, what: str) -> Ca
 def _from_camera_json(path: Path, width: int, height: int) -> CameraIntrinsics:
     try:
         data = json.loads(path.read_text())
+        if not isinstance(data, dict):
+            raise TypeError(f"top level is a {type(data).__name__}, not an object")
         fx, fy, cx, cy = data["fx"], data["fy"], data["cx"], data["cy"]
         w, h = data.get("width", width), data.get("height", height)
+        if isinstance(w, bool) or isinstance(h, bool) or not isinstance(w, (int, float)) or not isinstance(h, (int, float)):
+            raise TypeError(f"width and height must be numbers, got {str(w)[:20]!r} and {str(h)[:20]!r}")
+        if not (math.isfinite(w) and math.isfinite(h)):
+            raise ValueError(f"width and height must be finite, got {w} and {h}")
         w, h = int(w), int(h)
-    except (OSError, ValueError, TypeError, KeyError) as err:
-        raise InputError(f"cannot read intrinsics from {path} ({type(err).__name__}: {err}); it needs fx, fy, cx, cy, width, height") from err
+    except (OSError, ValueError, TypeError, KeyError, RecursionError) as err:
+        raise InputError(f"cannot read intrinsics from {path} ({type(err).__name__}: {_short(err)}); it needs fx, fy, cx, cy, width, height") from err
     if w <= 0 or h <= 0:
         raise InputError(f"{path}: width and height must be positive, got {w}x{h}")
     if abs(w / h - width / height) > 0.01 * (width / height):
@@ -198,13 +352,22 @@ def _from_camera_json(path: Path, width: int, height: int) -> CameraIntrinsics:
 def _rational(value) -> float | None:
     try:
         v = float(value)
-    except (TypeError, ValueError, ZeroDivisionError):
+    except (TypeError, ValueError, ZeroDivisionError, OverflowError):
         return None
     return v if math.isfinite(v) and v > 0 else None
 
 
 def _from_exif(tags: dict[int, object], width: int, height: int, stored_size: tuple[int, int]) -> CameraIntrinsics | None:
-    """Square-pixel intrinsics from EXIF focal length, or None when EXIF does not say."""
+    """Square-pixel intrinsics from EXIF focal length, or None when EXIF does not say (or says
+    something no camera has: then a warning, and the next source answers)."""
+    try:
+        return _from_exif_tags(tags, width, height, stored_size)
+    except InputError as err:
+        warnings.warn(f"EXIF focal length ignored: {err}", InputWarning, stacklevel=3)
+        return None
+
+
+def _from_exif_tags(tags: dict[int, object], width: int, height: int, stored_size: tuple[int, int]) -> CameraIntrinsics | None:
     f35 = _rational(tags.get(_TAG_FOCAL_35MM))
     if f35 is not None:
         # The 35 mm equivalent focal length is defined on the diagonal (CIPA DC-008).
@@ -212,7 +375,7 @@ def _from_exif(tags: dict[int, object], width: int, height: int, stored_size: tu
         return _checked(CameraIntrinsics(f_px, f_px, (width - 1) / 2.0, (height - 1) / 2.0, width, height, "exif"), "EXIF focal length")
     f_mm = _rational(tags.get(_TAG_FOCAL_LENGTH))
     x_res = _rational(tags.get(_TAG_FOCAL_PLANE_X_RES))
-    unit_mm = _RES_UNIT_MM.get(int(tags.get(_TAG_FOCAL_PLANE_RES_UNIT, 2) or 2))
+    unit_mm = _RES_UNIT_MM.get(int(_rational(tags.get(_TAG_FOCAL_PLANE_RES_UNIT)) or 2))
     if f_mm is None or x_res is None or unit_mm is None:
         return None
     # FocalPlaneXResolution is in pixels per unit of the sensor image (ExifImageWidth wide).
@@ -220,6 +383,12 @@ def _from_exif(tags: dict[int, object], width: int, height: int, stored_size: tu
     exif_w = _rational(tags.get(_TAG_EXIF_IMAGE_WIDTH)) or float(stored_size[0])
     f_px = f_mm * x_res / unit_mm * (stored_size[0] / exif_w)
     return _checked(CameraIntrinsics(f_px, f_px, (width - 1) / 2.0, (height - 1) / 2.0, width, height, "exif"), "EXIF focal length")
+
+
+def _fov_intrinsics(fov, width: int, height: int, source: str, what: str) -> CameraIntrinsics:
+    if not (isinstance(fov, (int, float)) and math.isfinite(fov) and 1.0 <= fov <= 175.0):
+        raise InputError(f"{what}: field of view must be between 1 and 175 degrees, got {fov}")
+    return CameraIntrinsics.from_fov(width, height, float(fov), source)
 
 
 def resolve_intrinsics(
@@ -230,22 +399,41 @@ def resolve_intrinsics(
     exif: dict[int, object] | None = None,
     stored_size: tuple[int, int] | None = None,
 ) -> CameraIntrinsics:
-    """Intrinsics of a ``width`` x ``height`` image, looked up in the order of the module doc."""
+    """Intrinsics of a ``width`` x ``height`` image, looked up in the order of the module doc;
+    warns (:class:`InputWarning`) when a lower source is present and disagrees with the winner."""
+    chosen: tuple[CameraIntrinsics, str] | None = None
     if inputs.intrinsics is not None:
         if len(inputs.intrinsics) != 4:
             raise InputError(f"--intrinsics needs 4 numbers fx,fy,cx,cy in pixels, got {len(inputs.intrinsics)}")
-        return _make(*inputs.intrinsics, width, height, "flag", "--intrinsics")
+        chosen = (_make(*inputs.intrinsics, width, height, "flag", "--intrinsics"), "--intrinsics")
+    elif inputs.fov_deg is not None:
+        chosen = (_fov_intrinsics(inputs.fov_deg, width, height, "flag", "--fov-deg"), f"--fov-deg {inputs.fov_deg:g}")
     camera_json = Path(inputs.image_path).with_name("camera.json")
+    found: list[tuple[CameraIntrinsics, str]] = []
     if camera_json.is_file():
-        return _from_camera_json(camera_json, width, height)
+        if chosen is None:
+            return _from_camera_json(camera_json, width, height)
+        try:
+            found.append((_from_camera_json(camera_json, width, height), f"{camera_json}"))
+        except InputError as err:
+            warnings.warn(f"{chosen[1]} is used; {camera_json} beside the image is ignored ({err})", InputWarning, stacklevel=2)
     if exif:
         k = _from_exif(exif, width, height, stored_size or (width, height))
         if k is not None:
-            return k
-    fov, source = (inputs.fov_deg, "flag") if inputs.fov_deg is not None else (config.default_fov_deg, "default-fov")
-    if not (fov is not None and math.isfinite(fov) and 1.0 <= fov <= 175.0):
-        raise InputError(f"field of view must be between 1 and 175 degrees, got {fov}")
-    return CameraIntrinsics.from_fov(width, height, float(fov), source)
+            if chosen is None:
+                return k
+            found.append((k, "the EXIF focal length"))
+    if chosen is None:
+        return _fov_intrinsics(config.default_fov_deg, width, height, "default-fov", "default field of view")
+    k, name = chosen
+    for other, other_name in found[:1]:  # the next source in line is the one the flag overrides
+        if abs(other.fx_px / k.fx_px - 1.0) > _DISAGREE or abs(other.cx_px - k.cx_px) > _DISAGREE * width:
+            warnings.warn(
+                f"{name} (fx {k.fx_px:.1f} px) wins over {other_name} (fx {other.fx_px:.1f} px), which disagrees; drop one of them to silence this",
+                InputWarning,
+                stacklevel=2,
+            )
+    return k
 
 
 def _downscale(rgb: np.ndarray, depth_m: np.ndarray | None, k: CameraIntrinsics) -> tuple[np.ndarray, np.ndarray | None, CameraIntrinsics, float]:
@@ -273,11 +461,12 @@ def load_input(inputs: InputSpec, config: PerceptionConfig) -> LoadedInput:
         depth = load_depth(Path(inputs.depth_path), inputs.depth_scale)
         if depth.shape != (h, w):
             same_aspect = abs(depth.shape[1] * h - depth.shape[0] * w) <= 0.01 * w * h / max(depth.shape)
-            hint = (
-                f"it has the photo's aspect ratio: if it covers the same field of view, resize it to {w}x{h} with nearest-neighbour first"
-                if same_aspect
-                else "pass a depth map registered to the photo at the same size"
-            )
+            if (depth.shape[1], depth.shape[0]) == tuple(stored_size) and (w, h) != tuple(stored_size):
+                hint = "it matches the image as stored, before its EXIF orientation is applied: rotate the depth map the same way"
+            elif same_aspect:
+                hint = f"it has the photo's aspect ratio: if it covers the same field of view, resize it to {w}x{h} with nearest-neighbour first"
+            else:
+                hint = "pass a depth map registered to the photo at the same size"
             raise InputError(f"depth map {inputs.depth_path} is {depth.shape[1]}x{depth.shape[0]} px but the image is {w}x{h} px; {hint}")
         check_depth(depth, f"depth map {inputs.depth_path}")
     k = resolve_intrinsics(inputs, config, w, h, exif, stored_size)

@@ -27,6 +27,16 @@ rerun recording to inspect it.
   scene-builder view room_scene               open the rerun viewer on a saved scene
 
 Frames: world Z up, metres, kilograms, floor at z = 0; camera frame OpenCV (x right, y down, z forward).
+
+Output folder: -o may replace only a folder scene-builder wrote (it holds .scene-builder and
+report.json); anything else is refused unless --overwrite. The current folder and a folder holding
+the input are always refused. Without -o the output is ./<image stem>_scene, which is replaced only
+by a build of the same image.
+
+Exit status: 0 ok, 1 other failure, 2 usage error (bad command line), 3 input error (bad or
+missing file, implausible depth or intrinsics, output folder refused), 4 model weights missing,
+5 export failed, 130 interrupted. Errors are one line 'error: ...'; doubtful input the build goes
+on with is one line 'warning: ...'.
 """
 
 
@@ -45,13 +55,33 @@ def _positive(text: str) -> float:
         v = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    if not (v > 0 and v != float("inf")):
+        raise argparse.ArgumentTypeError(f"expected a positive finite number, got {text!r}")
+    return v
+
+
+def _fov(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a field of view in degrees, got {text!r}") from None
+    if not 1.0 <= v <= 175.0:
+        raise argparse.ArgumentTypeError(f"field of view must be between 1 and 175 degrees, got {text}")
     return v
 
 
 def _add_build_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("-o", "--out", type=Path, help="output folder (default: <image stem>_scene/)")
+    p.add_argument(
+        "-o",
+        "--out",
+        type=Path,
+        help="output folder (default: ./<image stem>_scene, replaced only by a build of the same image)",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the output folder even if scene-builder did not write it (its content is deleted)",
+    )
     p.add_argument("--seed", type=int, default=0, help="random seed; the output is deterministic for a given input and seed (default 0)")
     p.add_argument(
         "--viz",
@@ -84,22 +114,36 @@ def make_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
-    b = sub.add_parser("build", help="build a scene from one photo (the default command)", description="Build a simulation-ready scene from one photo.")
+    b = sub.add_parser(
+        "build",
+        help="build a scene from one photo (the default command)",
+        description="Build a simulation-ready scene from one photo.",
+        epilog="Exit status: 0 ok, 2 usage error, 3 input error (bad file, implausible depth or intrinsics, output folder "
+        "refused), 4 model weights missing, 5 export failed; see scene-builder --help.",
+    )
     b.add_argument("image", type=Path, help="the photo (JPEG/PNG; EXIF orientation is applied)")
-    b.add_argument("--depth", type=Path, help="aligned depth map: uint16 PNG (see --depth-scale) or .npy in metres; same size as the image")
-    b.add_argument("--depth-scale", type=_positive, default=0.001, help="metres per depth unit of a PNG depth map (default 0.001: millimetres)")
+    b.add_argument("--depth", type=Path, help="aligned depth map: uint16 PNG in millimetres, float TIFF or .npy in metres; same size as the image")
+    b.add_argument(
+        "--depth-scale",
+        type=_positive,
+        metavar="M",
+        help="metres per unit of the depth file (default: 0.001 for integer files, 1 for float files). Without it an "
+        "8-bit depth image is refused, and so is depth whose median is no room's (0.3-15 m), with the scale that would fit",
+    )
     cam = b.add_mutually_exclusive_group()
     cam.add_argument("--intrinsics", type=_intrinsics, metavar="FX,FY,CX,CY", help="pinhole intrinsics in pixels")
     cam.add_argument(
         "--fov-deg",
-        type=_positive,
+        type=_fov,
         metavar="F",
-        help="horizontal field of view in degrees, used when no --intrinsics, camera.json beside the image or EXIF focal length (default 60)",
+        help="horizontal field of view in degrees (1-175); wins over a camera.json beside the image and the EXIF focal length "
+        "(a warning says so when they disagree); default: camera.json, else EXIF, else 60",
     )
     _add_build_options(b)
 
     d = sub.add_parser("demo", help="render a procedural room with MuJoCo, rebuild it, and compare with the truth")
     d.add_argument("-o", "--out", type=Path, default=Path("demo_scene"), help="output folder (default demo_scene/)")
+    d.add_argument("--overwrite", action="store_true", help="replace the output folder even if scene-builder did not write it")
     d.add_argument("--seed", type=int, default=0, help="room and build seed (default 0)")
     d.add_argument("--objects", type=int, default=6, help="number of objects in the room (default 6)")
     d.add_argument("--viz", choices=("save", "spawn", "off"), default="save", help="rerun recording (default save)")
@@ -159,18 +203,20 @@ def _cmd_build(args: argparse.Namespace) -> int:
         export=ExportConfig(usd=not args.no_usd, urdf=not args.no_urdf, gltf=not args.no_gltf, viz=args.viz),
     )
     out = args.out or default_out_dir(args.image)
-    result = build(inputs, out, config, progress=not args.quiet)
+    result = build(inputs, out, config, progress=not args.quiet, overwrite=args.overwrite, default_name=args.out is None)
     _print_summary(result)
     return 0
 
 
 def _print_summary(result) -> None:
-    from rich.console import Console
+    from rich.markup import escape
+
+    from scene_builder.pipeline import stderr_console
 
     v = result.verdict
-    console = Console(stderr=True, highlight=False)
+    console = stderr_console()
     console.print(
-        f"[bold]{len(result.scene.objects)} objects[/bold] -> {result.out_dir}/  "
+        f"[bold]{len(result.scene.objects)} objects[/bold] -> {escape(str(result.out_dir))}/  "
         f"(max penetration {v.max_penetration_m * 1000:.2f} mm, settle drift {v.settle_max_drift_m * 1000:.1f} mm, "
         f"{'stable' if v.stable else 'NOT stable'})"
     )
@@ -182,20 +228,21 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     import tempfile
 
     from scene_builder.config import BuildConfig, ExportConfig, InputSpec
-    from scene_builder.pipeline import build
+    from scene_builder.pipeline import add_to_marker, build, stderr_console
     from scene_builder.procedural import compare_to_ground_truth, write_demo_input
 
     with tempfile.TemporaryDirectory(prefix="scene-builder-demo-") as tmp:
         sample = write_demo_input(Path(tmp) / "room", seed=args.seed, n_objects=args.objects)
         cam = json.loads((sample / "camera.json").read_text())
         inputs = InputSpec(sample / "rgb.png", sample / "depth.png", 0.001, (cam["fx"], cam["fy"], cam["cx"], cam["cy"]))
-        result = build(inputs, args.out, BuildConfig(seed=args.seed, export=ExportConfig(viz=args.viz)), progress=True)
+        result = build(
+            inputs, args.out, BuildConfig(seed=args.seed, export=ExportConfig(viz=args.viz)), progress=True, overwrite=args.overwrite
+        )
         comparison = compare_to_ground_truth(result.scene, sample)
     (args.out / "ground_truth_comparison.json").write_text(json.dumps(comparison, indent=2) + "\n")
+    add_to_marker(args.out, "ground_truth_comparison.json")
     _print_summary(result)
-    from rich.console import Console
-
-    Console(stderr=True, highlight=False).print(
+    stderr_console().print(
         "fidelity vs the rendered room: "
         + ", ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}" for k, v in comparison["summary"].items())
     )
@@ -268,13 +315,47 @@ def main(argv: list[str] | None = None) -> int:
         "models": _cmd_models,
     }
     try:
-        return handlers[args.command](args)
+        with _one_line_warnings():
+            return handlers[args.command](args)
     except SceneBuilderError as err:
-        print(f"error: {err}", file=sys.stderr)
+        print(f"error: {_one_line(str(err))}", file=sys.stderr)
         return err.exit_code
+    except OSError as err:  # the machine's, not the input's: disk full, permissions changed mid-build
+        print(f"error: {_one_line(str(err))} (a file could not be read or written)", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return 130
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split())
+
+
+class _one_line_warnings:
+    """Print scene-builder's InputWarning as one line ``warning: ...`` (other warnings as usual)."""
+
+    def __enter__(self):
+        import warnings
+
+        from scene_builder.errors import InputWarning
+
+        self._saved = warnings.showwarning
+
+        def show(message, category, filename, lineno, file=None, line=None):
+            if issubclass(category, InputWarning):
+                print(f"warning: {_one_line(str(message))}", file=sys.stderr)
+            else:
+                self._saved(message, category, filename, lineno, file, line)
+
+        warnings.showwarning = show
+        return self
+
+    def __exit__(self, *exc):
+        import warnings
+
+        warnings.showwarning = self._saved
+        return False
 
 
 if __name__ == "__main__":

@@ -14,14 +14,15 @@ class InputSpec:
     """What the user handed in.
 
     image_path: the photo. depth_path: optional aligned depth image (uint16 PNG, or any
-    single-channel image readable by PIL, or a .npy of float metres). depth_scale: metres per depth
-    unit (0.001 for millimetre PNGs). intrinsics: (fx, fy, cx, cy) in pixels, or None. fov_deg:
-    horizontal field of view used when no intrinsics, EXIF focal length or camera.json is found.
+    single-channel image readable by PIL, or a .npy). depth_scale: metres per unit of the depth
+    file, or None for the file's natural unit (millimetres for integer images and arrays, metres
+    for float ones). intrinsics: (fx, fy, cx, cy) in pixels, or None. fov_deg: horizontal field of
+    view in degrees, or None (``perception.inputs`` gives the order of the intrinsics sources).
     """
 
     image_path: Path
     depth_path: Path | None = None
-    depth_scale: float = 0.001
+    depth_scale: float | None = None
     intrinsics: tuple[float, float, float, float] | None = None
     fov_deg: float | None = None
 

@@ -1,10 +1,29 @@
-"""Errors that reach the user as one actionable line.
+"""Errors that reach the user as one actionable line, and the exit status of each kind.
 
-Library code raises these (never ``sys.exit``); the CLI prints ``error: <message>`` and exits
-non-zero. The message must say what is wrong and what to do, on one line.
+Library code raises these (never ``sys.exit``); the CLI prints ``error: <message>`` and exits with
+the class's ``exit_code``. The message must say what is wrong and what to do, on one line.
+
+Exit statuses of ``scene-builder`` (also in ``--help`` and the README):
+
+====  =====================================================================================
+0     success
+1     other failure (``check`` found problems; an unexpected error)
+2     usage error: unknown command or flag, malformed flag value (argparse)
+3     input error: a file that is missing, corrupt or implausible; an output folder refused
+4     a learned model's weights are not available
+5     an exporter produced output its consumer rejects
+130   interrupted (Ctrl-C)
+====  =====================================================================================
+
+Doubtful input the build goes on with (which intrinsics source won, an alpha channel dropped)
+is reported with ``warnings.warn(..., InputWarning)``; the CLI prints it as one ``warning: ...``
+line.
 """
 
 from __future__ import annotations
+
+#: Exit status of a usage error (argparse's own status).
+USAGE_EXIT_CODE = 2
 
 
 class SceneBuilderError(Exception):
@@ -14,22 +33,26 @@ class SceneBuilderError(Exception):
 
 
 class InputError(SceneBuilderError):
-    """Bad input: missing or corrupt files, wrong sizes, invalid depth, bad flags."""
+    """Bad input: missing or corrupt files, wrong sizes, invalid depth, an output folder refused."""
 
-    exit_code = 2
+    exit_code = 3
 
 
 class ModelUnavailableError(SceneBuilderError):
     """A learned model's weights are not available locally (and no download is possible)."""
 
-    exit_code = 3
+    exit_code = 4
 
 
 class ExportError(SceneBuilderError):
     """An exporter produced output that its consumer rejects (names the object when it can)."""
 
-    exit_code = 4
+    exit_code = 5
 
 
 class EmptySceneError(InputError):
     """Perception found nothing to build (no objects, no floor)."""
+
+
+class InputWarning(UserWarning):
+    """Doubtful input the build goes on with; the message says what was assumed."""
