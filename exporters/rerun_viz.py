@@ -119,20 +119,38 @@ def _blueprint(scene: Scene, with_images: bool):
     )
     panels = (rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"), rrb.TimePanel(state="collapsed"))
     if not with_images:
-        return rrb.Blueprint(rrb.Horizontal(view3d, rrb.TextDocumentView(origin="report", name="report"), column_shares=[3, 1]), *panels)
-    return rrb.Blueprint(
-        rrb.Horizontal(
-            view3d,
-            rrb.Vertical(
-                rrb.Spatial2DView(name="photo + masks", origin="world/camera", contents=["world/camera/rgb", "world/camera/masks"]),
-                rrb.Spatial2DView(name="depth", origin="world/camera", contents=["world/camera/depth"]),
-                rrb.TextDocumentView(origin="report", name="report"),
-                row_shares=[2, 2, 1],
-            ),
-            column_shares=[3, 2],
+        root = rrb.Horizontal(view3d, rrb.TextDocumentView(origin="report", name="report"), column_shares=[3, 1])
+        return rrb.Blueprint(_with_fixed_ids(root), *panels)
+    root = rrb.Horizontal(
+        view3d,
+        rrb.Vertical(
+            rrb.Spatial2DView(name="photo + masks", origin="world/camera", contents=["world/camera/rgb", "world/camera/masks"]),
+            rrb.Spatial2DView(name="depth", origin="world/camera", contents=["world/camera/depth"]),
+            rrb.TextDocumentView(origin="report", name="report"),
+            row_shares=[2, 2, 1],
         ),
-        *panels,
+        column_shares=[3, 2],
     )
+    return rrb.Blueprint(_with_fixed_ids(root), *panels)
+
+
+#: Namespace of the blueprint's view and container ids (uuid5 of their place in the layout).
+#: uuid5(NAMESPACE_URL, "scene-builder/rerun-blueprint").
+_BLUEPRINT_NAMESPACE = "51c5483e-5d36-5689-a20e-7ccd1d8df9ae"
+
+
+def _with_fixed_ids(node, where: str = "root"):
+    """Give every container and view of the layout a uuid5 of its place in the tree instead of
+    rerun's random uuid4, so that the same scene always gets the same blueprint."""
+    import uuid
+
+    import rerun.blueprint as rrb
+
+    node.id = uuid.uuid5(uuid.UUID(_BLUEPRINT_NAMESPACE), where)
+    if isinstance(node, rrb.Container):
+        for i, child in enumerate(node.contents):
+            _with_fixed_ids(child, f"{where}/{i}")
+    return node
 
 
 EYE_BACK_M = 0.5  # the eye sits this far behind the input camera, so its (small) frustum is in view

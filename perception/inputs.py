@@ -48,6 +48,7 @@ __all__ = [
     "MIN_VALID_DEPTH_FRACTION",
     "ROOM_MEDIAN_DEPTH_M",
     "check_depth",
+    "check_paths",
     "load_depth",
     "load_input",
     "load_rgb",
@@ -64,7 +65,7 @@ MIN_VALID_DEPTH_FRACTION = 0.05
 #: The median of a room's measured depth lies in this range (metres) when the depth scale is
 #: inferred from the file; with an explicit ``depth_scale`` the wider range
 #: :data:`_EXPLICIT_MEDIAN_DEPTH_M` applies (the user said what the units are).
-ROOM_MEDIAN_DEPTH_M = (0.3, 15.0)
+ROOM_MEDIAN_DEPTH_M = (0.4, 15.0)
 _EXPLICIT_MEDIAN_DEPTH_M = (0.05, 100.0)
 #: Focal lengths giving a horizontal field of view outside this range (degrees) are no camera's.
 _FOV_RANGE_DEG = (2.0, 170.0)
@@ -164,6 +165,22 @@ def _to_rgb(im, path: Path) -> np.ndarray:
     return np.asarray(im.convert("RGB"), dtype=np.uint8)
 
 
+def check_paths(inputs: InputSpec) -> None:
+    """Raise InputError (as :func:`load_rgb` / :func:`load_depth` would) when the image or the depth
+    map is missing or a folder: a cheap check before anything else is looked at."""
+    _check_path(Path(inputs.image_path), "image")
+    if inputs.depth_path is not None:
+        _check_path(Path(inputs.depth_path), "depth map")
+
+
+def _check_path(path: Path, what: str) -> None:
+    if path.is_dir():
+        raise InputError(f"{what} {path} is a folder; pass the {'photo' if what == 'image' else 'depth'} file inside it")
+    if not path.is_file():
+        hint = "check the path" if what == "image" else "check the path, or leave depth out to estimate it"
+        raise InputError(f"{what} not found: {path} ({hint})")
+
+
 def load_rgb(path: Path) -> tuple[np.ndarray, dict[int, object], tuple[int, int]]:
     """Read a photo as RGB with its EXIF orientation applied.
 
@@ -173,8 +190,7 @@ def load_rgb(path: Path) -> tuple[np.ndarray, dict[int, object], tuple[int, int]
     from PIL import ImageOps
 
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"image not found: {path} (check the path)")
+    _check_path(path, "image")
     im = _open_checked(path, "image", "an image")
     try:
         with im:
@@ -215,8 +231,7 @@ def load_depth(path: Path, depth_scale: float | None = None) -> np.ndarray:
     explicit = depth_scale is not None
     if explicit and not (isinstance(depth_scale, (int, float)) and math.isfinite(depth_scale) and depth_scale > 0):
         raise InputError(f"depth scale must be a positive number of metres per depth unit, got {depth_scale} (0.001 for millimetre PNGs)")
-    if not path.is_file():
-        raise InputError(f"depth map not found: {path} (check the path, or leave depth out to estimate it)")
+    _check_path(path, "depth map")
     eight_bit = False
     if path.suffix.lower() == ".npy":
         try:

@@ -244,7 +244,9 @@ def _lowest_surface(points: np.ndarray, up: np.ndarray, min_count: int) -> float
     if len(bins) < 2:
         return None
     hist, edges = np.histogram(depth_below, bins=bins)
-    window = np.convolve(hist, np.ones(3, dtype=np.int64), mode="same")
+    # "full" trimmed to len(hist): mode "same" returns 3 values for a 2-bin histogram (a perfectly
+    # flat floor), which does not line up with the bins.
+    window = np.convolve(hist, np.ones(3, dtype=np.int64), mode="full")[1:-1]
     ok = np.flatnonzero((window >= min_count) & (edges[:-1] > 0.2))  # at least 20 cm below the camera
     a = np.cross(up, [1.0, 0.0, 0.0])
     a /= np.linalg.norm(a)

@@ -128,7 +128,7 @@ def make_parser() -> argparse.ArgumentParser:
         type=_positive,
         metavar="M",
         help="metres per unit of the depth file (default: 0.001 for integer files, 1 for float files). Without it an "
-        "8-bit depth image is refused, and so is depth whose median is no room's (0.3-15 m), with the scale that would fit",
+        "8-bit depth image is refused, and so is depth whose median is no room's (0.4-15 m), with the scale that would fit",
     )
     cam = b.add_mutually_exclusive_group()
     cam.add_argument("--intrinsics", type=_intrinsics, metavar="FX,FY,CX,CY", help="pinhole intrinsics in pixels")
@@ -333,30 +333,30 @@ def _one_line(text: str) -> str:
 
 
 class _one_line_warnings:
-    """Print scene-builder's InputWarning as one line ``warning: ...`` (other warnings as usual)."""
+    """Print every InputWarning as one line ``warning: ...`` (other warnings as usual)."""
 
     def __enter__(self):
         import warnings
 
         from scene_builder.errors import InputWarning
 
-        self._saved = warnings.showwarning
+        self._catch = warnings.catch_warnings()
+        self._catch.__enter__()
+        warnings.simplefilter("always", InputWarning)
+        saved = warnings.showwarning
 
         def show(message, category, filename, lineno, file=None, line=None):
             if issubclass(category, InputWarning):
                 print(f"warning: {_one_line(str(message))}", file=sys.stderr)
             else:
-                self._saved(message, category, filename, lineno, file, line)
+                saved(message, category, filename, lineno, file, line)
 
         warnings.showwarning = show
         return self
 
     def __exit__(self, *exc):
-        import warnings
-
-        warnings.showwarning = self._saved
+        self._catch.__exit__(*exc)
         return False
-
 
 if __name__ == "__main__":
     sys.exit(main())

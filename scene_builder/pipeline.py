@@ -136,9 +136,11 @@ def build(
     from generation import generate_assets
     from layout import settled_scene, solve_layout, verify_scene
     from perception import perceive
+    from perception.inputs import check_paths
     from scene_builder.report import build_report, write_report
 
     out_dir = Path(out_dir)
+    check_paths(inputs)  # a missing photo is the first thing to say, before anything about the output
     check_out_dir(out_dir, inputs, overwrite=overwrite, default_name=default_name)
     log = StageLog(progress)
     total_start = time.perf_counter()

@@ -159,3 +159,34 @@ def test_recording_content_is_deterministic(recording, tmp_path):
         return sorted(out)
 
     assert canonical(again) == canonical(path)
+
+
+def test_blueprint_ids_are_deterministic(recording, tmp_path):
+    """Views and containers get ids from their place in the layout, not rerun's random uuid4: two
+    recordings of one scene have the same blueprint entity paths and contents."""
+    import pyarrow as pa
+    from rerun.chunk import RrdReader
+
+    scene, path = recording
+    again = record_scene(tmp_path / "scene.rrd", scene=scene, perception=_perception(scene))
+
+    def blueprint(p):
+        reader = RrdReader(str(p))
+        chunks = list(reader.store(store=reader.blueprints()[0]).stream())
+        out = {}
+        for c in chunks:
+            rb = c.to_record_batch()
+            out.setdefault(c.entity_path, []).append(
+                sorted(
+                    (n, str(rb.column(n).to_pylist()))
+                    for n in rb.schema.names
+                    if "RowId" not in n and not pa.types.is_temporal(rb.column(n).type)
+                )
+            )
+        return out
+
+    a, b = blueprint(path), blueprint(again)
+    views = sorted(p for p in a if p.startswith("/view/") and p.count("/") == 2)
+    assert len(views) == 4  # 3D scene, photo + masks, depth, report
+    assert sorted(a) == sorted(b)
+    assert {k: sorted(v) for k, v in a.items()} == {k: sorted(v) for k, v in b.items()}
