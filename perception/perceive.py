@@ -159,6 +159,16 @@ def _select_instances(
             continue
         kept.append((mask, pix))
     kept.sort(key=lambda mp: -int(mp[1].sum()))
+    if len(kept) > config.max_objects:
+        import warnings
+
+        from scene_builder.errors import InputWarning
+
+        warnings.warn(
+            f"{len(kept)} objects found; the {config.max_objects} largest are built and {len(kept) - config.max_objects} smaller ones left out",
+            InputWarning,
+            stacklevel=3,
+        )
     return kept[: config.max_objects], behind_walls
 
 

@@ -1,4 +1,10 @@
-"""Shared test set-up: headless rendering, paths to the shared real data (tests skip without it)."""
+"""Shared test set-up: headless rendering, paths to the shared real data.
+
+Without ``../shared`` the tests that need it skip, with the reason, on a developer's machine. Under
+``CI=true`` a missing ``../shared/data`` or ``../shared/models`` stops the run at once with a
+clear message, and any skip for want of shared data is reported as a failure: CI must never pass
+while testing nothing real.
+"""
 
 from __future__ import annotations
 
@@ -19,16 +25,52 @@ PHYSX_PROTOCOL = SHARED / "data" / "physx_protocol"
 MODELS = SHARED / "models"
 
 
+def in_ci() -> bool:
+    """True when the environment says this is a CI run (``CI=true``, as GitHub Actions and
+    GitLab set it)."""
+    return os.environ.get("CI", "").strip().lower() in ("1", "true", "yes")
+
+
+def _missing_shared() -> list[Path]:
+    return [p for p in (SHARED / "data", SHARED / "models") if not p.is_dir()]
+
+
+def pytest_sessionstart(session) -> None:
+    if in_ci() and (missing := _missing_shared()):
+        pytest.exit(
+            f"CI=true but the shared data is missing: {', '.join(map(str, missing))}; "
+            "check out or mount ../shared beside the repository (the real-data tests would otherwise skip)",
+            returncode=1,
+        )
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    """Under CI, a test skipped for want of shared data fails instead."""
+    outcome = yield
+    report = outcome.get_result()
+    if in_ci() and report.skipped and "shared" in str(report.longrepr).lower():
+        report.outcome = "failed"
+        report.longrepr = f"CI=true: skipped for want of shared data, which CI must provide: {report.longrepr}"
+
+
 def require(path: Path) -> Path:
-    """Skip the calling test (with the reason) when a shared data folder is absent."""
+    """Skip the calling test (with the reason) when a shared data folder is absent; under
+    ``CI=true`` fail it instead."""
     if not path.exists():
-        pytest.skip(f"shared data not present: {path} (the tests use ../shared beside the checkout)")
+        message = f"shared data not present: {path} (the tests use ../shared beside the checkout)"
+        if in_ci():
+            pytest.fail(f"CI=true: {message}", pytrace=False)
+        pytest.skip(message)
     return path
 
 
 def real_samples(with_intrinsics: bool = True) -> list[Path]:
-    """Sample folders under ../shared/data/real that have aligned depth (and camera.json)."""
+    """Sample folders under ../shared/data/real that have aligned depth (and camera.json); empty
+    without the shared data (the tests using them skip), an error under ``CI=true``."""
     if not REAL_DATA.exists():
+        if in_ci():
+            raise RuntimeError(f"CI=true but {REAL_DATA} is missing; check out or mount ../shared beside the repository")
         return []
     out = []
     for d in sorted(REAL_DATA.iterdir()):
