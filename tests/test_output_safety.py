@@ -1,0 +1,247 @@
+"""Output safety and determinism on real builds (issue 12): a build replaces only its own output,
+respects the umask, leaves the previous output intact when interrupted, and two builds of one
+input give byte-identical scene.json, MJCF, USD, URDF, glTF and meshes; logs without a terminal
+are not wrapped; a photo of 500 small objects builds in bounded time."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from scene_builder.cli import main
+from scene_builder.pipeline import MARKER
+
+from .conftest import REPO
+
+CLI = [sys.executable, "-m", "scene_builder.cli"]
+DETERMINISTIC = ("scene.json", "scene.xml", "scene.usda", "scene.urdf", "scene.glb")
+
+
+@pytest.fixture(scope="module")
+def room(tmp_path_factory) -> tuple[Path, list[str]]:
+    """A small procedural RGB-D room (3 objects) and the build flags for it."""
+    from scene_builder.procedural import write_demo_input
+
+    sample = write_demo_input(tmp_path_factory.mktemp("in") / "room", seed=1, n_objects=3)
+    cam = json.loads((sample / "camera.json").read_text())
+    flags = ["--depth", str(sample / "depth.png"), "--intrinsics", f"{cam['fx']},{cam['fy']},{cam['cx']},{cam['cy']}"]
+    return sample / "rgb.png", flags
+
+
+def _files(out: Path) -> dict[str, bytes]:
+    names = [*DETERMINISTIC, *(f"meshes/{p.name}" for p in sorted((out / "meshes").iterdir()))]
+    return {n: (out / n).read_bytes() for n in names}
+
+
+@pytest.fixture()
+def work(tmp_path: Path, monkeypatch) -> Path:
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+@pytest.mark.slow
+def test_rebuild_replaces_its_own_output_with_umask_permissions(room, work: Path, capsys):
+    image, flags = room
+    precious = work / "precious"
+    precious.mkdir()
+    (precious / "thesis.txt").write_text("mine")
+    old_umask = os.umask(0o027)
+    try:
+        # --overwrite: the user says the folder may go
+        assert main([str(image), *flags, "-o", str(precious), "-q", "--viz", "off", "--overwrite"]) == 0
+        assert not (precious / "thesis.txt").exists()
+        assert (precious / "report.json").is_file()
+        assert (precious.stat().st_mode & 0o777) == 0o750  # not mkdtemp's 0700
+        assert ((precious / "scene.xml").stat().st_mode & 0o777) == 0o640
+        assert ((precious / "meshes").stat().st_mode & 0o777) == 0o750
+        marker = json.loads((precious / MARKER).read_text())
+        assert marker["image"] == str(image.resolve())
+        assert set(marker["files"]) == {p.name for p in precious.iterdir()} - {MARKER}
+        first = _files(precious)
+        # a folder scene-builder wrote is replaced without --overwrite, by any input
+        os.umask(0o022)
+        assert main([str(image), *flags, "-o", str(precious), "-q", "--viz", "off"]) == 0
+        assert (precious.stat().st_mode & 0o777) == 0o755
+    finally:
+        os.umask(old_umask)
+    # Byte-identical rebuild in one process (across processes: test_two_processes_build_identical_bytes)
+    assert _files(precious) == first
+    capsys.readouterr()
+
+
+@pytest.mark.slow
+def test_default_output_name_is_rebuilt_by_the_same_image(room, work: Path, capsys):
+    image, flags = room
+    assert main([str(image), *flags, "-q", "--viz", "off"]) == 0
+    assert main([str(image), *flags, "-q", "--viz", "off"]) == 0
+    assert (work / "rgb_scene" / "report.json").is_file()
+    # another photo with the same stem must not silently replace it
+    other = work / "elsewhere" / "rgb.png"
+    other.parent.mkdir()
+    other.write_bytes(image.read_bytes())
+    capsys.readouterr()
+    assert main([str(other), *flags, "-q", "--viz", "off"]) == 3
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "rgb_scene holds the build of another image" in err[0] and "-o elsewhere_rgb_scene" in err[0]
+
+
+def _previous_output(out: Path, image: Path) -> dict[str, bytes]:
+    """What an earlier build left in ``out``; returns its files' bytes."""
+    out.mkdir()
+    (out / "report.json").write_text('{"objects": []}\n')
+    (out / "scene.xml").write_text("<mujoco/>\n")
+    (out / MARKER).write_text(json.dumps({"format": "scene-builder/output", "version": 1, "image": str(image), "files": ["report.json", "scene.xml"]}))
+    return {p.name: p.read_bytes() for p in out.iterdir()}
+
+
+def test_interrupted_build_leaves_the_previous_output_intact(room, work: Path, monkeypatch, capsys):
+    """Ctrl-C during perception: the previous output is untouched and the staging folder gone."""
+    import perception
+
+    image, flags = room
+    out = work / "out"
+    before = _previous_output(out, image)
+    seen: list[str] = []
+
+    def interrupted(*args, **kwargs):
+        seen.extend(p.name for p in work.iterdir())
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(perception, "perceive", interrupted)
+    assert main([str(image), *flags, "-o", str(out), "-q", "--viz", "off"]) == 130
+    assert capsys.readouterr().err.strip() == "error: interrupted"
+    assert any(name.startswith(".out.tmp-") for name in seen)  # the staging folder existed
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert sorted(p.name for p in work.iterdir()) == ["out"]
+
+
+@pytest.mark.slow
+def test_build_interrupted_after_writing_leaves_the_previous_output_intact(room, work: Path, monkeypatch, capsys):
+    """Ctrl-C once the staging folder holds the MJCF: the same."""
+    import exporters
+
+    image, flags = room
+    out = work / "out"
+    before = _previous_output(out, image)
+    staged: list[Path] = []
+    real_write_mjcf = exporters.write_mjcf
+
+    def write_then_interrupt(scene, folder):
+        staged.append(real_write_mjcf(scene, folder))
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(exporters, "write_mjcf", write_then_interrupt)
+    assert main([str(image), *flags, "-o", str(out), "-q", "--viz", "off"]) == 130
+    assert capsys.readouterr().err.strip() == "error: interrupted"
+    assert staged and staged[0].parent.name.startswith(".out.tmp-")
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert sorted(p.name for p in work.iterdir()) == ["out"]
+
+
+@pytest.mark.slow
+def test_two_processes_build_identical_bytes_and_logs_are_not_wrapped(room, tmp_path: Path):
+    """Two separate processes (different hash seeds) give the same bytes; the second writes to a
+    folder with a long name, and its stderr (a pipe, not a terminal) keeps every line whole."""
+    image, flags = room
+    long_name = "a_folder_name_long_enough_that_an_80_column_console_would_have_wrapped_the_summary_line_" + "x" * 40
+    outs = [tmp_path / "first", tmp_path / long_name]
+    runs = []
+    for seed, out in zip(("1", "2"), outs):
+        env = {**os.environ, "PYTHONHASHSEED": seed, "COLUMNS": "80"}
+        env.pop("CI", None)
+        runs.append(subprocess.run([*CLI, str(image), *flags, "-o", str(out), "--viz", "off"], cwd=tmp_path, env=env,
+                                   capture_output=True, text=True, timeout=600))
+        assert runs[-1].returncode == 0, runs[-1].stderr[-2000:]
+    a, b = (_files(o) for o in outs)
+    assert sorted(a) == sorted(b)
+    for name in a:
+        assert a[name] == b[name], f"{name} differs between two builds of the same input"
+    lines = runs[1].stderr.splitlines()
+    assert any(re.search(rf"objects -> .*{long_name}/ +\(max penetration", line) for line in lines), lines[-3:]
+    stage_lines = [line for line in lines if line.startswith("✓")]
+    assert {line.split()[1] for line in stage_lines} >= {"perception", "generation", "layout", "export"}
+
+
+# ------------------------------------------------------------------------------------------
+# A photo of 500 small objects
+# ------------------------------------------------------------------------------------------
+
+
+def boxes_on_floor_depth_m(n: int = 500, side_m: float = 0.1, w: int = 640, h: int = 480, f: float = 525.0,
+                           height_m: float = 1.4, pitch_deg: float = 30.0) -> np.ndarray:
+    """(h, w) planar depth of ``n`` cubes of ``side_m`` in a grid on a floor (3.2 x 3.0 m, from
+    1.2 m in front of the camera), by ray casting each cube over its projected box only."""
+    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    d_cam = np.stack([(u - (w - 1) / 2) / f, (v - (h - 1) / 2) / f, np.ones_like(u)], axis=-1)
+    p = np.radians(pitch_deg)
+    rot = np.stack([[1.0, 0.0, 0.0], [0.0, -np.sin(p), -np.cos(p)], [0.0, np.cos(p), -np.sin(p)]], axis=1)  # world_from_camera
+    d = d_cam @ rot.T  # t along d is planar depth (d_cam.z = 1)
+    o = np.array([0.0, 0.0, height_m])
+    cols = int(np.ceil(np.sqrt(n)))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(d[..., 2] < 0, -o[2] / d[..., 2], np.inf)
+        for k in range(n):
+            i, j = divmod(k, cols)
+            centre = np.array([-1.6 + i * 3.2 / (cols - 1), 1.2 + j * 3.0 / (cols - 1)])
+            lo = np.array([*(centre - side_m / 2), 0.0])
+            hi = np.array([*(centre + side_m / 2), side_m])
+            corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+            pc = (corners - o) @ rot
+            uu, vv = f * pc[:, 0] / pc[:, 2] + (w - 1) / 2, f * pc[:, 1] / pc[:, 2] + (h - 1) / 2
+            u0, u1 = max(0, int(uu.min())), min(w, int(np.ceil(uu.max())) + 1)
+            v0, v1 = max(0, int(vv.min())), min(h, int(np.ceil(vv.max())) + 1)
+            if u0 >= u1 or v0 >= v1:
+                continue
+            dd = d[v0:v1, u0:u1]
+            t1, t2 = (lo - o) / dd, (hi - o) / dd
+            tn, tx = np.nanmax(np.minimum(t1, t2), axis=-1), np.nanmin(np.maximum(t1, t2), axis=-1)
+            hit = (tx >= tn) & (tn > 0)
+            t[v0:v1, u0:u1] = np.where(hit, np.minimum(t[v0:v1, u0:u1], tn), t[v0:v1, u0:u1])
+    t[~np.isfinite(t) | (t > 8.0)] = 0.0
+    return t
+
+
+@pytest.mark.slow
+def test_photo_of_500_small_objects_builds_the_largest_and_says_so(work: Path, capsys):
+    """What a user expects of a photo with 500 small things: a build in bounded time of the
+    largest ``PerceptionConfig.max_objects`` (40), and one line saying how many were left out."""
+    from scene_builder.config import PerceptionConfig
+
+    depth = boxes_on_floor_depth_m()
+    Image.fromarray((depth * 1000).round().astype(np.uint16)).save(work / "depth.png")
+    Image.fromarray(np.full((480, 640, 3), (150, 120, 90), np.uint8)).save(work / "many.png")
+    code = main(["many.png", "--depth", "depth.png", "--intrinsics", "525,525,319.5,239.5", "-q", "--viz", "off", "--settle-s", "0.5"])
+    err = capsys.readouterr().err
+    assert code == 0, err[-2000:]
+    cap = PerceptionConfig().max_objects
+    report = json.loads((work / "many_scene" / "report.json").read_text())
+    assert len(report["objects"]) == cap
+    left_out = re.search(rf"warning: (\d+) objects found; the {cap} largest are built and (\d+) smaller ones left out", err)
+    assert left_out is not None, err[-2000:]
+    assert int(left_out.group(1)) > cap and int(left_out.group(2)) == int(left_out.group(1)) - cap
+
+
+@pytest.mark.slow
+def test_real_photo_builds_identical_bytes_twice(tmp_path: Path):
+    """A real RGB-D photo (learned naming, real clutter): the same bytes twice."""
+    from scene_builder.config import BuildConfig, ExportConfig, InputSpec
+    from scene_builder.pipeline import build
+
+    from .conftest import REAL_DATA, require
+
+    sample = require(REAL_DATA / "nyuv2_metric3d_00000")
+    cam = json.loads((sample / "camera.json").read_text())
+    inputs = InputSpec(next(sample.glob("rgb.*")), sample / "depth.png", None, (cam["fx"], cam["fy"], cam["cx"], cam["cy"]))
+    config = BuildConfig(export=ExportConfig(viz="off"))
+    a, b = (build(inputs, tmp_path / name, config).out_dir for name in ("a", "b"))
+    fa, fb = _files(a), _files(b)
+    assert sorted(fa) == sorted(fb)
+    assert [n for n in fa if fa[n] != fb[n]] == []
