@@ -310,7 +310,7 @@ def _add_object(ctx: _Context, placed: PlacedObject, path) -> None:
         return
 
     UsdPhysics.ArticulationRootAPI.Apply(prim)
-    part_names = names.UniqueNames()
+    part_names = names.UniqueNames(reserved=("Joints",))
     part_paths = {p.name: path.AppendChild(part_names(p.name)) for p in asset.parts}
     for part in asset.parts:
         pxf = UsdGeom.Xform.Define(stage, part_paths[part.name])
@@ -324,10 +324,11 @@ def _add_object(ctx: _Context, placed: PlacedObject, path) -> None:
         fj = UsdPhysics.FixedJoint.Define(stage, joints.AppendChild("world_weld"))
         fj.CreateBody1Rel().SetTargets([part_paths[asset.root.name]])
         _set_joint_frames(fj, placed.world_from_asset[:3, 3], placed.world_from_asset[:3, :3], np.zeros(3), np.eye(3))
+    joint_names = names.UniqueNames(reserved=("world_weld",))
     for part in asset.parts:
         if part.joint is None:
             continue
-        _add_joint(stage, joints.AppendChild(names.valid_identifier(part.name + "_joint")), asset, part,
+        _add_joint(stage, joints.AppendChild(joint_names(part.name + "_joint")), asset, part,
                    part_paths[part.parent], part_paths[part.name])
 
 
