@@ -52,6 +52,7 @@ __all__ = [
     "load_depth",
     "load_input",
     "load_rgb",
+    "read_camera_json",
     "resolve_intrinsics",
 ]
 
@@ -107,7 +108,7 @@ class LoadedInput:
 def _open_checked(path: Path, what: str, hint: str):
     """Open ``path`` with PIL (header only), refusing images over :data:`MAX_IMAGE_PIXELS`.
     Returns the open image; the caller closes it."""
-    from PIL import Image, UnidentifiedImageError
+    from PIL import Image
 
     try:
         with warnings.catch_warnings():
@@ -116,7 +117,7 @@ def _open_checked(path: Path, what: str, hint: str):
             im = Image.open(path)
     except Image.DecompressionBombError as err:
         raise InputError(f"{what} {path} is too large to read ({err}); pass an image of at most {MAX_IMAGE_PIXELS // 1_000_000} MP") from err
-    except (UnidentifiedImageError, OSError, SyntaxError, ValueError, TypeError, EOFError) as err:
+    except _DECODE_ERRORS as err:
         raise InputError(f"cannot read {path} as {hint} ({_short(err)}); pass a JPEG or PNG file") from err
     w, h = im.size
     if w * h > MAX_IMAGE_PIXELS:
@@ -126,6 +127,13 @@ def _open_checked(path: Path, what: str, hint: str):
             f"{MAX_IMAGE_PIXELS // 1_000_000} MP: downscale it first"
         )
     return im
+
+
+#: What decoding a corrupt file with PIL can raise: besides OSError and SyntaxError (its documented
+#: ones), its plugins let struct.error, IndexError, KeyError, ZeroDivisionError... escape on
+#: malformed headers (found by ``python -m scene_builder.bench_fuzz``). Caught only around PIL's
+#: open / load / convert of the user's file, and turned into one InputError line with the cause.
+_DECODE_ERRORS = (Exception,)
 
 
 def _short(err: BaseException) -> str:
@@ -208,7 +216,7 @@ def load_rgb(path: Path) -> tuple[np.ndarray, dict[int, object], tuple[int, int]
             rgb = _to_rgb(oriented, path)
     except InputError:
         raise
-    except (OSError, SyntaxError, ValueError, TypeError, EOFError, MemoryError) as err:
+    except _DECODE_ERRORS as err:
         raise InputError(f"cannot read {path} as an image ({_short(err)}); pass a JPEG or PNG photo") from err
     if rgb.shape[0] < 16 or rgb.shape[1] < 16:
         raise InputError(f"image {path} is only {rgb.shape[1]}x{rgb.shape[0]} px; pass a photo of at least 16x16 px")
@@ -235,9 +243,12 @@ def load_depth(path: Path, depth_scale: float | None = None) -> np.ndarray:
     eight_bit = False
     if path.suffix.lower() == ".npy":
         try:
-            raw = np.load(path, allow_pickle=False)
-        except (ValueError, OSError, EOFError, TypeError, MemoryError) as err:
+            # Memory-mapped first: a header declaring a huge shape must not allocate it.
+            raw = np.load(path, allow_pickle=False, mmap_mode="r")
+        except _DECODE_ERRORS as err:  # numpy's header parser raises SyntaxError, tokenize.TokenError...
             raise InputError(f"cannot read {path} as a .npy depth array ({_short(err)}); save it with numpy.save") from err
+        if not isinstance(raw, np.ndarray):
+            raise InputError(f"{path} holds no array; save the depth with numpy.save")
         if raw.ndim == 3 and raw.shape[2] == 1:
             raw = raw[:, :, 0]
         kind = raw.dtype.kind
@@ -245,6 +256,10 @@ def load_depth(path: Path, depth_scale: float | None = None) -> np.ndarray:
             raise InputError(f"depth array {path} has shape {raw.shape} and dtype {raw.dtype}; expected an (H, W) array of metres")
         if raw.size > MAX_IMAGE_PIXELS:
             raise InputError(f"depth array {path} is {raw.shape[1]}x{raw.shape[0]}; at most {MAX_IMAGE_PIXELS // 1_000_000} MP is read")
+        try:
+            raw = np.array(raw)
+        except (OSError, ValueError) as err:
+            raise InputError(f"cannot read {path} as a .npy depth array ({_short(err)})") from err
         is_float = kind == "f"
         eight_bit = raw.dtype.itemsize == 1
     else:
@@ -260,7 +275,7 @@ def load_depth(path: Path, depth_scale: float | None = None) -> np.ndarray:
                 raw = np.asarray(im)
         except InputError:
             raise
-        except (OSError, SyntaxError, ValueError, TypeError, EOFError, MemoryError) as err:
+        except _DECODE_ERRORS as err:
             raise InputError(f"cannot read {path} as a depth image ({_short(err)}); pass a uint16 PNG or a .npy of metres") from err
         is_float = mode == "F"
         eight_bit = mode == "L"
@@ -342,7 +357,10 @@ def _make(fx, fy, cx, cy, width: int, height: int, source: str, what: str) -> Ca
     return _checked(CameraIntrinsics(*values, int(width), int(height), source), what)
 
 
-def _from_camera_json(path: Path, width: int, height: int) -> CameraIntrinsics:
+def read_camera_json(path: Path, width: int, height: int) -> CameraIntrinsics:
+    """Intrinsics of a ``width`` x ``height`` image from a ``camera.json`` (``fx, fy, cx, cy`` and
+    optionally the ``width, height`` they were given for: then scaled). Raises InputError (one line)
+    for anything else."""
     try:
         data = json.loads(path.read_text())
         if not isinstance(data, dict):
@@ -427,9 +445,9 @@ def resolve_intrinsics(
     found: list[tuple[CameraIntrinsics, str]] = []
     if camera_json.is_file():
         if chosen is None:
-            return _from_camera_json(camera_json, width, height)
+            return read_camera_json(camera_json, width, height)
         try:
-            found.append((_from_camera_json(camera_json, width, height), f"{camera_json}"))
+            found.append((read_camera_json(camera_json, width, height), f"{camera_json}"))
         except InputError as err:
             warnings.warn(f"{chosen[1]} is used; {camera_json} beside the image is ignored ({err})", InputWarning, stacklevel=2)
     if exif:

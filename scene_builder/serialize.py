@@ -15,12 +15,19 @@ import base64
 import dataclasses
 import enum
 import json
+import math
+import types
 import typing
 from pathlib import Path
 
 import numpy as np
 
 from scene_builder import model
+from scene_builder.errors import InputError
+
+
+class SceneFileError(InputError, ValueError):
+    """A ``scene.json`` that cannot be read: the one-line message names the field."""
 
 _SMALL_ARRAY = 16
 _TYPES: dict[str, type] = {
@@ -56,52 +63,123 @@ def to_jsonable(value):
     raise TypeError(f"cannot serialise {type(value).__name__}")
 
 
-def _decode_array(obj: dict) -> np.ndarray:
-    dtype = np.dtype(obj["dtype"]).newbyteorder("<") if np.dtype(obj["dtype"]).itemsize > 1 else np.dtype(obj["dtype"])
-    shape = tuple(obj["shape"])
-    data = obj["data"]
+#: numpy dtype kinds a scene file may hold: bool, signed / unsigned integers, floats.
+_ARRAY_KINDS = "biuf"
+
+
+def _decode_array(obj: dict, where: str) -> np.ndarray:
+    try:
+        if not isinstance(obj.get("dtype"), str) or len(obj["dtype"]) > 8:
+            raise ValueError("not a short dtype name")
+        want = np.dtype(obj["dtype"])
+    except (TypeError, ValueError, KeyError, SyntaxError) as err:
+        raise SceneFileError(f"scene.json: {where}: array dtype {str(obj.get('dtype'))[:20]!r} is not a numpy dtype") from err
+    if want.kind not in _ARRAY_KINDS or want.itemsize > 8:
+        raise SceneFileError(f"scene.json: {where}: array dtype {want} is not a number type")
+    shape = obj.get("shape")
+    if not isinstance(shape, list) or not all(isinstance(n, int) and not isinstance(n, bool) and 0 <= n < 2**31 for n in shape) or len(shape) > 8:
+        raise SceneFileError(f"scene.json: {where}: array shape {str(shape)[:40]} is not a list of sizes")
+    count = math.prod(shape)
+    data = obj.get("data")
+    le = want.newbyteorder("<") if want.itemsize > 1 else want
     if isinstance(data, str):
-        arr = np.frombuffer(base64.b64decode(data), dtype=dtype).reshape(shape)
+        if len(data) > 4 * (count * want.itemsize + 2) // 3 + 4:
+            raise SceneFileError(f"scene.json: {where}: array data is longer than its shape {shape} needs")
+        try:
+            raw = base64.b64decode(data, validate=True)
+        except ValueError as err:  # binascii.Error
+            raise SceneFileError(f"scene.json: {where}: array data is not base64 ({err})") from err
+        if len(raw) != count * want.itemsize:
+            raise SceneFileError(f"scene.json: {where}: array data holds {len(raw)} bytes, shape {shape} of {want} needs {count * want.itemsize}")
+        arr = np.frombuffer(raw, dtype=le).reshape(shape)
+    elif isinstance(data, list):
+        if len(data) != count or not all(isinstance(v, (int, float)) for v in data):
+            raise SceneFileError(f"scene.json: {where}: array data is not {count} numbers")
+        arr = np.array(data, dtype=want).reshape(shape)
     else:
-        arr = np.array(data, dtype=dtype).reshape(shape)
-    return arr.astype(np.dtype(obj["dtype"]), copy=True)
+        raise SceneFileError(f"scene.json: {where}: array data must be a list or base64 text")
+    return arr.astype(want, copy=True)
 
 
-def _from(value, hint):
+def _from(value, hint, where: str):
+    """The model value of JSON ``value`` for a field annotated ``hint``; SceneFileError when it
+    does not fit. Unknown annotations pass the value through."""
     origin = typing.get_origin(hint)
     args = typing.get_args(hint)
-    if value is None:
-        return None
-    if isinstance(value, dict) and value.get("__ndarray__"):
-        return _decode_array(value)
-    if isinstance(value, dict) and "__type__" in value:
-        return from_jsonable(value)
-    if origin in (typing.Union, getattr(__import__("types"), "UnionType", None)):
+    if origin in (typing.Union, types.UnionType):
+        if value is None and type(None) in args:
+            return None
         non_none = [a for a in args if a is not type(None)]
-        return _from(value, non_none[0]) if len(non_none) == 1 else value
+        if len(non_none) == 1:
+            return _from(value, non_none[0], where)
+        return value
+    if value is None:
+        raise SceneFileError(f"scene.json: {where} is null")
+    if hint is np.ndarray:
+        if not (isinstance(value, dict) and value.get("__ndarray__") is True):
+            raise SceneFileError(f"scene.json: {where} must be an array object")
+        return _decode_array(value, where)
+    if isinstance(hint, type) and dataclasses.is_dataclass(hint):
+        if not (isinstance(value, dict) and value.get("__type__") == hint.__name__):
+            raise SceneFileError(f"scene.json: {where} must be a {hint.__name__} object")
+        return _from_object(value, where)
     if origin is tuple:
+        if not isinstance(value, list):
+            raise SceneFileError(f"scene.json: {where} must be a list")
         if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_from(v, args[0]) for v in value)
+            return tuple(_from(v, args[0], f"{where}[{i}]") for i, v in enumerate(value))
         if args:
-            return tuple(_from(v, a) for v, a in zip(value, args))
+            if len(value) != len(args):
+                raise SceneFileError(f"scene.json: {where} must have {len(args)} items, has {len(value)}")
+            return tuple(_from(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
         return tuple(value)
     if isinstance(hint, type) and issubclass(hint, enum.Enum):
-        return hint(value)
-    if hint is float and isinstance(value, int):
+        try:
+            return hint(value)
+        except ValueError as err:
+            raise SceneFileError(f"scene.json: {where}: {str(value)[:20]!r} is not a {hint.__name__}") from err
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise SceneFileError(f"scene.json: {where} must be true or false")
+        return value
+    if hint is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise SceneFileError(f"scene.json: {where} must be an integer")
+        return value
+    if hint is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise SceneFileError(f"scene.json: {where} must be a number")
         return float(value)
-    if hint is Path:
-        return Path(value)
+    if hint is str or hint is Path:
+        if not isinstance(value, str):
+            raise SceneFileError(f"scene.json: {where} must be text")
+        return Path(value) if hint is Path else value
     return value
 
 
-def from_jsonable(obj: dict):
-    """Inverse of :func:`to_jsonable` for a dataclass object."""
-    cls = _TYPES.get(obj.get("__type__", ""))
+def _from_object(obj: dict, where: str):
+    cls = _TYPES.get(obj.get("__type__", "")) if isinstance(obj.get("__type__"), str) else None
     if cls is None:
-        raise ValueError(f"scene.json: unknown type {obj.get('__type__')!r}")
+        raise SceneFileError(f"scene.json: {where}: unknown type {str(obj.get('__type__'))[:30]!r}")
     hints = typing.get_type_hints(cls)
-    kwargs = {f.name: _from(obj[f.name], hints[f.name]) for f in dataclasses.fields(cls) if f.name in obj}
-    return cls(**kwargs)
+    kwargs = {}
+    for f in dataclasses.fields(cls):
+        if f.name in obj:
+            kwargs[f.name] = _from(obj[f.name], hints[f.name], f"{where}.{f.name}")
+        elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+            raise SceneFileError(f"scene.json: {where}: {cls.__name__} has no {f.name!r}")
+    try:
+        return cls(**kwargs)
+    except (ValueError, TypeError, ArithmeticError, np.linalg.LinAlgError) as err:  # the model's own checks
+        raise SceneFileError(f"scene.json: {where}: {' '.join(str(err).split())[:160]}") from err
+
+
+def from_jsonable(obj: dict):
+    """Inverse of :func:`to_jsonable` for a dataclass object. Raises SceneFileError (a
+    ValueError) naming the field when ``obj`` does not describe a valid model value."""
+    if not isinstance(obj, dict):
+        raise SceneFileError("scene.json: expected an object")
+    return _from_object(obj, str(obj.get("__type__", "value")))
 
 
 def scene_to_json(scene: model.Scene) -> str:
@@ -109,17 +187,22 @@ def scene_to_json(scene: model.Scene) -> str:
     return json.dumps({"format": "scene-builder/scene", "version": FORMAT_VERSION, "scene": to_jsonable(scene)}, sort_keys=True)
 
 
-def scene_from_json(text: str) -> model.Scene:
-    """Parse the text of ``scene.json``. Raises ValueError with a one-line reason on malformed input."""
+def scene_from_json(text: str | bytes) -> model.Scene:
+    """Parse the text of ``scene.json``. Raises SceneFileError (an InputError and a ValueError)
+    with a one-line reason, naming the field, on any malformed input; never anything else."""
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as err:
-        raise ValueError(f"scene.json is not valid JSON ({err.msg} at line {err.lineno})") from err
+        raise SceneFileError(f"scene.json is not valid JSON ({err.msg} at line {err.lineno})") from err
+    except (UnicodeDecodeError, RecursionError, ValueError, TypeError) as err:
+        raise SceneFileError(f"scene.json cannot be read as JSON ({type(err).__name__})") from err
     if not isinstance(doc, dict) or doc.get("format") != "scene-builder/scene":
-        raise ValueError("scene.json: not a scene-builder scene file")
+        raise SceneFileError("scene.json: not a scene-builder scene file")
     if doc.get("version") != FORMAT_VERSION:
-        raise ValueError(f"scene.json: version {doc.get('version')} is not supported (expected {FORMAT_VERSION})")
-    scene = from_jsonable(doc["scene"])
-    if not isinstance(scene, model.Scene):
-        raise ValueError("scene.json: top-level value is not a Scene")
-    return scene
+        raise SceneFileError(f"scene.json: version {str(doc.get('version'))[:10]} is not supported (expected {FORMAT_VERSION})")
+    if not (isinstance(doc.get("scene"), dict) and doc["scene"].get("__type__") == "Scene"):
+        raise SceneFileError("scene.json: top-level value is not a Scene")
+    try:
+        return from_jsonable(doc["scene"])
+    except RecursionError as err:
+        raise SceneFileError("scene.json: nested too deeply") from err

@@ -143,8 +143,10 @@ class ParseReport:
 # Numbers and units
 # --------------------------------------------------------------------------------------------
 
-_NUM = r"(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][-+]?\d+)?(?:\s*[x×*]\s*10\s*\^\s*[-+]?\d+)?"
-_RANGE = re.compile(rf"({_NUM})\s*(?:-|–|—|~|to)\s*({_NUM})")
+_NUM = r"(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][-+]?[0-9]+)?(?:\s*[x×*]\s*10\s*\^\s*[-+]?[0-9]+)?"
+# The lookbehind anchors a range at the start of a number: without it a long digit run with no
+# separator after it costs quadratic time (a match is tried, and backtracked, from every digit).
+_RANGE = re.compile(rf"(?<![0-9.])({_NUM})\s*(?:-|–|—|~|to)\s*({_NUM})")
 _SIGNED = re.compile(rf"[-+]?{_NUM}")
 _CUBE = r"(?:\^\s*3|3|³)"
 _UNITS: dict[str, tuple[tuple[str, float], ...]] = {
@@ -166,13 +168,31 @@ def _sig(x: float) -> float:
 
 
 def _to_float(token: str) -> float:
-    m = re.match(r"^([-+]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][-+]?\d+)?)(?:\s*[x×*]\s*10\s*\^\s*([-+]?\d+))?$", token.strip())
+    """The float of a number token (``1.5``, ``2e9``, ``2 x 10^9``); inf or 0 when it is out of
+    float range (never an OverflowError). Raises ValueError for a token that is no number."""
+    m = re.match(r"^([-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][-+]?[0-9]+)?)(?:\s*[x×*]\s*10\s*\^\s*([-+]?[0-9]+))?$", token.strip())
     if m is None:
         raise ValueError(token)
     value = float(m.group(1))
     if m.group(2) is not None:
-        value *= 10.0 ** int(m.group(2))
+        digits = m.group(2).lstrip("+-")
+        exponent = int(digits) if len(digits) <= 6 else 999999
+        sign = "-" if m.group(2).startswith("-") else ""
+        value *= float(f"1e{sign}{exponent}")  # saturates to inf / 0.0 where 10.0 ** n raises
     return value
+
+
+#: A density, modulus or ratio field longer than this is no number (real ones are < 30 characters).
+_MAX_FIELD = 200
+
+#: Labels, group ids, ranks longer than this many digits are no PhysX numbers (Python also refuses
+#: int() of more than 4300 digits).
+_MAX_DIGITS = 9
+
+
+def _small_int(digits: str) -> int | None:
+    """int of a (signed) digit string from model text, None when it has more than _MAX_DIGITS digits."""
+    return int(digits) if len(digits.lstrip("+-")) <= _MAX_DIGITS else None
 
 
 def _quantity(text: str, kind: str, what: str, warnings: list[str]) -> float | None:
@@ -181,6 +201,9 @@ def _quantity(text: str, kind: str, what: str, warnings: list[str]) -> float | N
     raw = text.strip()
     if not raw or raw.upper() in ("N/A", "NA", "NONE", "NULL", "-"):
         warnings.append(f"{what}: no value ({raw!r})")
+        return None
+    if len(raw) > _MAX_FIELD:
+        warnings.append(f"{what}: {len(raw)} characters is no number, dropped")
         return None
     scale, unit_seen = _DEFAULT_SCALE[kind], False
     rest = raw
@@ -200,7 +223,10 @@ def _quantity(text: str, kind: str, what: str, warnings: list[str]) -> float | N
         return None
     if len(values) > 1:
         warnings.append(f"{what}: {len(values)} values in {raw!r}, using their mean")
-    value = sum(values) / len(values)
+    value = math.fsum(values) / len(values)
+    if not math.isfinite(value):
+        warnings.append(f"{what}: {raw[:40]!r} is out of range, dropped")
+        return None
     if not unit_seen and kind == "density" and value > 30.0:
         warnings.append(f"{what}: {value:g} is no density in g/cm^3, read as kg/m^3")
         scale = 1.0
@@ -236,9 +262,9 @@ def _fmt_bracket(x: float) -> str:
 # --------------------------------------------------------------------------------------------
 
 _HEADER = re.compile(r"^\s*(name|category|dimensions?|parts|group_info|group info|groups)\s*:\s*(.*)$", re.IGNORECASE)
-_PART = re.compile(r"^\s*l_(\d+)\s*:\s*(.*)$")
-_GROUP = re.compile(r"^\s*group_(\d+)\s*:\s*(.*)$", re.IGNORECASE)
-_INT = re.compile(r"[-+]?\d+")
+_PART = re.compile(r"^\s*l_([0-9]{1,9})\s*:\s*(.*)$")
+_GROUP = re.compile(r"^\s*group_([0-9]{1,9})\s*:\s*(.*)$", re.IGNORECASE)
+_INT = re.compile(r"[-+]?[0-9]+")
 _TYPE_WORDS = {
     "FIXED": MovementType.FIXED,
     "FREE": MovementType.FREE,
@@ -253,8 +279,8 @@ _TYPE_WORDS = {
 
 
 def _parse_dimension(text: str, warnings: list[str]) -> tuple[float, float, float] | None:
-    nums = [float(t) for t in re.findall(r"\d+(?:\.\d+)?|\.\d+", text)]
-    if len(nums) != 3 or min(nums, default=0.0) <= 0.0:
+    nums = [float(t) for t in re.findall(r"[0-9]+(?:\.[0-9]+)?|\.[0-9]+", text)]
+    if len(nums) != 3 or min(nums, default=0.0) <= 0.0 or not all(math.isfinite(n) and n < 1e6 for n in nums):
         warnings.append(f"Dimension: expected three positive numbers A*B*C in cm, got {text.strip()[:40]!r}")
         return None
     low = text.lower()
@@ -291,11 +317,11 @@ def _parse_part(label: int, body: str, warnings: list[str]) -> PhysxPart:
         fields += [""] * (7 - len(fields))
     name, rank_s, material, dens_s, young_s, pois_s, desc = fields
     m = _INT.search(rank_s)
-    if m is None:
-        warnings.append(f"{where}: no affordance rank in {rank_s!r}, using 5")
+    rank = None if m is None else _small_int(m.group())
+    if rank is None:
+        warnings.append(f"{where}: no affordance rank in {rank_s[:20]!r}, using 5")
         rank = 5
     else:
-        rank = int(m.group())
         if not 1 <= rank <= 10:
             warnings.append(f"{where}: affordance rank {rank} clamped to 1..10")
             rank = min(max(rank, 1), 10)
@@ -319,9 +345,12 @@ def _bracket(line: str, key: str, n: int, where: str, warnings: list[str]) -> tu
     out: list[float] = []
     for item in m.group(1).split(","):
         try:
-            out.append(_to_float(item.strip().strip("'\"")))
+            v = _to_float(item.strip().strip("'\""))
+            if not math.isfinite(v):
+                raise ValueError(item)
+            out.append(v)
         except ValueError:
-            warnings.append(f"{where}: {key} item {item.strip()[:15]!r} is not a number, read as 0")
+            warnings.append(f"{where}: {key} item {item.strip()[:15]!r} is not a finite number, read as 0")
             out.append(0.0)
     if len(out) != n:
         warnings.append(f"{where}: {key} has {len(out)} values, expected {n}")
@@ -350,12 +379,12 @@ def _parse_group(gid: int, body: str, warnings: list[str]) -> PhysxGroup | None:
     where = f"group_{gid}"
     bm = re.search(r"\[([^\]]*)\]", body)
     member_text = bm.group(1) if bm else re.split(r"[;(]", body, maxsplit=1)[0]
-    members = tuple(int(x) for x in re.findall(r"l_(\d+)", member_text))
+    members = tuple(int(x) for x in re.findall(r"l_([0-9]{1,9})(?![0-9])", member_text))
     if not members:
         warnings.append(f"{where}: no member parts, group dropped")
         return None
     movement = _movement(body, where, warnings)
-    parents = re.findall(r"relative\s+to\s+group_(\d+)", body, flags=re.IGNORECASE)
+    parents = re.findall(r"relative\s+to\s+group_([0-9]{1,9})(?![0-9])", body, flags=re.IGNORECASE)
     parent = int(parents[-1]) if parents else None
     if movement is None:
         movement = MovementType.FIXED
@@ -577,7 +606,18 @@ def write_description(desc: PhysxDescription, separator: str | None = None) -> s
 
 def description_from_basic_info(data: dict, grid: int) -> tuple[PhysxDescription, ParseReport]:
     """Load an upstream ``basic_info.json`` (PhysX-Anything strings or PhysX-Omni floats, README
-    G6) into the same dataclasses. Normalised params are turned back into the text's grid units."""
+    G6) into the same dataclasses. Normalised params are turned back into the text's grid units.
+
+    Raises ProtocolError (one line) when the data does not follow that schema."""
+    try:
+        return _from_basic_info(data, grid)
+    except ProtocolError:
+        raise
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError, RecursionError) as err:
+        raise ProtocolError(f"basic_info does not follow the PhysX schema ({type(err).__name__}: {str(err)[:80]})") from err
+
+
+def _from_basic_info(data: dict, grid: int) -> tuple[PhysxDescription, ParseReport]:
     warnings: list[str] = []
     parts: list[PhysxPart] = []
     for entry in data.get("parts", []):

@@ -112,6 +112,17 @@ def _check_grid(occupancy: np.ndarray, grid: int) -> np.ndarray:
     return occ.astype(bool, copy=False)
 
 
+#: Digit strings longer than this are read as "larger than any grid index" without converting
+#: them (Python refuses int() of more than 4300 digits, and no index needs more than 18).
+_MAX_DIGITS = 18
+_HUGE = 10**_MAX_DIGITS
+
+
+def _index(digits: str) -> int:
+    """The integer of a digit string from model text; anything too long to be an index is _HUGE."""
+    return int(digits) if len(digits) <= _MAX_DIGITS else _HUGE
+
+
 def _runs_1d(flat: np.ndarray) -> np.ndarray:
     """(K, 2) int64 (start, length) of the maximal runs of True in the 1D bool array ``flat``."""
     padded = np.concatenate(([False], flat, [False])).astype(np.int8)
@@ -138,7 +149,7 @@ def encode_occupied_indices(occupancy: np.ndarray, grid: int = ANYTHING_GRID) ->
     return " ".join(map(str, np.flatnonzero(occ.reshape(-1)).tolist()))
 
 
-_RANGE_TOKEN = re.compile(r"^(\d+)(?:-(\d+))?$")
+_RANGE_TOKEN = re.compile(r"^([0-9]+)(?:-([0-9]+))?$")
 
 
 def _range_tokens(text: str, grid: int, lenient: bool) -> tuple[np.ndarray, list[str]]:
@@ -154,8 +165,8 @@ def _range_tokens(text: str, grid: int, lenient: bool) -> tuple[np.ndarray, list
                 warnings.append(f"dropped {'truncated last' if last else 'malformed'} token {word[:20]!r} (#{k})")
                 continue
             raise TokenFormatError(f"range token #{k} {word[:20]!r} is not N or A-B with non-negative integers")
-        a = int(m.group(1))
-        b = int(m.group(2)) if m.group(2) is not None else a
+        a = _index(m.group(1))
+        b = _index(m.group(2)) if m.group(2) is not None else a
         if b < a:
             if not lenient:
                 raise TokenFormatError(f"range token #{k} {word!r} ends before it starts")
@@ -325,9 +336,9 @@ def encode_omni(
 
 
 _TEMPLATE_LINE = re.compile(r"^([a-z]+):(.*)$")
-_LAYER_LINE = re.compile(r"^(\d+):layer ([a-z]+)((?: [+-]\[[^\]]*\])*)$")
+_LAYER_LINE = re.compile(r"^([0-9]+):layer ([a-z]+)((?: [+-]\[[^\]]*\])*)$")
 _DIFF = re.compile(r" ([+-])\[([^\]]*)\]")
-_RUN_ITEM = re.compile(r"^(\d+)(?: (\d+))?$")
+_RUN_ITEM = re.compile(r"^([0-9]+)(?: ([0-9]+))?$")
 
 
 def _parse_runs(text: str, where: str, n_cells: int, lenient: bool, warnings: list[str]) -> set[Run]:
@@ -341,7 +352,7 @@ def _parse_runs(text: str, where: str, n_cells: int, lenient: bool, warnings: li
                 warnings.append(f"{where}: dropped malformed run {item.strip()[:20]!r}")
                 continue
             raise TokenFormatError(f"{where}: run {item.strip()[:20]!r} is not 'start' or 'start length'")
-        start, length = int(m.group(1)), int(m.group(2) or 1)
+        start, length = _index(m.group(1)), _index(m.group(2) or "1")
         if length < 1 or start + length > n_cells:
             if lenient:
                 warnings.append(f"{where}: dropped run {start} {length} outside 0..{n_cells - 1}")
@@ -375,7 +386,7 @@ def _decode_omni(text: str, grid: int, lenient: bool) -> tuple[np.ndarray, list[
             raise TokenFormatError(f"line {n}: empty line (template RLE has no blank lines)")
         lm = _LAYER_LINE.match(line) or (_LAYER_LINE.match(re.sub(r":\s+", ":", line, count=1)) if lenient else None)
         if lm is not None:
-            z = int(lm.group(1))
+            z = _index(lm.group(1))
             if z >= grid:
                 if lenient:
                     warnings.append(f"line {n}: dropped layer {z} outside 0..{grid - 1}")
