@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -12,7 +13,7 @@ from PIL import Image
 
 from perception.inputs import MAX_SIDE_PX, load_input
 from scene_builder.config import InputSpec, PerceptionConfig
-from scene_builder.errors import InputError
+from scene_builder.errors import InputError, InputWarning
 
 CFG = PerceptionConfig()
 
@@ -171,7 +172,66 @@ def test_intrinsics_from_camera_json_scaled(tmp_path):
 def test_intrinsics_flag_beats_camera_json(tmp_path):
     img = _photo(tmp_path / "rgb.png")
     (tmp_path / "camera.json").write_text(json.dumps({"fx": 100.0, "fy": 100.0, "cx": 32, "cy": 24, "width": 64, "height": 48}))
-    assert load_input(InputSpec(img, intrinsics=(70.0, 70.0, 32.0, 24.0)), CFG).intrinsics.source == "flag"
+    with pytest.warns(InputWarning, match=r"--intrinsics \(fx 70\.0 px\) wins over .*camera\.json \(fx 100\.0 px\)"):
+        assert load_input(InputSpec(img, intrinsics=(70.0, 70.0, 32.0, 24.0)), CFG).intrinsics.source == "flag"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # agreeing sources: no warning
+        assert load_input(InputSpec(img, intrinsics=(100.0, 100.0, 32.0, 24.0)), CFG).intrinsics.fx_px == 100.0
+
+
+def test_fov_flag_beats_camera_json_and_exif(tmp_path):
+    img = _photo(tmp_path / "rgb.png")
+    (tmp_path / "camera.json").write_text(json.dumps({"fx": 100.0, "fy": 100.0, "cx": 31.5, "cy": 23.5}))
+    with pytest.warns(InputWarning, match="--fov-deg 90 .* wins over"):
+        k = load_input(InputSpec(img, fov_deg=90.0), CFG).intrinsics
+    assert k.source == "flag" and k.fx_px == pytest.approx(32.0)
+    exif = Image.Exif()
+    exif.get_ifd(0x8769)[0xA405] = 28
+    jpg = _photo(tmp_path / "sub.jpg", 60, 40, exif=exif)
+    (tmp_path / "camera.json").unlink()
+    with pytest.warns(InputWarning, match="wins over the EXIF focal length"):
+        assert load_input(InputSpec(jpg, fov_deg=90.0), CFG).intrinsics.source == "flag"
+
+
+# ------------------------------------------------------------------------------------------
+# Image modes and depth units
+# ------------------------------------------------------------------------------------------
+
+
+def test_image_modes_become_rgb(tmp_path):
+    from perception.inputs import load_rgb
+
+    rgb = np.asarray(Image.open(_photo(tmp_path / "a.png")))
+    grey = np.asarray(Image.fromarray(rgb).convert("L"))
+    Image.fromarray(grey.astype(np.uint16) * 257).save(tmp_path / "g16.png")
+    with pytest.warns(InputWarning, match="grey image"):
+        out, _, _ = load_rgb(tmp_path / "g16.png")
+    np.testing.assert_array_equal(out[:, :, 0], grey)  # 16 bits scaled back to 8, not clipped at 255
+    Image.fromarray(np.dstack([rgb, np.full(rgb.shape[:2], 255, np.uint8)])).save(tmp_path / "opaque.png")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # fully opaque alpha: nothing to say
+        np.testing.assert_array_equal(load_rgb(tmp_path / "opaque.png")[0], rgb)
+    Image.fromarray(rgb).convert("CMYK").save(tmp_path / "cmyk.jpg", quality=95)
+    assert load_rgb(tmp_path / "cmyk.jpg")[0].shape == rgb.shape
+
+
+def test_explicit_depth_scale_applies_to_float_files(tmp_path):
+    img = _photo(tmp_path / "a.png")
+    mm = _ramp_mm().astype(np.float32)
+    np.save(tmp_path / "mm.npy", mm)
+    with pytest.raises(InputError, match="if the file stores millimetres, pass --depth-scale 0.001"):
+        load_input(InputSpec(img, tmp_path / "mm.npy"), CFG)
+    depth = load_input(InputSpec(img, tmp_path / "mm.npy", depth_scale=0.001), CFG).depth_m
+    np.testing.assert_allclose(depth, mm / 1000.0, rtol=1e-6)
+
+
+def test_npy_header_declaring_a_huge_array_is_refused_without_allocating_it(tmp_path):
+    d = tmp_path / "huge.npy"
+    header = "{'descr': '<f4', 'fortran_order': False, 'shape': (200000, 200000), }"
+    header += " " * (118 - len(header)) + "\n"
+    d.write_bytes(b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header.encode() + b"\x00" * 64)
+    with pytest.raises(InputError, match=r"cannot read .*huge\.npy as a \.npy depth array"):
+        load_input(InputSpec(_photo(tmp_path / "a.png"), d), CFG)
 
 
 def test_intrinsics_from_exif_35mm(tmp_path):
