@@ -169,7 +169,9 @@ class TransformersQwenVL:
 
         tokenizer = AutoTokenizer.from_pretrained(model_dir, local_files_only=True)
         image_processor = Qwen2VLImageProcessorPil.from_pretrained(model_dir, local_files_only=True)
-        model = Qwen2_5_VLForConditionalGeneration.from_pretrained(model_dir, local_files_only=True, dtype=dtype).to(device).eval()
+        model = Qwen2_5_VLForConditionalGeneration.from_pretrained(
+            model_dir, local_files_only=True, dtype=dtype, use_safetensors=True
+        ).to(device).eval()
         template = tokenizer.chat_template
         tpl_file = model_dir / "chat_template.json"
         if template is None and tpl_file.is_file():
@@ -231,8 +233,8 @@ def model_dir_problem(model_dir: Path, need_prompts: bool = True) -> str | None:
     if not model_dir.is_dir():
         return f"no model directory {model_dir} (put the PhysX-Anything / PhysX-Omni weights there)"
     missing = [f for f in ("config.json", "preprocessor_config.json") if not (model_dir / f).is_file()]
-    if not list(model_dir.glob("*.safetensors")) and not list(model_dir.glob("*.bin")):
-        missing.append("*.safetensors")
+    if not list(model_dir.glob("*.safetensors")):
+        missing.append("*.safetensors (only safetensors weights are loaded: pickled .bin files can run code)")
     if not (model_dir / "tokenizer.json").is_file() and not (model_dir / "tokenizer_config.json").is_file():
         missing.append("tokenizer.json")
     if need_prompts:

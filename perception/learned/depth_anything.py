@@ -69,7 +69,7 @@ class DepthAnythingV2Estimator:
         if not isinstance(torch_dtype, torch.dtype):
             raise InputError(f"unknown dtype '{dtype}'; use float32, float16 or bfloat16")
         self.device = _pick_device(device)
-        self.model = DepthAnythingForDepthEstimation.from_pretrained(weights_dir, dtype=torch_dtype).to(self.device).eval()
+        self.model = DepthAnythingForDepthEstimation.from_pretrained(weights_dir, dtype=torch_dtype, use_safetensors=True).to(self.device).eval()
         if self.model.config.depth_estimation_type != "metric":
             raise ModelUnavailableError(
                 f"{weights_dir} is a relative-depth Depth Anything checkpoint; use a metric one "

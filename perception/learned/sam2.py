@@ -245,7 +245,7 @@ class Sam2Segmenter:
         if not (weights_dir / "config.json").is_file():
             raise ModelUnavailableError(f"no config.json in {weights_dir}; run: scene-builder models fetch sam2-hiera-tiny")
         self.device = device or ("cuda" if torch.cuda.is_available() else "cpu")
-        self.model = Sam2Model.from_pretrained(weights_dir).to(self.device).eval()
+        self.model = Sam2Model.from_pretrained(weights_dir, use_safetensors=True).to(self.device).eval()
         self.image_size = int(self.model.config.prompt_encoder_config.image_size)
         self.points_per_side = points_per_side
         self.points_per_batch = points_per_batch
