@@ -32,6 +32,7 @@ class Extra:
     about: str
     argv: tuple[str, ...]
     markdown: bool = False
+    timeout_s: float = 900.0
 
 
 EXTRAS: tuple[Extra, ...] = (
@@ -69,6 +70,16 @@ EXTRAS: tuple[Extra, ...] = (
         "Here only `depth-clusters` segmentation is available: SAM2 needs its weights.",
         ("-m", "scene_builder.bench_perception"),
     ),
+    Extra(
+        "Parser fuzzing",
+        "Every parser of outside data (`scene_builder.bench_fuzz`): PhysX geometry token decoders (strict and lenient), the "
+        "PhysX text protocol, basic_info.json, scene.json, depth, camera.json and image files, on mutated real seeds. "
+        "`rejected` = the parser's documented error; a crash is any other exception. The slowest input bounds the time "
+        "one input can take. About 40 minutes on 2 cores.",
+        ("-m", "scene_builder.bench_fuzz", "--n", "100000"),
+        markdown=True,
+        timeout_s=5400.0,
+    ),
 )
 
 
@@ -83,8 +94,10 @@ class ExtraRun:
     date: str
 
 
-def run_extra(extra: Extra, timeout_s: float = 900.0) -> ExtraRun:
-    """Run one stage benchmark in its own process (this interpreter) and capture its output."""
+def run_extra(extra: Extra, timeout_s: float | None = None) -> ExtraRun:
+    """Run one stage benchmark in its own process (this interpreter) and capture its output
+    (``timeout_s``: default the Extra's own)."""
+    timeout_s = extra.timeout_s if timeout_s is None else timeout_s
     date = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
     t0 = time.perf_counter()
     proc = subprocess.run([sys.executable, *extra.argv], capture_output=True, text=True, timeout=timeout_s, check=False)
