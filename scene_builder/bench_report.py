@@ -215,7 +215,7 @@ def main(argv: list[str] | None = None) -> int:
             _load(Path(a))  # check the inputs before spending minutes on the extras
         runs = tuple(run_extra(e) for e in EXTRAS) if with_extras else ()
         sys.stdout.write(render([Path(a) for a in args], runs))
-        failed = [r.extra.argv[-1] for r in runs if r.returncode != 0]
+        failed = [" ".join(r.extra.argv) for r in runs if r.returncode != 0]
         if failed:
             print(f"error: stage benchmark(s) failed: {', '.join(failed)} (their output is in the report)", file=sys.stderr)
             return 1
