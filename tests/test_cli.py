@@ -33,8 +33,10 @@ def test_help_is_fast_and_imports_no_heavy_library():
     assert out.stdout.strip() == ""
     res = _run(["--help"], REPO)
     assert res.returncode == 0 and "simulation-ready" in res.stdout
+    help_text = " ".join(res.stdout.split())
+    assert "Exit status: 0 ok, 1 other failure, 2 usage error" in help_text and "3 input error" in help_text
     res = _run(["build", "--help"], REPO)
-    for flag in ("--depth", "--depth-scale", "--intrinsics", "--fov-deg", "--out", "--seed", "--viz"):
+    for flag in ("--depth", "--depth-scale", "--intrinsics", "--fov-deg", "--out", "--overwrite", "--seed", "--viz"):
         assert flag in res.stdout
 
 

@@ -171,6 +171,65 @@ def test_two_processes_build_identical_bytes_and_logs_are_not_wrapped(room, tmp_
 
 
 # ------------------------------------------------------------------------------------------
+# The output-folder rules, without a build
+# ------------------------------------------------------------------------------------------
+
+
+def test_output_folder_rules(work: Path):
+    from scene_builder.config import InputSpec
+    from scene_builder.errors import InputError
+    from scene_builder.pipeline import add_to_marker, check_out_dir, read_marker, write_marker
+
+    photos = work / "photos"
+    photos.mkdir()
+    image = photos / "room.jpg"
+    image.write_bytes(b"x")
+    spec = InputSpec(image)
+    check_out_dir(work / "new", spec)  # a new folder
+    (work / "empty").mkdir()
+    check_out_dir(work / "empty", spec)  # an empty folder holds nothing to lose
+    with pytest.raises(InputError, match="inside the input's folder"):
+        check_out_dir(photos / "room_scene", spec)
+    os.chdir(photos)  # running in the photo's own folder: the default output lands there, allowed
+    check_out_dir(Path("room_scene"), spec, default_name=True)
+    with pytest.raises(InputError, match="current folder"):
+        check_out_dir(Path("."), spec, overwrite=True)  # --overwrite never allows these
+    os.chdir(work)
+    with pytest.raises(InputError, match="holds the input"):
+        check_out_dir(work / "photos", spec, overwrite=True)
+    # a folder scene-builder wrote, then the demo's extra file recorded in its marker
+    out = work / "out"
+    out.mkdir()
+    (out / "report.json").write_text("{}")
+    write_marker(out, spec)
+    assert read_marker(out)["files"] == ["report.json"]
+    (out / "ground_truth_comparison.json").write_text("{}")
+    with pytest.raises(InputError, match=r"holds files scene-builder did not write \(ground_truth_comparison\.json\)"):
+        check_out_dir(out, spec)
+    add_to_marker(out, "ground_truth_comparison.json")
+    check_out_dir(out, spec)
+    (out / "report.json").unlink()  # a marker without report.json is not a build
+    assert read_marker(out) is None
+
+
+def test_logs_without_a_terminal_are_not_wrapped(monkeypatch):
+    import io
+
+    from scene_builder.pipeline import StageLog, stderr_console
+
+    buf = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", buf)
+    console = stderr_console()
+    assert not console.is_terminal and console.soft_wrap
+    log = StageLog(True)
+    long_detail = "backend reason " * 20 + "[chair] [0, 1]"  # brackets are text, not markup
+    with log.stage("perception", lambda: long_detail):
+        pass
+    lines = buf.getvalue().splitlines()
+    assert len(lines) == 1 and lines[0].endswith("[chair] [0, 1]") and len(lines[0]) > 300
+
+
+# ------------------------------------------------------------------------------------------
 # A photo of 500 small objects
 # ------------------------------------------------------------------------------------------
 
