@@ -283,6 +283,7 @@ CASES = [
     Case("output contains the current folder", lambda e: e.rgbd("-o", ".."), 3, r"output folder \.\. is the current folder or contains it"),
     Case("output is the input's folder", lambda e: e.rgbd("-o", str(e.inp)), 3, r"output folder .* holds the input .*photo\.png and would be replaced; pass -o with a folder outside it"),
     Case("output inside the input's folder", lambda e: e.rgbd("-o", str(e.inp / "scene")), 3, r"output folder .*scene is inside the input's folder .*; pass -o with a folder outside it"),
+    Case("output where no folder can be made", lambda e: e.rgbd("-o", "/proc/scene"), 3, r"cannot (write in /proc \(permission denied\)|create the output folder beside /proc/scene \(No such file or directory\)); choose another -o"),
     Case("output parent missing", lambda e: e.rgbd("-o", str(e.root / "no" / "such" / "out")), 3, r"output folder's parent .*such does not exist; create it or choose another -o"),
     Case("output holds the user's files", _user_folder, 3, r"output folder .*precious exists and was not written by scene-builder; choose another -o, or pass --overwrite"),
     Case("output build folder with a file added", _output_with_user_file, 3, r"output folder .*out holds files scene-builder did not write \(notes\.txt\); move them or pass --overwrite"),
