@@ -163,13 +163,16 @@ def _check_scene_json(path: Path, names: list[str] | None, problems: list[str]) 
 def _check_report(path: Path, names: list[str] | None, problems: list[str]) -> None:
     try:
         report = json.loads(path.read_text())
-    except ValueError as err:
+    except (ValueError, RecursionError) as err:
         problems.append(f"{path.name} is not JSON: {err}")
+        return
+    if not isinstance(report, dict):
+        problems.append(f"{path.name} is not a JSON object")
         return
     for key in ("timings_s", "objects", "layout"):
         if key not in report:
             problems.append(f"{path.name} has no '{key}'")
-    layout = report.get("layout") or {}
+    layout = report.get("layout") if isinstance(report.get("layout"), dict) else {}
     for key in ("max_penetration_m", "settle_max_drift_m"):
         v = layout.get(key)
         if not isinstance(v, (int, float)) or not np.isfinite(v) or v < 0:
