@@ -152,7 +152,7 @@ def _check_scene_json(path: Path, names: list[str] | None, problems: list[str]) 
         if data.get("format") != "scene-builder/scene":
             raise ValueError(f"format is {data.get('format')!r}, not 'scene-builder/scene'")
         scene_names = sorted(o["asset"]["name"] for o in data["scene"]["objects"])
-    except (ValueError, KeyError, TypeError, AttributeError) as err:
+    except (ValueError, KeyError, TypeError, AttributeError, RecursionError) as err:
         problems.append(f"{path.name} is not a readable scene: {err!r}")
         return names
     if names is not None and scene_names != names:
