@@ -357,6 +357,10 @@ def _make(fx, fy, cx, cy, width: int, height: int, source: str, what: str) -> Ca
     return _checked(CameraIntrinsics(*values, int(width), int(height), source), what)
 
 
+#: Largest width / height a camera.json may give (a 100 MP image is 12,000 px wide).
+_MAX_JSON_SIDE = 1_000_000
+
+
 def read_camera_json(path: Path, width: int, height: int) -> CameraIntrinsics:
     """Intrinsics of a ``width`` x ``height`` image from a ``camera.json`` (``fx, fy, cx, cy`` and
     optionally the ``width, height`` they were given for: then scaled). Raises InputError (one line)
@@ -372,10 +376,10 @@ def read_camera_json(path: Path, width: int, height: int) -> CameraIntrinsics:
         if not (math.isfinite(w) and math.isfinite(h)):
             raise ValueError(f"width and height must be finite, got {w} and {h}")
         w, h = int(w), int(h)
+        if not (0 < w <= _MAX_JSON_SIDE and 0 < h <= _MAX_JSON_SIDE):
+            raise ValueError(f"width and height must be 1..{_MAX_JSON_SIDE} px, got {w}x{h}")
     except (OSError, ValueError, TypeError, KeyError, RecursionError) as err:
         raise InputError(f"cannot read intrinsics from {path} ({type(err).__name__}: {_short(err)}); it needs fx, fy, cx, cy, width, height") from err
-    if w <= 0 or h <= 0:
-        raise InputError(f"{path}: width and height must be positive, got {w}x{h}")
     if abs(w / h - width / height) > 0.01 * (width / height):
         raise InputError(f"{path} describes a {w}x{h} image but the photo is {width}x{height} (different aspect ratio); fix or remove it")
     k = _make(fx, fy, cx, cy, w, h, "file", str(path))

@@ -95,7 +95,10 @@ def _decode_array(obj: dict, where: str) -> np.ndarray:
     elif isinstance(data, list):
         if len(data) != count or not all(isinstance(v, (int, float)) for v in data):
             raise SceneFileError(f"scene.json: {where}: array data is not {count} numbers")
-        arr = np.array(data, dtype=want).reshape(shape)
+        try:
+            arr = np.array(data, dtype=want).reshape(shape)
+        except (OverflowError, ValueError) as err:  # -1 for a uint8, 1e300 for an int32
+            raise SceneFileError(f"scene.json: {where}: array data does not fit {want} ({err})") from err
     else:
         raise SceneFileError(f"scene.json: {where}: array data must be a list or base64 text")
     return arr.astype(want, copy=True)
