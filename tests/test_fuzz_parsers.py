@@ -144,3 +144,21 @@ def test_scene_json_names_the_bad_field():
     with pytest.raises(SceneFileError, match="array shape"):
         scene_from_json(json.dumps(doc))
     assert scene_from_json(scene_to_json(bench_fuzz.seed_scene())).objects[0].name == "box_1"
+
+
+def test_regressions_found_by_the_fuzz_benchmark(tmp_path):
+    """Inputs the 100,000-input benchmark crashed on before they were fixed."""
+    from perception.inputs import read_camera_json
+    from scene_builder.errors import InputError
+    from scene_builder.serialize import SceneFileError, scene_from_json, scene_to_json
+
+    doc = json.loads(scene_to_json(bench_fuzz.seed_scene()))
+    faces = doc["scene"]["objects"][0]["asset"]["parts"][0]["visual"]["faces"]
+    doc["scene"]["objects"][0]["asset"]["parts"][0]["visual"]["faces"] = {"__ndarray__": True, "dtype": "u1", "shape": [1, 3], "data": [-1, 0, 1]}
+    with pytest.raises(SceneFileError, match="does not fit uint8"):
+        scene_from_json(json.dumps(doc))
+    assert faces  # the seed had faces there
+    cam = tmp_path / "camera.json"
+    cam.write_text('{"fx": 500, "fy": 500, "cx": 320, "cy": 240, "width": 640, "height": 4' + "9" * 400 + "}")
+    with pytest.raises(InputError, match="width and height must be 1..1000000 px"):
+        read_camera_json(cam, 640, 480)
