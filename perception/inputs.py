@@ -373,12 +373,12 @@ def read_camera_json(path: Path, width: int, height: int) -> CameraIntrinsics:
         w, h = data.get("width", width), data.get("height", height)
         if isinstance(w, bool) or isinstance(h, bool) or not isinstance(w, (int, float)) or not isinstance(h, (int, float)):
             raise TypeError(f"width and height must be numbers, got {str(w)[:20]!r} and {str(h)[:20]!r}")
-        if not (math.isfinite(w) and math.isfinite(h)):
+        if not all(isinstance(v, int) or math.isfinite(v) for v in (w, h)):
             raise ValueError(f"width and height must be finite, got {w} and {h}")
         w, h = int(w), int(h)
         if not (0 < w <= _MAX_JSON_SIDE and 0 < h <= _MAX_JSON_SIDE):
             raise ValueError(f"width and height must be 1..{_MAX_JSON_SIDE} px, got {w}x{h}")
-    except (OSError, ValueError, TypeError, KeyError, RecursionError) as err:
+    except (OSError, ValueError, TypeError, KeyError, RecursionError, OverflowError) as err:
         raise InputError(f"cannot read intrinsics from {path} ({type(err).__name__}: {_short(err)}); it needs fx, fy, cx, cy, width, height") from err
     if abs(w / h - width / height) > 0.01 * (width / height):
         raise InputError(f"{path} describes a {w}x{h} image but the photo is {width}x{height} (different aspect ratio); fix or remove it")
