@@ -27,6 +27,39 @@ class InputSpec:
 
 
 @dataclass(frozen=True)
+class Sam2Settings:
+    """SAM 2 automatic-mask generator and box prompts (``perception.learned.sam2``).
+
+    The defaults of the first group are upstream's, as the authors run SAM 2: the keyword defaults
+    of ``SAM2AutomaticMaskGenerator.__init__`` in facebookresearch/sam2
+    (``sam2/automatic_mask_generator.py``, commit 2b90b9f5): 32 x 32 points, 64 per batch,
+    predicted IoU > 0.8, stability >= 0.95 at a logit offset of 1.0 around the 0.0 mask threshold,
+    box NMS at IoU 0.7, no small-region clean-up (0 px), three masks per point. transformers'
+    ``mask-generation`` pipeline (``pipelines/mask_generation.py`` and
+    ``Sam2ImageProcessor.filter_masks``) uses the same values except predicted IoU > 0.88 (the
+    SAM 1 value). Box prompts give one mask per box (``multimask_output=False``), as
+    IDEA-Research/Grounded-SAM-2 does in ``grounded_sam2_local_demo.py``.
+
+    The last two fields are this project's own steps after upstream's generator: masks lying
+    mostly (``max_background_frac``) on floor / walls / ceiling are not objects, and instances
+    smaller than ``min_instance_frac`` of the image are dropped.
+    """
+
+    points_per_side: int = 32
+    points_per_batch: int = 64
+    pred_iou_thresh: float = 0.8
+    stability_score_thresh: float = 0.95
+    stability_score_offset: float = 1.0
+    mask_threshold: float = 0.0
+    box_nms_thresh: float = 0.7
+    min_mask_region_area_px: int = 0
+    multimask_output: bool = True
+    box_prompt_multimask: bool = False
+    max_background_frac: float = 0.5
+    min_instance_frac: float = 0.001
+
+
+@dataclass(frozen=True)
 class PerceptionConfig:
     """Perception settings.
 
@@ -34,7 +67,7 @@ class PerceptionConfig:
     is a typical phone / Kinect-class camera). max_depth_m: depth beyond this is ignored.
     min_object_points: clusters with fewer observed points are dropped. depth_backend,
     segmentation_backend, naming_backend: registry names or "auto". models_dir: where learned
-    model weights are looked up first (also $SCENE_BUILDER_MODELS).
+    model weights are looked up first (also $SCENE_BUILDER_MODELS). sam2: SAM 2 settings.
     """
 
     default_fov_deg: float = 60.0
@@ -45,6 +78,7 @@ class PerceptionConfig:
     segmentation_backend: str = "auto"
     naming_backend: str = "auto"
     models_dir: Path | None = None
+    sam2: Sam2Settings = field(default_factory=Sam2Settings)
 
 
 @dataclass(frozen=True)

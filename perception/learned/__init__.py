@@ -11,7 +11,19 @@ from pathlib import Path
 from scene_builder.config import PerceptionConfig
 from scene_builder.registry import Registry
 
-__all__ = ["register_backends"]
+__all__ = ["register_backends", "register_box_prompt_backends"]
+
+
+def _weights(name: str, models_dir: Path | None) -> Path:
+    """The local weights of model ``name``; ModelUnavailableError (one line) when absent."""
+    from perception import models
+
+    path = models.resolve_weights(name, models_dir)
+    if path is None:
+        from scene_builder.errors import ModelUnavailableError
+
+        raise ModelUnavailableError(models.unavailable_reason(name, models_dir) or f"{name} is not available")
+    return path
 
 
 def register_backends(depth: Registry, segmentation: Registry, naming: Registry, config: PerceptionConfig) -> None:
@@ -27,12 +39,7 @@ def register_backends(depth: Registry, segmentation: Registry, naming: Registry,
     models_dir = config.models_dir
 
     def weights(name: str) -> Path:
-        path = models.resolve_weights(name, models_dir)
-        if path is None:
-            from scene_builder.errors import ModelUnavailableError
-
-            raise ModelUnavailableError(models.unavailable_reason(name, models_dir) or f"{name} is not available")
-        return path
+        return _weights(name, models_dir)
 
     da_name = models.default_model("depth").name
     sam_name = models.default_model("segmentation").name
@@ -51,7 +58,7 @@ def register_backends(depth: Registry, segmentation: Registry, naming: Registry,
     def make_sam2():
         from perception.learned.sam2 import Sam2Segmenter
 
-        return Sam2Segmenter(weights(sam_name))
+        return Sam2Segmenter(weights(sam_name), config.sam2)
 
     def make_efficientnet():
         from perception.learned.naming import EfficientNetNamer
@@ -87,4 +94,26 @@ def register_backends(depth: Registry, segmentation: Registry, naming: Registry,
         priority=50,
         available=_eff_ok,
         description="EfficientNet-Lite0 ImageNet classifier mapped to the project vocabulary",
+    )
+
+
+def register_box_prompt_backends(registry: Registry, config: PerceptionConfig) -> None:
+    """Register ``"sam2"`` (priority 100, when its weights resolve locally) into a registry of
+    ``perception.protocols.BoxPromptSegmenter`` backends: detector boxes prompt SAM 2 as in
+    Grounded-SAM-2. The caller registers its classical fallback (GrabCut) at a lower priority."""
+    from perception import models
+
+    sam_name = models.default_model("segmentation").name
+
+    def make_sam2():
+        from perception.learned.sam2 import Sam2Segmenter
+
+        return Sam2Segmenter(_weights(sam_name, config.models_dir), config.sam2)
+
+    registry.register(
+        "sam2",
+        make_sam2,
+        priority=100,
+        available=lambda: models.unavailable_reason(sam_name, config.models_dir),
+        description=f"SAM 2 prompted with detector boxes, one mask per box ({sam_name}, transformers)",
     )
