@@ -89,6 +89,12 @@ class GenerationConfig:
     coacd_threshold: CoACD concavity threshold. max_collision_pieces: bound on convex pieces per part.
     cache_dir: where convex decompositions are cached (keyed by mesh hash); None disables it.
     backend: registry name or "auto".
+    vlm_max_new_tokens: answer budget of the PhysX vision-language model, tokens per answer; 0
+    follows the voxel grid (1024 per voxel of grid side: 32768 for 32^3, 65536 for 64^3).
+    vlm_retries: a truncated answer is asked again with twice the budget this many times; still
+    cut, the object falls back to the shape prior. vlm_crop_px, vlm_crop_fill: the single-object
+    image given to the model (side in pixels; the object's longer side over the image side),
+    upstream's 512 and the 0.58 median of its demo images.
     """
 
     voxel_resolution: int = 48
@@ -97,6 +103,10 @@ class GenerationConfig:
     max_visual_faces: int = 4000
     cache_dir: Path | None = None
     backend: str = "auto"
+    vlm_max_new_tokens: int = 0
+    vlm_retries: int = 1
+    vlm_crop_px: int = 512
+    vlm_crop_fill: float = 0.58
 
 
 @dataclass(frozen=True)

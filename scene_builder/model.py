@@ -526,6 +526,8 @@ class ObjectAsset:
     size_m: (3,) extents of the axis-aligned bounding box of all parts, asset frame.
     is_fixed: welded to the world (built-in furniture) instead of a free body.
     backend: registry name of the generator that made it.
+    fallback_reason: when the preferred generator failed on this object and ``backend`` answered
+    instead, why (one line); empty otherwise.
     """
 
     name: str
@@ -537,6 +539,7 @@ class ObjectAsset:
     is_fixed: bool = False
     deformable: DeformableSettings | None = None
     backend: str = ""
+    fallback_reason: str = ""
 
     def __post_init__(self) -> None:
         _freeze(self, "size_m", np.float64, (3,))

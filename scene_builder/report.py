@@ -63,6 +63,7 @@ def build_report(
                 "materials": sorted({p.material.name for p in a.parts}),
                 "joints": joints,
                 "generator": a.backend,
+                "generator_fallback_reason": a.fallback_reason or None,
                 "physics": None
                 if v is None
                 else {
@@ -74,6 +75,11 @@ def build_report(
             }
         )
     timings = {name: _r(s, 3) for name, s in timings_s}
+    failures = [
+        {"object": o.asset.name, "backend": o.asset.backend, "reason": o.asset.fallback_reason}
+        for o in scene.objects
+        if o.asset.fallback_reason
+    ]
     return {
         "format": REPORT_FORMAT,
         "version": __version__,
@@ -87,7 +93,8 @@ def build_report(
         },
         "seed": config.seed,
         "backends": [{"task": b.task, "backend": b.backend, "reason": b.reason} for b in perception.backends]
-        + [{"task": "generation", "backend": b, "reason": "per object"} for b in sorted({o.asset.backend for o in scene.objects})],
+        + [_generation_use(b, scene) for b in sorted({o.asset.backend for o in scene.objects})],
+        "generation_failures": failures,
         "timings_s": timings,
         "objects": objects,
         "layout": {
@@ -110,6 +117,17 @@ def build_report(
         },
         "machine": {"python": platform.python_version(), "platform": platform.platform()},
     }
+
+
+def _generation_use(backend: str, scene: Scene) -> dict:
+    """The generation entry of ``backends`` for one generator: how many objects it made, and for
+    how many of them it stood in for a generator that failed."""
+    made = [o.asset for o in scene.objects if o.asset.backend == backend]
+    fell_back = [a.name for a in made if a.fallback_reason]
+    reason = f"{len(made)} objects"
+    if fell_back:
+        reason += f"; fallback for {len(fell_back)} the preferred generator failed on ({', '.join(fell_back)}; see generation_failures)"
+    return {"task": "generation", "backend": backend, "reason": reason}
 
 
 def write_report(out_dir: Path, scene: Scene, report: dict) -> Path:
