@@ -312,3 +312,21 @@ def test_qwen_image_processor_with_upstreams_pixel_bounds_gives_324_visual_token
     out = proc(images=[Image.new("RGB", (512, 512))], return_tensors="pt")
     assert out["image_grid_thw"].tolist() == [[1, 36, 36]]  # 504 x 504 pixels, 36 x 36 patches
     assert int(out["image_grid_thw"][0].prod()) // 4 == 324
+
+
+def test_scale_is_reconciled_with_the_observed_box_on_all_three_axes():
+    conv = run_conversation(CannedCabinet(), np.zeros((8, 8, 3), np.uint8), _prompts())
+    own, _ = physx_from_conversation(conv)
+    target = np.array([0.5, 1.2, 0.7])  # the model says 0.40 x 1.00 x 0.80 m
+    obj, report = physx_from_conversation(conv, target_size_m=target)
+    np.testing.assert_allclose(obj.size_m, target, rtol=1e-9)
+    np.testing.assert_allclose(obj.scale_to_target, target / own.size_m, rtol=1e-9)
+    door_own, door = own.part("cabinet_door"), obj.part("cabinet_door")
+    # every part scaled per axis: voxel sizes, origins and the hinge's anchor
+    np.testing.assert_allclose(door.voxel_size_m, door_own.voxel_size_m * obj.scale_to_target, rtol=1e-9)
+    np.testing.assert_allclose(door.joint.anchor_m, door_own.joint.anchor_m * obj.scale_to_target, atol=1e-9)
+    assert door.joint.lower == door_own.joint.lower  # angles are not lengths
+    assert door.voxel_count == door_own.voxel_count
+    # a box whose proportions are not the model's object's at all: refused (the caller falls back)
+    with pytest.raises(ProtocolError, match="differ by more than 3x"):
+        physx_from_conversation(conv, target_size_m=np.array([0.4, 0.15, 0.8]))
