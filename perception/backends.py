@@ -55,3 +55,49 @@ def build_registries(config: PerceptionConfig) -> PerceptionRegistries:
         if hasattr(learned, "register_backends"):
             learned.register_backends(depth, segmentation, naming, config)
     return PerceptionRegistries(depth, segmentation, naming)
+
+
+def prepare_learned_weights(
+    config: PerceptionConfig,
+    need_depth: bool,
+    offline: bool = False,
+    timeout_s: float = 2.0,
+    progress: bool = True,
+) -> tuple[str, ...]:
+    """Make the default learned perception models usable for a build, the first time downloading
+    them (Depth Anything V2 when ``need_depth``, SAM 2) with progress bars, unless ``offline``,
+    ``HF_HUB_OFFLINE`` or no network (``perception.models.offline_reason``, decided in about
+    ``timeout_s``). Only the models of tasks whose backend is "auto" or that model's backend are
+    considered. Returns one-line notes for the user: what was downloaded, or which fallback each
+    task will use and why (empty when every weight was already here)."""
+    from perception import models
+
+    wanted: list[tuple[str, str, str]] = []  # (task, backend, model)
+    if need_depth and config.depth_backend in ("auto", "depth-anything-v2"):
+        wanted.append(("depth", "depth-anything-v2", models.default_model("depth").name))
+    if config.segmentation_backend in ("auto", "sam2"):
+        wanted.append(("segmentation", "sam2", models.default_model("segmentation").name))
+    missing = [w for w in wanted if models.resolve_weights(w[2], config.models_dir) is None]
+    if not missing:
+        return ()
+    names = [m for _, _, m in missing]
+    size_mb = sum(models.model_spec(m).download_mb for m in names)
+    why = models.offline_reason(offline, timeout_s)
+    if why is None:
+        try:
+            paths = models.fetch_models(names, config.models_dir, endpoint_timeout_s=max(timeout_s, 5.0), progress=progress)
+        except Exception as err:  # noqa: BLE001 - any failed optional download (HTTP, disk, the hub client's
+            # own transport errors, which are not OSErrors) leaves the build on its fallbacks; the note says why
+            why = f"download failed: {type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}".rstrip(": ")
+        else:
+            where = ", ".join(str(p) for p in paths)
+            return (f"downloaded {', '.join(names)} (about {size_mb:.0f} MB) to {where}",)
+    registries = build_registries(config)
+    uses = []
+    for task, backend, _ in missing:
+        fallback = next((e.name for e in getattr(registries, task).entries() if e.name != backend and e.available() is None), "none")
+        uses.append(f"{task}: {fallback} instead of {backend}")
+    return (
+        f"no {' or '.join(names)} weights here and no download ({why}): {'; '.join(uses)}. "
+        f"`scene-builder models fetch` on a networked machine gets them (about {size_mb:.0f} MB)",
+    )

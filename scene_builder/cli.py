@@ -60,6 +60,12 @@ def _add_build_options(p: argparse.ArgumentParser) -> None:
         help="rerun recording: save OUT/scene.rrd (default), spawn = save and open the viewer, off = none",
     )
     p.add_argument("--models-dir", type=Path, help="folder with learned model weights (also $SCENE_BUILDER_MODELS)")
+    p.add_argument(
+        "--offline",
+        action="store_true",
+        help="never download weights (also HF_HUB_OFFLINE=1); by default the first run downloads Depth Anything V2 "
+        "and SAM 2 (about 255 MB) when the network allows, else says which fallback it uses",
+    )
     p.add_argument("--depth-backend", default="auto", help="depth backend when no depth map is given (default auto; see `models list`)")
     p.add_argument("--segmentation-backend", default="auto", help="instance segmentation backend (default auto)")
     p.add_argument("--settle-s", type=_positive, default=3.0, help="seconds of simulation in the stability check (default 3)")
@@ -121,8 +127,8 @@ def make_parser() -> argparse.ArgumentParser:
     msub = m.add_subparsers(dest="models_command", metavar="ACTION", required=True)
     ml = msub.add_parser("list", help="show each known model and whether its weights are available locally")
     ml.add_argument("--models-dir", type=Path, help="folder with model weights (also $SCENE_BUILDER_MODELS)")
-    mf = msub.add_parser("fetch", help="download model weights (needs a network)")
-    mf.add_argument("names", nargs="*", help="model names (default: all)")
+    mf = msub.add_parser("fetch", help="download model weights (needs a network; HF_ENDPOINT selects a mirror)")
+    mf.add_argument("names", nargs="*", help="model names (default: the ones a build uses, Depth Anything V2 and SAM 2, about 255 MB)")
     mf.add_argument("--models-dir", type=Path, help="where to put them (default: the Hugging Face cache)")
     return parser
 
@@ -159,9 +165,21 @@ def _cmd_build(args: argparse.Namespace) -> int:
         export=ExportConfig(usd=not args.no_usd, urdf=not args.no_urdf, gltf=not args.no_gltf, viz=args.viz),
     )
     out = args.out or default_out_dir(args.image)
+    if args.image.is_file():  # no download before a missing photo is reported (by build, below)
+        _prepare_weights(config.perception, need_depth=args.depth is None, offline=args.offline, quiet=args.quiet)
     result = build(inputs, out, config, progress=not args.quiet)
     _print_summary(result)
     return 0
+
+
+def _prepare_weights(perception_config, need_depth: bool, offline: bool, quiet: bool) -> None:
+    """Download the default learned models on the first networked run (progress bars on stderr),
+    or say in one line which fallback the build uses and why."""
+    from perception.backends import prepare_learned_weights
+
+    for line in prepare_learned_weights(perception_config, need_depth=need_depth, offline=offline, progress=not quiet):
+        if not quiet:
+            print(line, file=sys.stderr)
 
 
 def _print_summary(result) -> None:
@@ -238,14 +256,15 @@ def _cmd_view(args: argparse.Namespace) -> int:
 
 
 def _cmd_models(args: argparse.Namespace) -> int:
-    from perception.models import fetch_models, list_models
+    from perception.models import MODELS, fetch_models, list_models
 
     if args.models_command == "list":
         for s in list_models(args.models_dir):
             where = s.location if s.available else s.reason
             print(f"{'✓' if s.available else '✗'} {s.name:<28} {s.task:<13} {s.license:<14} {s.repo_id}  {where}")
         return 0
-    for path in fetch_models(tuple(args.names), args.models_dir):
+    names = tuple(args.names) or tuple(m.name for m in MODELS if m.default and m.source == "huggingface")
+    for path in fetch_models(names, args.models_dir):
         print(path)
     return 0
 

@@ -120,8 +120,8 @@ def test_preprocess_square_and_letterbox():
     assert inner == (32, 64) and np.all(px[:, 40:, :] == 0)
 
 
-@pytest.fixture(scope="module")
-def tiny_sam(tmp_path_factory):
+def save_tiny_sam2(folder):
+    """A randomly initialised tiny Sam2Model saved as a transformers folder; returns the folder."""
     import torch
     from transformers import Sam2Config, Sam2Model
     from transformers.models.sam2.configuration_sam2 import (
@@ -145,9 +145,13 @@ def tiny_sam(tmp_path_factory):
         mask_decoder_config=Sam2MaskDecoderConfig(hidden_size=32, mlp_dim=64, num_attention_heads=2, iou_head_hidden_dim=16),
     )
     torch.manual_seed(0)
-    folder = tmp_path_factory.mktemp("sam2")
     Sam2Model(config).save_pretrained(folder)
     return folder
+
+
+@pytest.fixture(scope="module")
+def tiny_sam(tmp_path_factory):
+    return save_tiny_sam2(tmp_path_factory.mktemp("sam2"))
 
 
 @pytest.mark.slow
