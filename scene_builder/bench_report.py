@@ -62,6 +62,14 @@ EXTRAS: tuple[Extra, ...] = (
         ("-m", "perception.bench_depth"),
     ),
     Extra(
+        "Learned backends at their published size",
+        "Depth Anything V2 Small and SAM 2 Hiera-Tiny built from their published architectures with random weights and run "
+        "through the project's backends on a real 640 x 480 photo (`perception.bench_learned`): CPU and wall seconds, peak "
+        "memory. Compute does not depend on the weights' values; no weights reach these machines.",
+        ("-m", "perception.bench_learned"),
+        markdown=True,
+    ),
+    Extra(
         "Segmentation and naming on procedural rooms",
         "The default (best available) segmentation and naming backends on rendered procedural rooms with ground-truth "
         "instances (`scene_builder.bench_perception`; `--segmentation NAME`, `--naming NAME` pick others): object recall "
