@@ -131,6 +131,10 @@ def test_recorded_answers_become_an_articulated_asset_of_the_observed_size():
     np.testing.assert_allclose(corners, [0.6, 0.1, 0.0], atol=0.02)
     door_world = transform_points(generated.world_from_asset, door.visual.vertices_m).mean(axis=0)
     assert door_world[0] < 0.6 - 0.1  # the camera looks along +x from x = -1.8
+    # coloured like the photo, as the shape prior's assets are
+    frame = next(p for p in asset.parts if p.name == "cabinet_frame")
+    colours = np.asarray(frame.visual.vertex_colors_rgba)[:, :3]
+    np.testing.assert_allclose(np.median(colours, axis=0), (150, 90, 40), atol=3)
 
 
 def test_turn_to_match_picks_the_footprint_orientation_that_fits():

@@ -87,7 +87,7 @@ class PhysxVlmGenerator:
         from generation.pose import fit_box, floor_snap_height_m
         from generation.shape_prior import complete_box
 
-        from scene_builder.frames import pose, rot_z
+        from scene_builder.frames import pose, rot_z, transform_points
         from scene_builder.model import GeneratedAsset
 
         crop = object_crop(perception.observation.rgb, obj.mask, config.vlm_crop_px, config.vlm_crop_fill)
@@ -99,8 +99,10 @@ class PhysxVlmGenerator:
         observed = np.asarray(fit.size_m, dtype=np.float64)
         turn = turn_to_match(model_size_m(description, grids), observed)
         physx = physx_object(description, grids, target_size_m=observed[[1, 0, 2]] if turn else observed)
-        asset = to_object_asset(physx, obj.name, obj.label, config=config, seed=seed, backend=BACKEND_NAME)
         world_from_asset = fit.world_from_box @ pose(rot_z(np.pi / 2), np.zeros(3)) if turn else fit.world_from_box
+        seen = transform_points(np.linalg.inv(world_from_asset), obj.points_world_m)
+        asset = to_object_asset(physx, obj.name, obj.label, config=config, seed=seed, backend=BACKEND_NAME,
+                                observed_points_m=seen, observed_colors_rgb=obj.colors_rgb)
         return GeneratedAsset(asset, world_from_asset, obj.points_world_m)
 
 

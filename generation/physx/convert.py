@@ -378,10 +378,14 @@ def to_object_asset(
     config=None,
     seed: int = 0,
     backend: str = "physx-anything-vlm",
+    observed_points_m: np.ndarray | None = None,
+    observed_colors_rgb: np.ndarray | None = None,
 ) -> ObjectAsset:
     """Mesh, weigh and decompose the parts with the generator's ``assemble_asset`` (marching
     cubes, mass and inertia by integration over the watertight mesh, convex collision pieces).
-    The PhysX texts give no friction; joints get the generator's derived damping and friction."""
+    The PhysX texts give no friction; joints get the generator's derived damping and friction.
+    observed_points_m: (N, 3) points seen in the photo, in the asset frame, with their
+    observed_colors_rgb (N, 3) uint8: the meshes take the photo's colours, as the shape prior's do."""
     from scene_builder.config import GenerationConfig
 
     from generation.assembly import JointSpec, PartSpec, assemble_asset
@@ -405,4 +409,7 @@ def to_object_asset(
             )
         )
     text = f"{obj.name} ({obj.category})" if obj.category else obj.name
-    return assemble_asset(name, label, specs, config=cfg, seed=seed, description=text, backend=backend, recenter=False)
+    return assemble_asset(
+        name, label, specs, config=cfg, seed=seed, description=text, backend=backend, recenter=False,
+        observed_points_m=observed_points_m, observed_colors_rgb=observed_colors_rgb,
+    )
