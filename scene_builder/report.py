@@ -76,7 +76,7 @@ def build_report(
         )
     timings = {name: _r(s, 3) for name, s in timings_s}
     failures = [
-        {"object": o.asset.name, "backend": o.asset.backend, "reason": o.asset.fallback_reason}
+        {"object": o.asset.name, "answered_by": o.asset.backend, "reason": o.asset.fallback_reason}
         for o in scene.objects
         if o.asset.fallback_reason
     ]

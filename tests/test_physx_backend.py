@@ -213,7 +213,7 @@ def test_a_build_where_every_vlm_call_fails_finishes_with_shape_prior_assets(tmp
     report = json.loads((tmp_path / "out" / "report.json").read_text())
     assert report["objects"] and len(report["generation_failures"]) == len(report["objects"])
     for obj, failure in zip(report["objects"], report["generation_failures"]):
-        assert obj["generator"] == "shape-prior" and failure["object"] == obj["name"]
+        assert obj["generator"] == "shape-prior" and failure["object"] == obj["name"] and failure["answered_by"] == "shape-prior"
         assert failure["reason"].startswith("physx-anything-vlm failed: TruncatedAnswerError: description: answer truncated")
         assert "8, 16 tokens" in failure["reason"] and obj["generator_fallback_reason"] == failure["reason"]
     gen_use = [b for b in report["backends"] if b["task"] == "generation"]
