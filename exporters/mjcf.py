@@ -22,10 +22,12 @@ import numpy as np
 from exporters import names
 from scene_builder.errors import ExportError
 from scene_builder.frames import mujoco_camera, quat_wxyz_from_matrix, transform_points
-from scene_builder.model import AssetKind, JointType, ObjectAsset, Part, PlacedObject, Plane, Scene, TriangleMesh
+from scene_builder.model import AssetKind, Background, JointType, ObjectAsset, Part, PlacedObject, Plane, Scene, Texture, TriangleMesh
 
 TIMESTEP_S = 0.002
 MESH_DIR = "meshes"
+TEXTURE_DIR = "textures"
+BACKGROUND_GROUP = 0
 VISUAL_GROUP = 1
 COLLISION_GROUP = 3
 WALL_GROUP = 2
@@ -41,6 +43,7 @@ CONDIM = 4
 TORSIONAL_FRICTION = 0.005
 ROLLING_FRICTION = 0.0001
 WALL_EXTENT_M = 6.0
+FLOOR_VISUAL_DROP_M = 0.02
 CHECK_STEPS = 100
 
 
@@ -77,17 +80,103 @@ def build_spec(scene: Scene, out_dir: Path, objects: tuple[PlacedObject, ...] | 
     spec.visual.global_.offwidth = max(640, scene.camera.intrinsics.width_px)
     spec.visual.global_.offheight = max(480, scene.camera.intrinsics.height_px)
 
+    spec.texturedir = TEXTURE_DIR
+    bg = scene.room.background
     _add_lights(spec)
-    _add_floor(spec)
+    _add_floor(spec, hidden=bg is not None)
     for i, wall in enumerate(scene.room.walls):
-        _add_wall(spec, i, wall)
+        _add_wall(spec, i, wall, hidden=bg is not None)
     _add_camera(spec, scene)
+    looks = _Looks(spec, Path(out_dir))
+    if bg is not None:
+        _add_background(spec, bg, Path(out_dir), looks)
     for placed in objects:
         if placed.asset.kind is AssetKind.DEFORMABLE:
             _add_flex(spec, placed)
         else:
-            _add_object(spec, placed, Path(out_dir))
+            _add_object(spec, placed, Path(out_dir), looks)
     return spec
+
+
+#: Photo-textured surfaces carry the light of the room they were photographed in: their material
+#: emits this share of the texture, and the scene's lights add the rest (PHOTO_EMISSION +
+#: headlight ambient + the diffuse light a surface facing the camera gets ~ 1), so rendered from
+#: the input camera they look like the photo; untextured things (a robot) are lit as usual.
+PHOTO_EMISSION = 0.55
+
+
+def write_texture(texture: Texture, out_dir: Path) -> str:
+    """Write ``out_dir/textures/<name>.png`` (once per name; deterministic bytes) and return the
+    file name relative to ``textures/``."""
+    from PIL import Image
+
+    fname = names.file_stem(texture.name) + ".png"
+    path = Path(out_dir) / TEXTURE_DIR / fname
+    if not path.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        Image.fromarray(np.ascontiguousarray(texture.image_rgb)).save(path, format="PNG", compress_level=6)
+    return fname
+
+
+class _Looks:
+    """One MuJoCo texture + material per scene texture (written once, by name)."""
+
+    def __init__(self, spec, out_dir: Path) -> None:
+        self.spec = spec
+        self.out_dir = out_dir
+        self.done: set[str] = set()
+
+    def material(self, texture: Texture) -> str:
+        import mujoco
+
+        name = f"photo/{texture.name}"
+        if name not in self.done:
+            fname = write_texture(texture, self.out_dir)
+            self.spec.add_texture(name=name, type=mujoco.mjtTexture.mjTEXTURE_2D, file=fname)
+            mat = self.spec.add_material(name=name, emission=PHOTO_EMISSION, specular=0.0, shininess=0.0, reflectance=0.0)
+            mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = name
+            self.done.add(name)
+        return name
+
+
+def _yaw_quat(yaw_rad: float) -> list[float]:
+    return [float(np.cos(yaw_rad / 2.0)), 0.0, 0.0, float(np.sin(yaw_rad / 2.0))]
+
+
+def _add_background(spec, bg: Background, out_dir: Path, looks: _Looks) -> None:
+    """The static background in the world body: its textured surface and the visual meshes of
+    objects that became background (visual only, group BACKGROUND_GROUP), their convex pieces and
+    the collision boxes (group COLLISION_GROUP)."""
+    import mujoco
+
+    mdir = out_dir / MESH_DIR
+    mdir.mkdir(parents=True, exist_ok=True)
+    visuals = [("surface", bg.surface), *((f"object/{n}", m) for n, m in zip(bg.static_names, bg.static_meshes))]
+    for label, mesh in visuals:
+        gname = f"background/{label}"
+        fname = names.file_stem("background", *label.split("/")) + ".obj"
+        _write_obj(mdir / fname, mesh)
+        spec.add_mesh(name=gname, file=fname, inertia=mujoco.mjtMeshInertia.mjMESH_INERTIA_SHELL)
+        extra = {"material": looks.material(mesh.texture)} if mesh.texture is not None else {"rgba": _mesh_rgba(mesh)}
+        spec.worldbody.add_geom(name=gname, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=gname, contype=0, conaffinity=0,
+                                group=BACKGROUND_GROUP, density=0.0, **extra)
+    common = dict(group=COLLISION_GROUP, friction=[FLOOR_DYNAMIC_FRICTION, TORSIONAL_FRICTION, ROLLING_FRICTION], condim=CONDIM,
+                  solref=list(SOLREF), solimp=list(SOLIMP), rgba=[0.3, 0.5, 0.9, 0.4])
+    for k, piece in enumerate(bg.static_pieces):
+        gname = f"background/piece/{k}"
+        fname = names.file_stem("background", "piece", str(k)) + ".obj"
+        _write_obj(mdir / fname, piece)
+        spec.add_mesh(name=gname, file=fname)
+        spec.worldbody.add_geom(name=gname, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=gname, **common)
+    for k in range(bg.box_count):
+        spec.worldbody.add_geom(name=f"background/box/{k}", type=mujoco.mjtGeom.mjGEOM_BOX, pos=bg.box_centers_m[k],
+                                quat=_yaw_quat(float(bg.box_yaws_rad[k])), size=bg.box_half_extents_m[k], **common)
+
+
+def _mesh_rgba(mesh: TriangleMesh) -> list[float]:
+    if mesh.vertex_colors_rgba is not None:
+        return (mesh.vertex_colors_rgba.astype(np.float64).mean(axis=0) / 255.0).tolist()
+    return [0.7, 0.7, 0.7, 1.0]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -109,7 +198,11 @@ def _add_lights(spec) -> None:
                              diffuse=[0.2, 0.2, 0.2], specular=[0.0, 0.0, 0.0], castshadow=False)
 
 
-def _add_floor(spec) -> None:
+def _add_floor(spec, hidden: bool = False) -> None:
+    """The floor: a collision half-space at z = 0. With a background, the observed floor is part
+    of the background's surface: the plane goes to the collision group (not drawn), and a drawn
+    copy lies FLOOR_VISUAL_DROP_M lower, so it shows only past the observed floor and never
+    through it."""
     import mujoco
 
     spec.add_texture(
@@ -121,8 +214,13 @@ def _add_floor(spec) -> None:
     spec.worldbody.add_geom(
         name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[WALL_EXTENT_M, WALL_EXTENT_M, 0.05], material="floor",
         friction=[FLOOR_DYNAMIC_FRICTION, TORSIONAL_FRICTION, ROLLING_FRICTION], condim=CONDIM,
-        solref=list(SOLREF), solimp=list(SOLIMP), group=0,
+        solref=list(SOLREF), solimp=list(SOLIMP), group=COLLISION_GROUP if hidden else 0,
     )
+    if hidden:
+        spec.worldbody.add_geom(
+            name="floor_visual", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[WALL_EXTENT_M, WALL_EXTENT_M, 0.05], material="floor",
+            pos=[0.0, 0.0, -FLOOR_VISUAL_DROP_M], contype=0, conaffinity=0, group=0,
+        )
 
 
 def _plane_pose(plane: Plane) -> tuple[np.ndarray, np.ndarray]:
@@ -136,16 +234,17 @@ def _plane_pose(plane: Plane) -> tuple[np.ndarray, np.ndarray]:
     return p, quat_wxyz_from_matrix(np.stack([x, y, n], axis=1))
 
 
-def _add_wall(spec, i: int, wall: Plane) -> None:
+def _add_wall(spec, i: int, wall: Plane, hidden: bool = False) -> None:
     """A wall is a collision half-space (MuJoCo plane geom), drawn in an off-white paint colour;
     planes are only drawn from their front side, which faces into the room, so they never hide
-    the scene from a camera inside it."""
+    the scene from a camera inside it. With a background (which has the observed wall), the
+    plane goes to the collision group and is not drawn."""
     import mujoco
 
     pos, quat = _plane_pose(wall)
     spec.worldbody.add_geom(
         name=f"wall_{i}", type=mujoco.mjtGeom.mjGEOM_PLANE, pos=pos, quat=quat,
-        size=[WALL_EXTENT_M, WALL_EXTENT_M, 0.05], rgba=[0.86, 0.84, 0.78, 1.0], group=WALL_GROUP,
+        size=[WALL_EXTENT_M, WALL_EXTENT_M, 0.05], rgba=[0.86, 0.84, 0.78, 1.0], group=COLLISION_GROUP if hidden else WALL_GROUP,
         friction=[FLOOR_DYNAMIC_FRICTION, TORSIONAL_FRICTION, ROLLING_FRICTION], condim=CONDIM,
         solref=list(SOLREF), solimp=list(SOLIMP),
     )
@@ -161,13 +260,19 @@ def _add_camera(spec, scene: Scene) -> None:
 
 
 def _write_obj(path: Path, mesh: TriangleMesh) -> None:
-    """Plain OBJ (positions and faces only, 1-based). Written by hand: it is three lines of
-    numpy, exact (repr-precision floats) and keeps vertex order, which exporters that merge or
-    reorder vertices do not guarantee."""
+    """Plain OBJ (positions, texture coordinates when the mesh has them, faces; 1-based).
+    Written by hand: it is a few lines of numpy, exact (repr-precision floats) and keeps vertex
+    order, which exporters that merge or reorder vertices do not guarantee. OBJ's ``vt`` runs up
+    from the bottom of the image: ``1 - v`` of the model's convention."""
     with open(path, "w") as f:
         f.write(f"# {len(mesh.vertices_m)} vertices, {len(mesh.faces)} faces, metres\n")
         np.savetxt(f, mesh.vertices_m, fmt="v %.9g %.9g %.9g")
-        np.savetxt(f, mesh.faces + 1, fmt="f %d %d %d")
+        if mesh.uv is not None:
+            np.savetxt(f, np.stack([mesh.uv[:, 0], 1.0 - mesh.uv[:, 1]], axis=1), fmt="vt %.9g %.9g")
+            idx = mesh.faces + 1
+            np.savetxt(f, np.repeat(idx, 2, axis=1), fmt="f %d/%d %d/%d %d/%d")
+        else:
+            np.savetxt(f, mesh.faces + 1, fmt="f %d %d %d")
 
 
 def mesh_files(asset: ObjectAsset, part: Part) -> tuple[str, tuple[str, ...]]:
@@ -203,7 +308,7 @@ def _children(asset: ObjectAsset) -> dict[str | None, list[Part]]:
     return kids
 
 
-def _add_object(spec, placed: PlacedObject, out_dir: Path) -> None:
+def _add_object(spec, placed: PlacedObject, out_dir: Path, looks: "_Looks") -> None:
     import mujoco
 
     asset = placed.asset
@@ -219,9 +324,11 @@ def _add_object(spec, placed: PlacedObject, out_dir: Path) -> None:
         vis, cols = mesh_files(asset, part)
         bname = names.body_name(asset, part)
         spec.add_mesh(name=f"{bname}/visual", file=vis)
+        tex = part.visual.texture
+        look = {"material": looks.material(tex)} if tex is not None else {"rgba": part_rgba(part)}
         body.add_geom(
             name=f"{bname}/visual", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"{bname}/visual",
-            contype=0, conaffinity=0, group=VISUAL_GROUP, rgba=part_rgba(part), density=0.0,
+            contype=0, conaffinity=0, group=VISUAL_GROUP, density=0.0, **look,
         )
         mu = part.material.dynamic_friction
         for k, fname in enumerate(cols):

@@ -38,12 +38,9 @@ class Body:
     com_rel_m: np.ndarray
     mass_kg: float
     fixed: bool
-    parent: int = -1  # index of the supporting body; -1 floor, -2 wall
+    parent: int = -1  # index of the supporting body; -1 floor, -2 wall, -3 background, -4 none
     support_surface: int = -1  # index into the parent's ``surfaces`` when parent >= 0
     children: list[int] = field(default_factory=list)
-    # Hung on a wall by the support graph (``support.wall_mountable``): exported welded, yet the
-    # solver may still slide it like any movable body.
-    wall_mounted: bool = False
 
     @property
     def bottom_m(self) -> float:

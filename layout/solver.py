@@ -38,10 +38,11 @@ from layout.bodies import Body, make_body
 from layout.geometry import clip_to_slab_xy, closest_point_in_polygon, horizontal_mtv, placements_inside
 from layout.narrowphase import ConvexWorld
 from layout.snapping import YawSnap, reference_yaw, snap_yaw
-from layout.support import FLOOR, build_support, is_ancestor, subtree
+from layout.background import BackgroundSupport, absorb, carve, column_boxes, observed_structure, support_pad
+from layout.support import BACKGROUND, FLOOR, UNSUPPORTED, build_support, is_ancestor, subtree
 from scene_builder.config import LayoutConfig
 from scene_builder.errors import InputError
-from scene_builder.model import AssetKind, GeneratedAsset, LayoutResult, ObjectAsset, Perception, PlacedObject, Plane, Scene, SupportEdge
+from scene_builder.model import AssetKind, Background, GeneratedAsset, LayoutResult, Perception, PlacedObject, Placement, Plane, Scene, SupportEdge
 
 # Signed distances above -PENETRATION_TOL_M count as touching (resting contacts are exact up to
 # floating point).
@@ -543,8 +544,63 @@ class _Solver:
         return worst
 
 
-def _welded(asset: ObjectAsset, wall_mounted: bool) -> ObjectAsset:
-    return dataclasses.replace(asset, is_fixed=True) if wall_mounted and not asset.is_fixed else asset
+def _yaw_deg(rotation: np.ndarray) -> float:
+    return float(np.degrees(np.arctan2(rotation[1, 0], rotation[0, 0])))
+
+
+def _static_background(
+    background: Background | None, bodies: list[Body], absorbed: list[int], walls: tuple[Plane, ...]
+) -> Background | None:
+    """The background with the objects in ``absorbed`` (body indices) made part of it, a pad under
+    every body resting on it, and the collision boxes of its observed structure carved clear of
+    the remaining bodies."""
+    if background is None:
+        return None
+    for k in absorbed:
+        b = bodies[k]
+        background = absorb(background, b.name, b.asset, b.world_from_asset())
+    lo, hi = column_boxes(observed_structure(background, walls))
+    movers = [b for k, b in enumerate(bodies) if k not in set(absorbed)]
+    if movers:
+        olo = np.concatenate([b.piece_lo_rel_m + b.position_m for b in movers])
+        ohi = np.concatenate([b.piece_hi_rel_m + b.position_m for b in movers])
+        lo, hi = carve(lo, hi, olo, ohi)
+    centers = [(lo + hi) / 2.0]
+    halves = [(hi - lo) / 2.0]
+    yaws = [np.zeros(len(lo))]
+    for b in movers:
+        if b.parent == BACKGROUND:
+            c, h, yaw = support_pad(b.footprint_rel_m, b.rotation, b.position_m, b.bottom_m)
+            centers.append(c[None])
+            halves.append(h[None])
+            yaws.append(np.array([yaw]))
+    return dataclasses.replace(
+        background,
+        box_centers_m=np.concatenate(centers),
+        box_half_extents_m=np.concatenate(halves),
+        box_yaws_rad=np.concatenate(yaws),
+    )
+
+
+def _placement(g: GeneratedAsset, b: Body, support: str, absorbed: bool, dropped: bool) -> Placement:
+    """How far ``b`` ended from where ``g`` was seen, and why."""
+    seen = g.world_from_asset[:3, 3]
+    delta = b.position_m - seen
+    dist = float(np.linalg.norm(delta))
+    yaw = abs((_yaw_deg(b.rotation) - _yaw_deg(g.world_from_asset[:3, :3]) + 180.0) % 360.0 - 180.0)
+    reasons = []
+    if absorbed:
+        reasons.append("nothing seen under it to rest on: kept where seen as static background")
+    if dropped:
+        reasons.append("no room left on its support: moved to the floor")
+    if dist > 0.01 and not absorbed:
+        if abs(delta[2]) > 0.01:
+            reasons.append(f"{'lowered' if delta[2] < 0 else 'raised'} {abs(delta[2]) * 100:.0f} cm onto the {support if support in ('floor', 'background', 'wall') else support}")
+        if float(np.linalg.norm(delta[:2])) > 0.01:
+            reasons.append(f"pushed {float(np.linalg.norm(delta[:2])) * 100:.0f} cm sideways out of interpenetration")
+    if yaw > 1.0:
+        reasons.append(f"turned {yaw:.0f} deg to align with the walls")
+    return Placement(g.asset.name, 0.0 if absorbed else dist, 0.0 if absorbed else yaw, support, absorbed, "; ".join(reasons))
 
 
 def solve_layout_with_stats(
@@ -583,7 +639,12 @@ def solve_layout_with_stats(
     lap("narrowphase_setup")
     before = solver.max_penetration()
     lap("measure_before")
-    edges, _ = build_support(bodies, walls, solver.vertical_clash)
+    background = perception.room.background
+    ground = BackgroundSupport(background, walls)
+    edges, _ = build_support(bodies, walls, solver.vertical_clash, ground.height_under if background is not None else None)
+    absorbed = [i for i, b in enumerate(bodies) if b.parent == UNSUPPORTED]
+    for i in absorbed:
+        bodies[i].fixed = True  # left where seen; the others make room around it
     for i, b in enumerate(bodies):
         solver.world.set_position(i, b.position_m)
     lap("support")
@@ -605,18 +666,30 @@ def solve_layout_with_stats(
 
     by_name = {b.name: b for b in bodies}
     parent_of = {e.child: e.parent for e in edges}
-    # Bodies that the support graph hung on a wall are welded there (``support.wall_mountable``).
+    absorbed_names = {bodies[i].name for i in absorbed}
+    dropped_names = {bodies[i].name for i in solver.dropped}
+    # What rests on an object that became background rests on the background.
+    parent_of = {c: ("background" if p in absorbed_names else p) for c, p in parent_of.items()}
+    edges = [dataclasses.replace(e, parent=parent_of[e.child]) for e in edges]
     placed = tuple(
-        PlacedObject(asset=_welded(g.asset, by_name[g.asset.name].wall_mounted), world_from_asset=by_name[g.asset.name].world_from_asset(), support=parent_of[g.asset.name])
+        PlacedObject(asset=g.asset, world_from_asset=by_name[g.asset.name].world_from_asset(), support=parent_of[g.asset.name])
+        for g in generated
+        if g.asset.name not in absorbed_names
+    )
+    room = dataclasses.replace(perception.room, background=_static_background(background, bodies, absorbed, walls))
+    scene = Scene(camera=perception.camera, room=room, objects=placed)
+    edge_order = {n: k for k, n in enumerate(names)}
+    support = tuple(sorted((e for e in edges if e.child not in absorbed_names), key=lambda e: edge_order[e.child]))
+    placements = tuple(
+        _placement(g, by_name[g.asset.name], parent_of[g.asset.name], g.asset.name in absorbed_names, g.asset.name in dropped_names)
         for g in generated
     )
-    scene = Scene(camera=perception.camera, room=perception.room, objects=placed)
-    edge_order = {n: k for k, n in enumerate(names)}
-    support = tuple(sorted(edges, key=lambda e: edge_order[e.child]))
+    lap("background")
     shifts = np.array([np.linalg.norm(b.position_m[:2] - b.initial_position_m[:2]) for b in bodies])
     stats = SolveStats(tuple(snaps), float(shifts.mean()), float(shifts.max()), converged, iterations, tuple(phases))
     return (
-        LayoutResult(scene=scene, support=support, iterations=iterations, max_penetration_before_m=before, max_penetration_after_m=after),
+        LayoutResult(scene=scene, support=support, iterations=iterations, max_penetration_before_m=before,
+                     max_penetration_after_m=after, placements=placements),
         stats,
     )
 

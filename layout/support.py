@@ -1,5 +1,12 @@
-"""Support graph: which object rests on which (floor, another object's top face, or a wall), built
-bottom-up from geometry, and the vertical placement that makes each resting contact exact."""
+"""Support graph: which object rests on which (floor, another object's top face, the static
+background seen under it, or a wall for built-in furniture), built bottom-up from geometry, and
+the vertical placement that makes each resting contact exact.
+
+An object rests on the highest support found in a band around where it was seen: from
+:data:`MAX_DROP_M` below its observed bottom to :data:`SUPPORT_TOL_M` above. Nothing falls
+further than that: an object with nothing under it in the band is not dropped to whatever lies
+metres below; it is left where it was seen, unsupported, and the layout makes it part of the
+static background (built-in furniture against a wall hangs on the wall instead)."""
 
 from __future__ import annotations
 
@@ -11,7 +18,7 @@ from layout.bodies import Body
 from layout.geometry import clip_convex_polygons, polygon_area
 from scene_builder.model import AssetKind, Plane, SupportEdge
 
-FLOOR, WALL = -1, -2
+FLOOR, WALL, BACKGROUND, UNSUPPORTED = -1, -2, -3, -4
 # A top face counts as a support when it lies below the object's bottom + this tolerance
 # (observed bottoms sink into supports by depth noise and by completion errors). Not more: an
 # object standing on the floor next to a low box must not be lifted onto it.
@@ -26,16 +33,12 @@ SUPPORT_CLASH_TOL_M = 0.01
 # A soft body rests on a face only when the face has at least this share of its footprint's area
 # (a pillow draped over a narrower pillow or a sofa's arm slides off in simulation).
 DEFORMABLE_MIN_FACE_AREA = 0.5
-# Fixed furniture this close to a wall and off the floor hangs on the wall.
+# Fixed (built-in) furniture this close to a wall and off the floor hangs on the wall.
 WALL_CONTACT_M = 0.05
-# A rigid object seen with nothing under it, its bottom this high and within WALL_MOUNT_REACH_M
-# of a wall (or reaching into it), is welded where it was seen instead of falling to the floor,
-# up to metres from its pixels: it hangs on the wall (a picture, a window frame, a TV, a sconce)
-# or stands on something against the wall that perception did not separate from it (a shelf
-# board, a counter). Lower objects (a pillow by a sofa, a box by a bed) still fall: they more
-# likely rest on furniture in front of the wall whose shape the prior got too low.
-WALL_MOUNT_MIN_BOTTOM_M = 0.6
-WALL_MOUNT_REACH_M = 0.35
+# A support more than this far below an object's observed bottom is not what it rests on: the
+# object would drop further than its observed bottom can be wrong (legs hidden behind a nearer
+# object are extended to the floor by generation, ``generation.pose.floor_snap_height_m``).
+MAX_DROP_M = 0.15
 
 
 def _footprint_world(b: Body) -> np.ndarray:
@@ -60,29 +63,25 @@ def _near_wall(b: Body, walls: tuple[Plane, ...], reach_m: float = WALL_CONTACT_
     return any(float(np.min(w.signed_distance_m(v))) < reach_m for w in walls)
 
 
-def wall_mountable(b: Body, walls: tuple[Plane, ...]) -> bool:
-    """Whether a movable body with no object under it hangs on a wall instead of falling: rigid
-    (soft bodies drape; articulated furniture stands), bottom at least WALL_MOUNT_MIN_BOTTOM_M
-    above the floor, within WALL_MOUNT_REACH_M of a wall."""
-    return (
-        b.asset.kind is AssetKind.RIGID
-        and b.bottom_m >= WALL_MOUNT_MIN_BOTTOM_M
-        and _near_wall(b, walls, WALL_MOUNT_REACH_M)
-    )
-
-
 def build_support(
-    bodies: list[Body], walls: tuple[Plane, ...], clash: Callable[[int, int, float], float] | None = None
+    bodies: list[Body],
+    walls: tuple[Plane, ...],
+    clash: Callable[[int, int, float], float] | None = None,
+    background: Callable[[np.ndarray, float, float], float | None] | None = None,
 ) -> tuple[list[SupportEdge], list[int]]:
     """Assign each body its support and set its height so that it rests exactly on it.
 
     Bodies are processed bottom-up (by initial bottom height, then name), and a body can only rest
-    on a body processed before it, so the graph has no cycles. A body rests on the highest top
-    face (of an earlier body) that lies below its bottom + tolerance and under at least 25 % of
-    its footprint (rigid bodies never rest on soft ones); else fixed furniture off the floor and against a wall, or a rigid object high
-    up near a wall (``wall_mountable``; it becomes fixed), hangs on the wall (its height is kept; ``wall_mounted`` is set on the latter);
-    else it stands on the floor. Updates ``position_m[2]``, ``parent`` and
-    ``children`` in place. Returns the edges (in processing order) and the processing order.
+    on a body processed before it, so the graph has no cycles. The candidates lie between
+    MAX_DROP_M below the body's bottom and SUPPORT_TOL_M above it: the top faces of earlier bodies
+    under at least 25 % of its footprint (rigid bodies never rest on soft ones), the background
+    surface seen around its footprint (``background(footprint_world (K, 2), low_m, high_m)``
+    gives its height or None; ``layout.background.BackgroundSupport.height_under``), and the
+    floor. The highest candidate wins (an object face before the background at equal height).
+    With none, fixed furniture off the floor and against a wall hangs on the wall; anything else
+    is left where it was seen with ``parent = UNSUPPORTED`` (the layout turns it into
+    background). Updates ``position_m[2]``, ``parent``, ``support_surface`` and ``children`` in
+    place. Returns the edges (in processing order) and the processing order.
 
     ``clash(child, support, z)``: penetration depth (m) of the child placed at height z against the
     support. A face that the child, set on it, would sink into the rest of the support (the top
@@ -92,7 +91,7 @@ def build_support(
     edges: list[SupportEdge] = []
     placed: list[int] = []
     for b in bodies:
-        b.parent, b.support_surface, b.children, b.wall_mounted = FLOOR, -1, [], False
+        b.parent, b.support_surface, b.children = FLOOR, -1, []
     # Plan boxes of the bodies placed so far (vectorised prefilter of candidate supports).
     placed_lo = np.zeros((len(bodies), 2))
     placed_hi = np.zeros((len(bodies), 2))
@@ -118,7 +117,7 @@ def build_support(
                 continue
             for k, surf in enumerate(s.surfaces):
                 h = float(s.position_m[2] + surf.height_rel_m)
-                if h < MIN_SURFACE_HEIGHT_M or h > bottom + tol or polygon_area(surf.polygon_rel_m) < min_face_area:
+                if h < max(MIN_SURFACE_HEIGHT_M, bottom - MAX_DROP_M) or h > bottom + tol or polygon_area(surf.polygon_rel_m) < min_face_area:
                     continue
                 frac = _overlap_fraction(foot, surf.polygon_rel_m + s.position_m[:2])
                 if frac < MIN_FOOTPRINT_OVERLAP:
@@ -130,18 +129,31 @@ def build_support(
             if clash is None or clash(i, -neg_j, z) <= SUPPORT_CLASH_TOL_M:
                 best = (h, -neg_j, k)
                 break
-        if best is not None:
+        h_bg = None
+        if background is not None:
+            h_bg = background(foot, max(MIN_SURFACE_HEIGHT_M, bottom - MAX_DROP_M), bottom + tol)
+            if h_bg is not None and best is not None and h_bg <= best[0]:
+                h_bg = None
+        if h_bg is not None:
+            h = h_bg
+            b.parent, b.support_surface = BACKGROUND, -1
+            parent_name = "background"
+        elif best is not None:
             h, j, k = best
             b.parent, b.support_surface = j, k
             bodies[j].children.append(i)
             parent_name = bodies[j].name
-        elif (b.fixed and bottom > tol and _near_wall(b, walls)) or (not b.fixed and wall_mountable(b, walls)):
-            b.parent, b.wall_mounted = WALL, not b.fixed
+        elif bottom <= MAX_DROP_M:
+            h = 0.0
+            parent_name = "floor"
+        elif b.fixed and _near_wall(b, walls):
+            b.parent = WALL
             h = bottom
             parent_name = "wall"
         else:
-            h = 0.0
-            parent_name = "floor"
+            b.parent = UNSUPPORTED
+            h = bottom
+            parent_name = "none"
         # The gap as observed: the child's and the support's initial heights.
         if b.parent >= 0:
             s = bodies[b.parent]

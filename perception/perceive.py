@@ -12,7 +12,7 @@ from perception.room import RoomFrame, estimate_room, place_floor_under
 from scene_builder.config import InputSpec, PerceptionConfig
 from scene_builder.errors import EmptySceneError, InputError
 from scene_builder.frames import transform_points
-from scene_builder.model import BackendUse, Camera, CameraIntrinsics, Observation, PerceivedObject, Perception
+from scene_builder.model import BackendUse, Camera, CameraIntrinsics, Observation, PerceivedObject, Perception, Room
 
 __all__ = ["BEHIND_WALL_TOLERANCE_M", "CROP_CONTEXT", "MAX_OBJECT_HEIGHT_M", "MIN_OBJECT_HEIGHT_M", "MIN_RAISED_OBJECT_HEIGHT_M", "RAISED_M", "gravity_aligned_size", "perceive"]
 
@@ -271,5 +271,10 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
     if named_by_prior:
         backends.append(BackendUse("naming", "geometric-prior", f"named {named_by_prior} of {len(objects)} objects that '{name_use.backend}' left as 'object'"))
     camera = Camera(k, frame.world_from_camera)
-    return Perception(observation, camera, frame.room, tuple(objects), tuple(backends))
+    room = frame.room
+    if config.background:
+        from perception.background import observed_background
+
+        room = Room(walls=room.walls, background=observed_background(observation, camera, room.walls, tuple(objects), config.max_depth_m))
+    return Perception(observation, camera, room, tuple(objects), tuple(backends))
 

@@ -34,7 +34,8 @@ class PerceptionConfig:
     is a typical phone / Kinect-class camera). max_depth_m: depth beyond this is ignored.
     min_object_points: clusters with fewer observed points are dropped. depth_backend,
     segmentation_backend, naming_backend: registry names or "auto". models_dir: where learned
-    model weights are looked up first (also $SCENE_BUILDER_MODELS).
+    model weights are looked up first (also $SCENE_BUILDER_MODELS). background: build the static
+    textured background from every pixel no movable object explains.
     """
 
     default_fov_deg: float = 60.0
@@ -45,6 +46,7 @@ class PerceptionConfig:
     segmentation_backend: str = "auto"
     naming_backend: str = "auto"
     models_dir: Path | None = None
+    background: bool = True
 
 
 @dataclass(frozen=True)
@@ -54,7 +56,8 @@ class GenerationConfig:
     voxel_resolution: voxels along the longest side of an object's grid (PhysX-Omni uses 64).
     coacd_threshold: CoACD concavity threshold. max_collision_pieces: bound on convex pieces per part.
     cache_dir: where convex decompositions are cached (keyed by mesh hash); None disables it.
-    backend: registry name or "auto".
+    backend: registry name or "auto". photo_textures: texture every asset with the photo,
+    projected from the input camera.
     """
 
     voxel_resolution: int = 48
@@ -63,6 +66,7 @@ class GenerationConfig:
     max_visual_faces: int = 4000
     cache_dir: Path | None = None
     backend: str = "auto"
+    photo_textures: bool = True
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,230 @@
+"""The static background in the layout: what objects rest on when they were seen on something
+that is not itself an object, and the background's collision geometry.
+
+* :class:`BackgroundSupport` answers "what background surface was seen right under this
+  object?": among the observed background vertices that face up (a counter top, a shelf board,
+  a bed seen as background), those within :data:`SUPPORT_REACH_M` of the object's footprint and
+  in the height band just under its bottom; the support height is the densest 1 cm layer of
+  them. The surface under the object itself is hidden by the object, so its height comes from
+  what was seen around it.
+* :func:`support_pad`: the hidden part of that surface, as a thin box under the object's
+  footprint at the support height (the object rests exactly on it).
+* :func:`column_boxes`: the background's observed surface above the floor and in front of the
+  walls as collision boxes: the points in each :data:`CELL_M` x :data:`CELL_M` column, split where
+  they leave a vertical gap, each run a box whose top is the run's highest point (so boxes follow
+  the observed heights, not a voxel grid), merged along x where neighbours agree; then carved
+  clear of every object (:func:`carve`).
+* :func:`absorb`: objects that cannot stand where they were seen join the background.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from scene_builder.frames import transform_points
+from scene_builder.model import Background, ObjectAsset, Plane, TriangleMesh
+
+__all__ = [
+    "BackgroundSupport",
+    "CELL_M",
+    "PAD_THICKNESS_M",
+    "SUPPORT_REACH_M",
+    "absorb",
+    "carve",
+    "column_boxes",
+    "support_pad",
+]
+
+#: Background vertices whose normal is within this angle of +Z face up (can support things).
+UP_MAX_TILT_DEG = 25.0
+#: How far around an object's footprint the surface it rests on is looked for.
+SUPPORT_REACH_M = 0.10
+#: At least this many upward background vertices in the densest layer make a support.
+MIN_SUPPORT_POINTS = 8
+#: Layer thickness for the densest-layer vote, and the band kept around it.
+LAYER_M = 0.01
+#: Thickness of the pad under an object resting on the background.
+PAD_THICKNESS_M = 0.03
+#: Collision boxes: column size, the vertical gap that splits a column, the thickness given to
+#: a run of points (a surface seen from above is a thin slab), least points per run.
+CELL_M = 0.05
+COLUMN_GAP_M = 0.06
+SHELL_M = 0.02
+MIN_RUN_POINTS = 3
+#: Observed points this close to the floor or a wall plane are the floor's or the wall's.
+FLOOR_BAND_M = 0.03
+WALL_BAND_M = 0.05
+#: Neighbouring column boxes whose bottoms and tops agree within this merge into one.
+MERGE_TOL_M = 0.01
+#: Boxes keep this gap from objects.
+CARVE_CLEARANCE_M = 0.002
+#: A box cut below an object keeps at least this thickness, else it is dropped.
+MIN_BOX_THICKNESS_M = 0.01
+
+
+def vertex_normals(mesh: TriangleMesh) -> np.ndarray:
+    """(V, 3) area-weighted unit vertex normals (faces are counter-clockwise seen from outside:
+    for the background surface, seen from the camera)."""
+    v, f = mesh.vertices_m, mesh.faces
+    n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    out = np.zeros_like(v)
+    for k in range(3):
+        np.add.at(out, f[:, k], n)
+    norm = np.linalg.norm(out, axis=1, keepdims=True)
+    return np.divide(out, norm, out=np.zeros_like(out), where=norm > 0)
+
+
+def observed_structure(background: Background, walls: tuple[Plane, ...]) -> np.ndarray:
+    """(N, 3) observed background vertices that are neither floor nor wall (world frame)."""
+    v = background.surface.vertices_m[background.surface_observed]
+    keep = v[:, 2] > FLOOR_BAND_M
+    for w in walls:
+        keep &= w.signed_distance_m(v) > WALL_BAND_M
+    return v[keep]
+
+
+class BackgroundSupport:
+    """Support heights from the background's observed upward-facing surfaces (module docstring)."""
+
+    def __init__(self, background: Background | None, walls: tuple[Plane, ...] = ()) -> None:
+        from scipy.spatial import cKDTree
+
+        self.points = np.zeros((0, 3))
+        self.tree = None
+        if background is None:
+            return
+        normals = vertex_normals(background.surface)
+        up = normals[:, 2] >= np.cos(np.radians(UP_MAX_TILT_DEG))
+        v = background.surface.vertices_m
+        keep = background.surface_observed & up & (v[:, 2] > FLOOR_BAND_M)
+        for w in walls:
+            keep &= w.signed_distance_m(v) > -WALL_BAND_M
+        self.points = v[keep]
+        if len(self.points):
+            self.tree = cKDTree(self.points[:, :2])
+
+    def height_under(self, footprint_world_m: np.ndarray, low_m: float, high_m: float) -> float | None:
+        """Height (m) of the upward background surface seen around the (K, 2) footprint polygon,
+        within [low_m, high_m]; None when too few points support it."""
+        import shapely
+
+        if self.tree is None or len(footprint_world_m) == 0:
+            return None
+        foot = np.asarray(footprint_world_m, dtype=np.float64)
+        centre = foot.mean(axis=0)
+        radius = float(np.max(np.linalg.norm(foot - centre, axis=1))) + SUPPORT_REACH_M
+        idx = np.array(self.tree.query_ball_point(centre, radius), dtype=np.int64)
+        if len(idx) < MIN_SUPPORT_POINTS:
+            return None
+        p = self.points[idx]
+        p = p[(p[:, 2] >= low_m) & (p[:, 2] <= high_m)]
+        if len(p) < MIN_SUPPORT_POINTS:
+            return None
+        region = shapely.Polygon(foot).buffer(SUPPORT_REACH_M) if len(foot) >= 3 else shapely.Point(centre).buffer(SUPPORT_REACH_M)
+        p = p[shapely.contains_xy(region, p[:, 0], p[:, 1])]
+        if len(p) < MIN_SUPPORT_POINTS:
+            return None
+        layers = np.floor((p[:, 2] - low_m) / LAYER_M).astype(np.int64)
+        counts = np.bincount(layers)
+        # Densest layer; ties go to the higher one (the surface, not the points under its edge).
+        best = int(len(counts) - 1 - np.argmax(counts[::-1]))
+        near = np.abs(p[:, 2] - (low_m + (best + 0.5) * LAYER_M)) <= 1.5 * LAYER_M
+        if int(near.sum()) < MIN_SUPPORT_POINTS:
+            return None
+        return float(np.median(p[near, 2]))
+
+
+def support_pad(footprint_rel_m: np.ndarray, rotation: np.ndarray, position_m: np.ndarray, height_m: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """The box under an object resting on the background: its footprint's bounding rectangle in
+    the object's own (yawed) axes, from ``height_m - PAD_THICKNESS_M`` (not below the floor) up to
+    ``height_m``. footprint_rel_m: (K, 2) relative to the object's position in world axes.
+    Returns centre (3,), half extents (3,) and yaw (rad)."""
+    yaw = float(np.arctan2(rotation[1, 0], rotation[0, 0]))
+    c, s = np.cos(yaw), np.sin(yaw)
+    local = footprint_rel_m @ np.array([[c, -s], [s, c]])  # world offsets -> object axes
+    lo, hi = local.min(axis=0), local.max(axis=0)
+    mid = 0.5 * (lo + hi)
+    centre_xy = position_m[:2] + np.array([[c, -s], [s, c]]) @ mid
+    bottom = max(0.0, height_m - PAD_THICKNESS_M)
+    thickness = max(height_m - bottom, 1e-3)
+    centre = np.array([centre_xy[0], centre_xy[1], height_m - thickness / 2.0])
+    half = np.array([max((hi - lo)[0] / 2.0, 1e-3), max((hi - lo)[1] / 2.0, 1e-3), thickness / 2.0])
+    return centre, half, yaw
+
+
+def column_boxes(points_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Axis-aligned collision boxes (lo (B, 3), hi (B, 3)) over observed structure points (N, 3)
+    (see the module docstring)."""
+    p = np.asarray(points_m, dtype=np.float64)
+    if len(p) == 0:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    ij = np.floor(p[:, :2] / CELL_M).astype(np.int64)
+    order = np.lexsort((p[:, 2], ij[:, 1], ij[:, 0]))
+    ij, z = ij[order], p[order, 2]
+    new_col = np.ones(len(z), dtype=bool)
+    new_col[1:] = np.any(ij[1:] != ij[:-1], axis=1)
+    gap = np.ones(len(z), dtype=bool)
+    gap[1:] = new_col[1:] | (z[1:] - z[:-1] > COLUMN_GAP_M)
+    run = np.cumsum(gap) - 1
+    counts = np.bincount(run)
+    starts = np.flatnonzero(gap)
+    zlo = z[starts]
+    zhi = np.maximum.reduceat(z, starts)
+    cells = ij[starts]
+    ok = counts >= MIN_RUN_POINTS
+    cells, zlo, zhi = cells[ok], zlo[ok] - SHELL_M, zhi[ok]
+    # Merge runs of neighbouring cells along x (same y, adjacent x, bottoms and tops agree).
+    order = np.lexsort((cells[:, 0], np.round(zhi / MERGE_TOL_M), cells[:, 1]))
+    boxes_lo, boxes_hi = [], []
+    cur = None
+    for k in order:
+        i, j = int(cells[k, 0]), int(cells[k, 1])
+        if cur is not None and cur[1] == j and cur[2] + 1 == i and abs(cur[3] - zlo[k]) <= MERGE_TOL_M and abs(cur[4] - zhi[k]) <= MERGE_TOL_M:
+            cur = [cur[0], j, i, min(cur[3], zlo[k]), max(cur[4], zhi[k])]
+            continue
+        if cur is not None:
+            boxes_lo.append([cur[0] * CELL_M, cur[1] * CELL_M, cur[3]])
+            boxes_hi.append([(cur[2] + 1) * CELL_M, (cur[1] + 1) * CELL_M, cur[4]])
+        cur = [i, j, i, float(zlo[k]), float(zhi[k])]
+    if cur is not None:
+        boxes_lo.append([cur[0] * CELL_M, cur[1] * CELL_M, cur[3]])
+        boxes_hi.append([(cur[2] + 1) * CELL_M, (cur[1] + 1) * CELL_M, cur[4]])
+    lo, hi = np.array(boxes_lo), np.array(boxes_hi)
+    lo[:, 2] = np.maximum(lo[:, 2], 0.0)
+    hi[:, 2] = np.maximum(hi[:, 2], lo[:, 2] + MIN_BOX_THICKNESS_M)
+    return lo, hi
+
+
+def carve(lo_m: np.ndarray, hi_m: np.ndarray, obstacles_lo_m: np.ndarray, obstacles_hi_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Boxes (lo, hi: (B, 3)) kept clear of the obstacles' boxes ((K, 3), (K, 3), e.g. the world
+    bounds of every object's convex pieces) by CARVE_CLEARANCE_M: a box reaching into an
+    obstacle from below is cut down to the obstacle's bottom when at least MIN_BOX_THICKNESS_M
+    remains, otherwise dropped."""
+    lo, hi = np.array(lo_m, dtype=np.float64), np.array(hi_m, dtype=np.float64)
+    keep = np.ones(len(lo), dtype=bool)
+    c = CARVE_CLEARANCE_M
+    for olo, ohi in zip(np.asarray(obstacles_lo_m), np.asarray(obstacles_hi_m)):
+        hit = keep & np.all(lo < ohi + c, axis=1) & np.all(hi > olo - c, axis=1)
+        if not np.any(hit):
+            continue
+        cut = olo[2] - c
+        can = hit & (cut - lo[:, 2] >= MIN_BOX_THICKNESS_M)
+        hi[can, 2] = cut
+        keep &= ~(hit & ~can)
+    return lo[keep], hi[keep]
+
+
+def absorb(background: Background, name: str, asset: ObjectAsset, world_from_asset: np.ndarray) -> Background:
+    """``background`` with ``asset`` (placed at ``world_from_asset``) made part of it: every
+    part's visual mesh (rest pose) joins ``static_meshes`` under ``name`` (``name/part`` for parts
+    other than the root) and its convex pieces join ``static_pieces``, in the world frame."""
+    meshes, labels, pieces = list(background.static_meshes), list(background.static_names), list(background.static_pieces)
+    for part in asset.parts:
+        v = part.visual
+        meshes.append(dataclasses.replace(v, vertices_m=transform_points(world_from_asset, v.vertices_m)))
+        labels.append(name if part.parent is None else f"{name}/{part.name}")
+        for piece in part.collision:
+            pieces.append(TriangleMesh(transform_points(world_from_asset, piece.vertices_m), piece.faces))
+    return dataclasses.replace(background, static_meshes=tuple(meshes), static_names=tuple(labels), static_pieces=tuple(pieces))
