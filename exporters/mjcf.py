@@ -20,13 +20,13 @@ from pathlib import Path
 import numpy as np
 
 from exporters import names
+from exporters.textures import TEXTURE_DIR, texture_file, write_mtl, write_texture
 from scene_builder.errors import ExportError
 from scene_builder.frames import mujoco_camera, quat_wxyz_from_matrix, transform_points
 from scene_builder.model import AssetKind, Background, JointType, ObjectAsset, Part, PlacedObject, Plane, Scene, Texture, TriangleMesh
 
 TIMESTEP_S = 0.002
 MESH_DIR = "meshes"
-TEXTURE_DIR = "textures"
 BACKGROUND_GROUP = 0
 VISUAL_GROUP = 1
 COLLISION_GROUP = 3
@@ -103,19 +103,9 @@ def build_spec(scene: Scene, out_dir: Path, objects: tuple[PlacedObject, ...] | 
 #: headlight ambient + the diffuse light a surface facing the camera gets ~ 1), so rendered from
 #: the input camera they look like the photo; untextured things (a robot) are lit as usual.
 PHOTO_EMISSION = 0.55
-
-
-def write_texture(texture: Texture, out_dir: Path) -> str:
-    """Write ``out_dir/textures/<name>.png`` (once per name; deterministic bytes) and return the
-    file name relative to ``textures/``."""
-    from PIL import Image
-
-    fname = names.file_stem(texture.name) + ".png"
-    path = Path(out_dir) / TEXTURE_DIR / fname
-    if not path.exists():
-        path.parent.mkdir(parents=True, exist_ok=True)
-        Image.fromarray(np.ascontiguousarray(texture.image_rgb)).save(path, format="PNG", compress_level=6)
-    return fname
+HEADLIGHT_AMBIENT = 0.3
+HEADLIGHT_DIFFUSE = 0.15
+KEY_DIFFUSE = 0.1
 
 
 class _Looks:
@@ -131,8 +121,8 @@ class _Looks:
 
         name = f"photo/{texture.name}"
         if name not in self.done:
-            fname = write_texture(texture, self.out_dir)
-            self.spec.add_texture(name=name, type=mujoco.mjtTexture.mjTEXTURE_2D, file=fname)
+            write_texture(texture, self.out_dir)
+            self.spec.add_texture(name=name, type=mujoco.mjtTexture.mjTEXTURE_2D, file=texture_file(texture))
             mat = self.spec.add_material(name=name, emission=PHOTO_EMISSION, specular=0.0, shininess=0.0, reflectance=0.0)
             mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = name
             self.done.add(name)
@@ -183,19 +173,19 @@ def _mesh_rgba(mesh: TriangleMesh) -> list[float]:
 
 
 def _add_lights(spec) -> None:
-    """Indoor light rig: a soft headlight (ambient fill, as from room walls) and two directional
-    ceiling lights, the key one casting shadows, so rendered views have the photo's brightness
-    (visual only: lights do not touch the physics)."""
+    """Indoor light rig: a soft headlight (ambient fill, as from room walls) and one directional
+    ceiling light, without shadows: photo-textured surfaces already carry the room's light and
+    shadows (their material emits PHOTO_EMISSION of their texture, and these lights add about
+    the rest), while untextured things (a robot) are lit at about 0.7 (visual only: lights do not
+    touch the physics)."""
     import mujoco
 
-    spec.visual.headlight.ambient = [0.35, 0.35, 0.35]
-    spec.visual.headlight.diffuse = [0.35, 0.35, 0.35]
-    spec.visual.headlight.specular = [0.05, 0.05, 0.05]
+    spec.visual.headlight.ambient = [HEADLIGHT_AMBIENT] * 3
+    spec.visual.headlight.diffuse = [HEADLIGHT_DIFFUSE] * 3
+    spec.visual.headlight.specular = [0.02, 0.02, 0.02]
     directional = mujoco.mjtLightType.mjLIGHT_DIRECTIONAL
     spec.worldbody.add_light(name="key", type=directional, pos=[0.0, 0.0, 3.0], dir=[0.3, 0.2, -1.0],
-                             diffuse=[0.45, 0.43, 0.4], specular=[0.1, 0.1, 0.1], castshadow=True)
-    spec.worldbody.add_light(name="fill", type=directional, pos=[0.0, 0.0, 3.0], dir=[-0.4, -0.3, -1.0],
-                             diffuse=[0.2, 0.2, 0.2], specular=[0.0, 0.0, 0.0], castshadow=False)
+                             diffuse=[KEY_DIFFUSE] * 3, specular=[0.05, 0.05, 0.05], castshadow=False)
 
 
 def _add_floor(spec, hidden: bool = False) -> None:
@@ -260,12 +250,17 @@ def _add_camera(spec, scene: Scene) -> None:
 
 
 def _write_obj(path: Path, mesh: TriangleMesh) -> None:
-    """Plain OBJ (positions, texture coordinates when the mesh has them, faces; 1-based).
-    Written by hand: it is a few lines of numpy, exact (repr-precision floats) and keeps vertex
-    order, which exporters that merge or reorder vertices do not guarantee. OBJ's ``vt`` runs up
-    from the bottom of the image: ``1 - v`` of the model's convention."""
+    """Plain OBJ (positions, texture coordinates when the mesh has them, faces; 1-based), with a
+    material library naming the texture for OBJ consumers (MuJoCo takes the texture from the
+    MJCF material instead). Written by hand: it is a few lines of numpy, exact (repr-precision
+    floats) and keeps vertex order, which exporters that merge or reorder vertices do not
+    guarantee. OBJ's ``vt`` runs up from the bottom of the image: ``1 - v`` of the model's
+    convention."""
+    out_dir = Path(path).parent.parent
     with open(path, "w") as f:
         f.write(f"# {len(mesh.vertices_m)} vertices, {len(mesh.faces)} faces, metres\n")
+        if mesh.texture is not None:
+            f.write(f"mtllib {write_mtl(Path(path), mesh.texture, out_dir)}\nusemtl photo\n")
         np.savetxt(f, mesh.vertices_m, fmt="v %.9g %.9g %.9g")
         if mesh.uv is not None:
             np.savetxt(f, np.stack([mesh.uv[:, 0], 1.0 - mesh.uv[:, 1]], axis=1), fmt="vt %.9g %.9g")

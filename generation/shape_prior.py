@@ -20,6 +20,7 @@ import numpy as np
 
 from scene_builder.config import GenerationConfig
 from scene_builder.frames import pose, transform_points
+from generation.visibility import FreeSpace, surface_samples
 from scene_builder.model import AssetKind, GeneratedAsset, PerceivedObject, Perception
 
 __all__ = ["ShapePriorGenerator", "BACKEND_NAME", "complete_box", "depth_to_walls"]
@@ -28,6 +29,16 @@ BACKEND_NAME = "shape-prior"
 # a face seen head-on spans less than this fraction of the expected depth: complete the depth
 _DEPTH_COMPLETE_FRACTION = 0.6
 _MIRROR_X = {"lamp", "plant", "bottle", "bowl", "mug", "soft_toy"}
+#: A shape prior or template whose surface lies this much in seen free space (a sample of
+#: VIOLATION_SAMPLES points) contradicts the observation: the observed shell is used instead.
+MAX_FREE_SPACE_SHARE = 0.10
+VIOLATION_SAMPLES = 2000
+#: A completed voxel this close to another object's observed surface is that object's.
+OTHERS_CLEARANCE_M = 0.02
+#: Completed voxels keep this far in front of the walls.
+WALL_CLEARANCE_M = 0.005
+#: A shape prior or template reaching further than this into a wall is not used.
+MAX_BEHIND_WALL_M = 0.01
 
 
 def depth_to_walls(fit, walls) -> float:
@@ -86,6 +97,8 @@ class ShapePriorGenerator:
         from generation.assembly import ConvexSolids, PartSpec, assemble_asset_with_offset, box_solid
         from generation.completion import complete_occupancy, superellipsoid_occupancy
         from generation.materials import category_material, deformable_settings
+        from scipy.spatial import cKDTree
+
         from generation.pose import fit_box, floor_snap_height_m
         from generation.priors import PRIOR_LABELS, prior_parts
         from scene_builder.vocabulary import category
@@ -134,26 +147,54 @@ class ShapePriorGenerator:
                               description=f"{label}: soft body", shell_thickness_m=shell, rgba=rgba)]
             description += "; deformable"
         else:
-            geometry = complete_occupancy(pts, cam, size, config.voxel_resolution, mirror_y=True, mirror_x=label in _MIRROR_X)
-            specs = [PartSpec("body", None, geometry, cm.material, affordance_rank=3, affordance="pick up or push",
-                              description=f"{label}: observed shell extruded and mirrored", shell_thickness_m=cm.shell_thickness_m,
-                              rgba=rgba)]
-            description += "; completed from the observed shell"
+            specs = None
 
-        asset, shift = assemble_asset_with_offset(
-            obj.name,
-            label,
-            specs,
-            config=cfg,
-            seed=seed,
-            kind=kind,
-            is_fixed=cat.fixed,
-            deformable=soft,
-            description=description,
-            backend=BACKEND_NAME,
-            observed_points_m=pts,
-            observed_colors_rgb=obj.colors_rgb,
-        )
-        # asset coordinates = box coordinates + shift
-        world_from_asset = fit.world_from_box @ pose(np.eye(3), -shift)
-        return GeneratedAsset(asset, world_from_asset, obj.points_world_m)
+        space = FreeSpace(perception.observation, perception.camera)
+
+        def assemble(specs, kind, soft, description, cfg):
+            asset, shift = assemble_asset_with_offset(
+                obj.name, label, specs, config=cfg, seed=seed, kind=kind, is_fixed=cat.fixed, deformable=soft,
+                description=description, backend=BACKEND_NAME, observed_points_m=pts, observed_colors_rgb=obj.colors_rgb,
+            )
+            # asset coordinates = box coordinates + shift
+            return GeneratedAsset(asset, fit.world_from_box @ pose(np.eye(3), -shift), obj.points_world_m)
+
+        if specs is not None:
+            generated = assemble(specs, kind, soft, description, cfg)
+            samples = transform_points(generated.world_from_asset, surface_samples([q.visual for q in generated.asset.parts], VIOLATION_SAMPLES, seed))
+            share = space.violation(samples)
+            behind = max([0.0] + [float(-np.min(w.signed_distance_m(samples))) for w in perception.room.walls])
+            if share <= MAX_FREE_SPACE_SHARE and behind <= MAX_BEHIND_WALL_M:
+                return generated
+            what = "articulation template" if label in ARTICULATED_LABELS else "shape prior"
+            why = f"filled {share:.0%} seen free space" if share > MAX_FREE_SPACE_SHARE else f"reached {behind * 100:.0f} cm into a wall"
+            description = f"{label}: the {what} {why}; " + description.split("; ")[0]
+            kind, soft = None, None
+            size = fit.size_m.copy()
+
+        voxel_m = float(size.max()) / config.voxel_resolution
+        others_tree = cKDTree(np.concatenate(others)) if others else None
+        own_tree = cKDTree(obj.points_world_m)
+        walls = perception.room.walls
+
+        def blocked(p_box: np.ndarray) -> np.ndarray:
+            """Voxel centres this object may not fill: seen free space, behind a wall, or nearer
+            to another object's observed surface than to its own (hidden space between two
+            objects is shared out by distance, so their completions do not overlap)."""
+            p_world = transform_points(fit.world_from_box, p_box)
+            out = space.free(p_world, extra_margin_m=0.5 * voxel_m)
+            for wall in walls:
+                out |= wall.signed_distance_m(p_world) < WALL_CLEARANCE_M + 0.5 * voxel_m
+            if others_tree is not None:
+                d_other, _ = others_tree.query(p_world)
+                d_own, _ = own_tree.query(p_world)
+                out |= (d_other < OTHERS_CLEARANCE_M + 0.5 * voxel_m) | (d_other + 0.5 * voxel_m < d_own)
+            return out
+
+        geometry = complete_occupancy(pts, cam, size, config.voxel_resolution, mirror_y=True, mirror_x=label in _MIRROR_X, blocked=blocked)
+        specs = [PartSpec("body", None, geometry, cm.material, affordance_rank=3, affordance="pick up or push",
+                          description=f"{label}: observed shell extruded and mirrored", shell_thickness_m=cm.shell_thickness_m,
+                          rgba=rgba)]
+        description += "; completed from the observed shell, carved to the seen free space"
+        out = assemble(specs, None, None, description, config)
+        return replace(out, asset=replace(out.asset, observed_shape=True))

@@ -2,11 +2,10 @@
 that is not itself an object, and the background's collision geometry.
 
 * :class:`BackgroundSupport` answers "what background surface was seen right under this
-  object?": among the observed background vertices that face up (a counter top, a shelf board,
-  a bed seen as background), those within :data:`SUPPORT_REACH_M` of the object's footprint and
-  in the height band just under its bottom; the support height is the densest 1 cm layer of
-  them. The surface under the object itself is hidden by the object, so its height comes from
-  what was seen around it.
+  object?": the tops of the background columns within :data:`SUPPORT_REACH_M` of the object's
+  footprint, in the height band just under its bottom (a counter top, a shelf board's edge, a
+  bed seen as background). The surface under the object itself is hidden by the object, so its
+  height comes from what was seen around it.
 * :func:`support_pad`: the hidden part of that surface, as a thin box under the object's
   footprint at the support height (the object rests exactly on it).
 * :func:`column_boxes`: the background's observed surface above the floor and in front of the
@@ -37,12 +36,13 @@ __all__ = [
     "support_pad",
 ]
 
-#: Background vertices whose normal is within this angle of +Z face up (can support things).
-UP_MAX_TILT_DEG = 25.0
 #: How far around an object's footprint the surface it rests on is looked for.
 SUPPORT_REACH_M = 0.10
-#: At least this many upward background vertices in the densest layer make a support.
-MIN_SUPPORT_POINTS = 8
+#: Column size for support queries; at least this many column tops in the densest layer make a
+#: support; a column whose points go on within CLEAR_ABOVE_M above its top is not a top.
+SUPPORT_CELL_M = 0.02
+MIN_SUPPORT_CELLS = 3
+CLEAR_ABOVE_M = 0.15
 #: Layer thickness for the densest-layer vote, and the band kept around it.
 LAYER_M = 0.01
 #: Thickness of the pad under an object resting on the background.
@@ -86,54 +86,71 @@ def observed_structure(background: Background, walls: tuple[Plane, ...]) -> np.n
 
 
 class BackgroundSupport:
-    """Support heights from the background's observed upward-facing surfaces (module docstring)."""
+    """Support heights from the background seen around an object (see the module docstring).
+
+    The observed background structure (neither floor nor wall) is binned into columns of
+    :data:`SUPPORT_CELL_M`. Around an object's footprint, a column whose points in the height
+    band under the object stop there (nothing of it within :data:`CLEAR_ABOVE_M` above its top
+    in the band) is the top of something the object can stand on: a counter or table top seen
+    from above, a shelf board's front edge seen from its own height. A column that goes on up
+    (a wall or a cabinet side behind the object) is not. The support height is the densest
+    1 cm layer of those column tops.
+    """
 
     def __init__(self, background: Background | None, walls: tuple[Plane, ...] = ()) -> None:
-        from scipy.spatial import cKDTree
-
-        self.points = np.zeros((0, 3))
-        self.tree = None
+        self.cells: dict[tuple[int, int], np.ndarray] = {}
         if background is None:
             return
-        normals = vertex_normals(background.surface)
-        up = normals[:, 2] >= np.cos(np.radians(UP_MAX_TILT_DEG))
         v = background.surface.vertices_m
-        keep = background.surface_observed & up & (v[:, 2] > FLOOR_BAND_M)
+        keep = background.surface_observed & (v[:, 2] > FLOOR_BAND_M)
         for w in walls:
-            keep &= w.signed_distance_m(v) > -WALL_BAND_M
-        self.points = v[keep]
-        if len(self.points):
-            self.tree = cKDTree(self.points[:, :2])
+            keep &= w.signed_distance_m(v) > WALL_BAND_M
+        p = v[keep]
+        if not len(p):
+            return
+        ij = np.floor(p[:, :2] / SUPPORT_CELL_M).astype(np.int64)
+        order = np.lexsort((p[:, 2], ij[:, 1], ij[:, 0]))
+        ij, z = ij[order], p[order, 2]
+        starts = np.flatnonzero(np.concatenate([[True], np.any(ij[1:] != ij[:-1], axis=1)]))
+        ends = np.concatenate([starts[1:], [len(z)]])
+        self.cells = {(int(ij[a, 0]), int(ij[a, 1])): z[a:b] for a, b in zip(starts, ends)}
 
     def height_under(self, footprint_world_m: np.ndarray, low_m: float, high_m: float) -> float | None:
-        """Height (m) of the upward background surface seen around the (K, 2) footprint polygon,
-        within [low_m, high_m]; None when too few points support it."""
+        """Height (m) of the background top seen around the (K, 2) footprint polygon within
+        [low_m, high_m]; None when fewer than MIN_SUPPORT_CELLS columns support it."""
         import shapely
 
-        if self.tree is None or len(footprint_world_m) == 0:
+        if not self.cells or len(footprint_world_m) == 0:
             return None
         foot = np.asarray(footprint_world_m, dtype=np.float64)
-        centre = foot.mean(axis=0)
-        radius = float(np.max(np.linalg.norm(foot - centre, axis=1))) + SUPPORT_REACH_M
-        idx = np.array(self.tree.query_ball_point(centre, radius), dtype=np.int64)
-        if len(idx) < MIN_SUPPORT_POINTS:
+        region = shapely.Polygon(foot).buffer(SUPPORT_REACH_M) if len(foot) >= 3 else shapely.Point(foot.mean(axis=0)).buffer(SUPPORT_REACH_M)
+        x0, y0, x1, y1 = region.bounds
+        i0, i1 = int(np.floor(x0 / SUPPORT_CELL_M)), int(np.floor(x1 / SUPPORT_CELL_M))
+        j0, j1 = int(np.floor(y0 / SUPPORT_CELL_M)), int(np.floor(y1 / SUPPORT_CELL_M))
+        tops, weights = [], []
+        for i in range(i0, i1 + 1):
+            for j in range(j0, j1 + 1):
+                z = self.cells.get((i, j))
+                if z is None or not shapely.contains_xy(region, (i + 0.5) * SUPPORT_CELL_M, (j + 0.5) * SUPPORT_CELL_M):
+                    continue
+                band = z[(z >= low_m) & (z <= high_m)]
+                if len(band) == 0:
+                    continue
+                top = float(band.max())
+                if np.any((z > top + 0.5 * LAYER_M) & (z <= top + CLEAR_ABOVE_M)):
+                    continue  # the column goes on up: a wall or a side behind, not a top
+                tops.append(top)
+                weights.append(len(band))
+        if len(tops) < MIN_SUPPORT_CELLS:
             return None
-        p = self.points[idx]
-        p = p[(p[:, 2] >= low_m) & (p[:, 2] <= high_m)]
-        if len(p) < MIN_SUPPORT_POINTS:
+        t = np.array(tops)
+        layers = np.floor((t - low_m) / LAYER_M).astype(np.int64)
+        counts = np.bincount(layers, weights=np.array(weights, dtype=np.float64))
+        best = int(len(counts) - 1 - np.argmax(counts[::-1]))  # densest; ties go to the higher
+        near = np.abs(t - (low_m + (best + 0.5) * LAYER_M)) <= 1.5 * LAYER_M
+        if int(near.sum()) < MIN_SUPPORT_CELLS:
             return None
-        region = shapely.Polygon(foot).buffer(SUPPORT_REACH_M) if len(foot) >= 3 else shapely.Point(centre).buffer(SUPPORT_REACH_M)
-        p = p[shapely.contains_xy(region, p[:, 0], p[:, 1])]
-        if len(p) < MIN_SUPPORT_POINTS:
-            return None
-        layers = np.floor((p[:, 2] - low_m) / LAYER_M).astype(np.int64)
-        counts = np.bincount(layers)
-        # Densest layer; ties go to the higher one (the surface, not the points under its edge).
-        best = int(len(counts) - 1 - np.argmax(counts[::-1]))
-        near = np.abs(p[:, 2] - (low_m + (best + 0.5) * LAYER_M)) <= 1.5 * LAYER_M
-        if int(near.sum()) < MIN_SUPPORT_POINTS:
-            return None
-        return float(np.median(p[near, 2]))
+        return float(np.median(t[near]))
 
 
 def support_pad(footprint_rel_m: np.ndarray, rotation: np.ndarray, position_m: np.ndarray, height_m: float) -> tuple[np.ndarray, np.ndarray, float]:

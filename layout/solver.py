@@ -35,10 +35,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from layout.bodies import Body, make_body
-from layout.geometry import clip_to_slab_xy, closest_point_in_polygon, horizontal_mtv, placements_inside
+from layout.geometry import clip_half_plane, clip_to_slab_xy, closest_point_in_polygon, horizontal_mtv, placements_inside
 from layout.narrowphase import ConvexWorld
 from layout.snapping import YawSnap, reference_yaw, snap_yaw
 from layout.background import BackgroundSupport, absorb, carve, column_boxes, observed_structure, support_pad
+from layout.trim import trim_pair
 from layout.support import BACKGROUND, FLOOR, UNSUPPORTED, build_support, is_ancestor, subtree
 from scene_builder.config import LayoutConfig
 from scene_builder.errors import InputError
@@ -338,6 +339,8 @@ class _Solver:
         gaps = self.wall_min_rel + pos @ self.wall_n.T + self.wall_off  # (N, W)
         moved = False
         for i, w in np.argwhere(self.clearance - gaps > CLEARANCE_TOL_M):
+            if self.bodies[int(i)].fixed:
+                continue  # fixed furniture and objects left where seen never move
             n_xy = self.wall_n[w, :2]
             norm = float(np.linalg.norm(n_xy))
             short = self.clearance - float(self.wall_gaps(int(i))[w])  # earlier moves count
@@ -372,13 +375,37 @@ class _Solver:
         self._regions[i] = (key, region)
         return region
 
+    def inside_walls(self, i: int, region: np.ndarray) -> np.ndarray:
+        """The positions (x, y) of ``region`` (K, 2) at which body i (and what rests on it, whose
+        relative offsets stay) keeps the clearance from every wall."""
+        if not len(self.wall_n):
+            return region
+        b = self.bodies[i]
+        for k in subtree(self.bodies, i):
+            off = self.bodies[k].position_m - b.position_m
+            for w in range(len(self.wall_n)):
+                n = self.wall_n[w]
+                # gap = wall_min_rel + n . (pos + off) + wall_off >= clearance
+                rhs = self.clearance - self.wall_min_rel[k, w] - self.wall_off[w] - float(n @ off) - n[2] * b.position_m[2]
+                region = clip_half_plane(region, n[:2], rhs)
+                if len(region) == 0:
+                    return region
+        return region
+
     def keep_on_support(self) -> bool:
         moved = False
         for i, b in enumerate(self.bodies):
             if b.parent < 0 or b.fixed:
                 continue
             s = self.bodies[b.parent]
-            region = self.support_region(i) + s.position_m[:2]
+            region = self.inside_walls(i, self.support_region(i) + s.position_m[:2])
+            if len(region) == 0:
+                # Stable spots all lie in a wall: the wall wins, the settle simulation judges
+                # whether the object still stands (relaxed to its centre of mass over the face).
+                face = self.bodies[b.parent].surfaces[b.support_surface].polygon_rel_m + s.position_m[:2] - b.com_rel_m[:2]
+                region = self.inside_walls(i, face)
+                if len(region) == 0:
+                    continue
             here = b.position_m[:2]
             target = region[0] if len(region) < 3 else closest_point_in_polygon(here, region, 0.0)
             delta = target - here
@@ -544,6 +571,31 @@ class _Solver:
         return worst
 
 
+def _trim_overlaps(solver: _Solver) -> bool:
+    """Cut apart the collision pieces of overlapping bodies where the overlap is shallow
+    (``layout.trim``), replacing those bodies in place (pose, support and flags kept). Returns
+    whether anything was cut (the solver's narrow phase must then be rebuilt)."""
+    bodies = solver.bodies
+    changed = False
+    for i, j in solver.penetrating_pairs():
+        bi, bj = bodies[i], bodies[j]
+        if bi.asset.kind is AssetKind.DEFORMABLE or bj.asset.kind is AssetKind.DEFORMABLE:
+            continue  # a flex is simulated as its box: nothing to cut
+        a, b, cut, _ = trim_pair(bi.asset, bi.world_from_asset(), bj.asset, bj.world_from_asset())
+        if cut <= PENETRATION_TOL_M:
+            continue
+        for k, asset in ((i, a), (j, b)):
+            old = bodies[k]
+            if asset is old.asset:
+                continue
+            new = make_body(asset, old.world_from_asset())
+            new.initial_position_m = old.initial_position_m
+            new.parent, new.support_surface, new.children, new.fixed = old.parent, old.support_surface, old.children, old.fixed
+            bodies[k] = new
+            changed = True
+    return changed
+
+
 def _yaw_deg(rotation: np.ndarray) -> float:
     return float(np.degrees(np.arctan2(rotation[1, 0], rotation[0, 0])))
 
@@ -600,7 +652,8 @@ def _placement(g: GeneratedAsset, b: Body, support: str, absorbed: bool, dropped
             reasons.append(f"pushed {float(np.linalg.norm(delta[:2])) * 100:.0f} cm sideways out of interpenetration")
     if yaw > 1.0:
         reasons.append(f"turned {yaw:.0f} deg to align with the walls")
-    return Placement(g.asset.name, 0.0 if absorbed else dist, 0.0 if absorbed else yaw, support, absorbed, "; ".join(reasons))
+    return Placement(g.asset.name, 0.0 if absorbed else dist, 0.0 if absorbed else yaw, support, absorbed, "; ".join(reasons),
+                     0.0 if absorbed else float(-delta[2]))
 
 
 def solve_layout_with_stats(
@@ -648,6 +701,9 @@ def solve_layout_with_stats(
     for i, b in enumerate(bodies):
         solver.world.set_position(i, b.position_m)
     lap("support")
+    if _trim_overlaps(solver):
+        solver = _Solver(bodies, walls, config, seed)
+    lap("trim")
     iterations, converged = solver.run(int(config.max_iterations))
     for _ in range(RELOCATE_ROUNDS):
         # Pushes that stall (a table jammed between a shelf and a wall) leave overlaps: the
@@ -672,7 +728,7 @@ def solve_layout_with_stats(
     parent_of = {c: ("background" if p in absorbed_names else p) for c, p in parent_of.items()}
     edges = [dataclasses.replace(e, parent=parent_of[e.child]) for e in edges]
     placed = tuple(
-        PlacedObject(asset=g.asset, world_from_asset=by_name[g.asset.name].world_from_asset(), support=parent_of[g.asset.name])
+        PlacedObject(asset=by_name[g.asset.name].asset, world_from_asset=by_name[g.asset.name].world_from_asset(), support=parent_of[g.asset.name])
         for g in generated
         if g.asset.name not in absorbed_names
     )

@@ -77,11 +77,13 @@ def build_support(
     under at least 25 % of its footprint (rigid bodies never rest on soft ones), the background
     surface seen around its footprint (``background(footprint_world (K, 2), low_m, high_m)``
     gives its height or None; ``layout.background.BackgroundSupport.height_under``), and the
-    floor. The highest candidate wins (an object face before the background at equal height).
+    floor.
     With none, fixed furniture off the floor and against a wall hangs on the wall; anything else
     is left where it was seen with ``parent = UNSUPPORTED`` (the layout turns it into
     background). Updates ``position_m[2]``, ``parent``, ``support_surface`` and ``children`` in
     place. Returns the edges (in processing order) and the processing order.
+    Among the candidates the one nearest to the observed bottom wins (ties: an object's face,
+    then the background, then the floor).
 
     ``clash(child, support, z)``: penetration depth (m) of the child placed at height z against the
     support. A face that the child, set on it, would sink into the rest of the support (the top
@@ -123,29 +125,26 @@ def build_support(
                 if frac < MIN_FOOTPRINT_OVERLAP:
                     continue
                 candidates.append((h, frac, -j, k))
-        best = None
+        # The support nearest to the observed bottom wins (ties: an object's face, then the
+        # background, then the floor): the object moves as little as it can.
+        options: list[tuple[float, int, float, int, int]] = []  # (|gap|, rank, h, parent, surface)
         for h, _, neg_j, k in sorted(candidates, reverse=True):
             z = float(b.position_m[2] + h - bottom)
             if clash is None or clash(i, -neg_j, z) <= SUPPORT_CLASH_TOL_M:
-                best = (h, -neg_j, k)
+                options.append((abs(h - bottom), 0, h, -neg_j, k))
                 break
-        h_bg = None
         if background is not None:
             h_bg = background(foot, max(MIN_SURFACE_HEIGHT_M, bottom - MAX_DROP_M), bottom + tol)
-            if h_bg is not None and best is not None and h_bg <= best[0]:
-                h_bg = None
-        if h_bg is not None:
-            h = h_bg
-            b.parent, b.support_surface = BACKGROUND, -1
-            parent_name = "background"
-        elif best is not None:
-            h, j, k = best
+            if h_bg is not None:
+                options.append((abs(h_bg - bottom), 1, h_bg, BACKGROUND, -1))
+        if bottom <= MAX_DROP_M:
+            options.append((abs(bottom), 2, 0.0, FLOOR, -1))
+        if options:
+            _, _, h, j, k = min(options)
             b.parent, b.support_surface = j, k
-            bodies[j].children.append(i)
-            parent_name = bodies[j].name
-        elif bottom <= MAX_DROP_M:
-            h = 0.0
-            parent_name = "floor"
+            if j >= 0:
+                bodies[j].children.append(i)
+            parent_name = bodies[j].name if j >= 0 else ("background" if j == BACKGROUND else "floor")
         elif b.fixed and _near_wall(b, walls):
             b.parent = WALL
             h = bottom

@@ -114,8 +114,10 @@ def make_parser() -> argparse.ArgumentParser:
     c = sub.add_parser("check", help="re-validate an output folder (MJCF compiles and is stable, USD validates, files resolve)")
     c.add_argument("out", type=Path, help="an output folder written by `scene-builder build`")
 
-    v = sub.add_parser("view", help="open the rerun viewer on OUT/scene.rrd")
+    v = sub.add_parser("view", help="open the rerun viewer on OUT/scene.rrd (or write its view to a PNG without a display)")
     v.add_argument("out", type=Path, help="an output folder (or a .rrd file)")
+    v.add_argument("--screenshot", type=Path, metavar="PNG",
+                   help="write the default view (photo beside the twin rendered from the photo's camera, 3D view, report) to PNG headless, instead of opening the viewer")
 
     m = sub.add_parser("models", help="list or fetch learned model weights")
     msub = m.add_subparsers(dest="models_command", metavar="ACTION", required=True)
@@ -234,6 +236,11 @@ def _cmd_view(args: argparse.Namespace) -> int:
     rrd = args.out if args.out.suffix == ".rrd" else args.out / "scene.rrd"
     if not rrd.is_file():
         raise InputError(f"no recording at {rrd}; build with --viz save (the default) first")
+    if args.screenshot is not None:
+        from exporters.rerun_viz import screenshot
+
+        print(screenshot(rrd, args.screenshot))
+        return 0
     return subprocess.call([sys.executable, "-m", "rerun", str(rrd)])
 
 

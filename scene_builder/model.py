@@ -604,6 +604,9 @@ class ObjectAsset:
     size_m: (3,) extents of the axis-aligned bounding box of all parts, asset frame.
     is_fixed: welded to the world (built-in furniture) instead of a free body.
     backend: registry name of the generator that made it.
+    observed_shape: its geometry was built from the observed surface (extruded, completed and
+      carved at the pose where it was seen), not fitted from a prior: its yaw is the
+      observation's, so the layout never turns it.
     """
 
     name: str
@@ -615,6 +618,7 @@ class ObjectAsset:
     is_fixed: bool = False
     deformable: DeformableSettings | None = None
     backend: str = ""
+    observed_shape: bool = False
 
     def __post_init__(self) -> None:
         _freeze(self, "size_m", np.float64, (3,))
@@ -725,7 +729,7 @@ class Placement:
     became_background: it could not stand physically where it was seen and is now part of the
       static background (``Room.background.static_names``).
     reason: one line saying why it moved more than a centimetre or became background ("" when
-      neither).
+      neither). lowered_m: how far it ended below where it was seen (negative: raised).
     """
 
     name: str
@@ -734,6 +738,7 @@ class Placement:
     support: str
     became_background: bool = False
     reason: str = ""
+    lowered_m: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -769,22 +774,33 @@ class Trajectory:
 
 @dataclass(frozen=True)
 class ObjectVerdict:
-    """Physics check of one object after layout."""
+    """Physics check of one object after layout.
+
+    start_penetration_m / end_penetration_m: its deepest overlap with any other body or static
+    geometry at t = 0 and after settling. fixed: welded to the world (built-in furniture): it
+    cannot move, so it is never counted as "at rest".
+    """
 
     name: str
     start_penetration_m: float
     drift_m: float
     rotation_deg: float
     toppled: bool
+    fixed: bool = False
+    end_penetration_m: float = 0.0
 
 
 @dataclass(frozen=True)
 class PhysicsVerdict:
     """Physics check of the whole exported scene (measured in MuJoCo from the exported MJCF).
 
-    max_penetration_m: deepest contact between distinct bodies (and body vs floor/walls) at t=0.
-    settle_max_drift_m: largest displacement of any free body over ``simulated_s``.
-    stable: every object stays within 1 cm and 2 degrees.
+    max_penetration_m: deepest overlap at t = 0 over every pair of collision geometry of
+      different bodies: objects, fixed furniture, floor, walls and the static background
+      (``mj_geomDistance``; soft bodies by their contacts). max_penetration_settled_m: the same
+      after ``simulated_s`` of simulation.
+    settle_max_drift_m / settle_max_rotation_deg: largest motion of any movable object.
+    stable: every movable object stays within the drift and rotation bounds (fixed furniture is
+      not counted: it cannot move). movable_count / fixed_count: how many of each were checked.
     """
 
     max_penetration_m: float
@@ -795,20 +811,38 @@ class PhysicsVerdict:
     objects: tuple[ObjectVerdict, ...] = ()
     trajectories: tuple[Trajectory, ...] = ()
     contact_points_m: tuple[tuple[float, float, float], ...] = ()
+    max_penetration_settled_m: float = 0.0
+    movable_count: int = 0
+    fixed_count: int = 0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Fidelity:
-    """Render-and-compare of the final scene against the observation.
+    """Render-and-compare of the scene against the observation, rendered from ``input_camera``
+    with the scene's own lights, at t = 0 and after the settle simulation.
 
-    depth_absrel: mean |d_render - d_obs| / d_obs over object pixels with valid depth.
-    mask_iou_mean: mean over objects of IoU(rendered segmentation, perceived mask).
-    mask_iou: per object name.
+    psnr_db, ssim (unitless, -1..1): the RGB render against the photo (t = 0);
+      psnr_settled_db, ssim_settled: after settling.
+    depth_absrel (unitless): mean |d_render - d_obs| / d_obs over every pixel with valid observed
+      depth, t = 0 (a pixel where the render hits nothing counts as relative error 1);
+      depth_absrel_settled: the same after settling; object_depth_absrel: over the movable
+      objects' perceived pixels only.
+    mask_iou_mean: mean over movable objects of the IoU of their rendered (visible) silhouette
+      and their perceived mask; mask_iou: per object name.
+    render_rgb, render_settled_rgb: (H, W, 3) uint8 renders, or None.
     """
 
     depth_absrel: float
     mask_iou_mean: float
     mask_iou: tuple[tuple[str, float], ...] = field(default_factory=tuple)
+    depth_absrel_settled: float = float("nan")
+    object_depth_absrel: float = float("nan")
+    psnr_db: float = float("nan")
+    ssim: float = float("nan")
+    psnr_settled_db: float = float("nan")
+    ssim_settled: float = float("nan")
+    render_rgb: np.ndarray | None = None
+    render_settled_rgb: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
