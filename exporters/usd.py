@@ -76,6 +76,30 @@ def write_usd(scene: Scene, out_dir: Path) -> Path:
     return path
 
 
+def write_usdz(usda_path: Path) -> Path:
+    """Package ``scene.usda`` and every asset it references (the textures) as one
+    ``scene.usdz`` beside it (``UsdUtils.CreateNewUsdzPackage``), open the package and check the
+    stage and its textures are inside."""
+    import zipfile
+
+    from pxr import Sdf, Usd, UsdUtils
+
+    usda_path = Path(usda_path).resolve()
+    out = usda_path.with_suffix(".usdz")
+    if not UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(str(usda_path)), str(out)):
+        raise ExportError(f"USD could not package {usda_path.name} as {out.name}")
+    stage = Usd.Stage.Open(str(out))
+    if stage is None or not stage.GetDefaultPrim():
+        raise ExportError(f"{out.name}: the packaged stage does not open")
+    with zipfile.ZipFile(out) as z:
+        packed = set(z.namelist())
+    missing = sorted(p.relative_to(usda_path.parent).as_posix() for p in (usda_path.parent / TEXTURE_DIR).glob("*.png")
+                     if p.relative_to(usda_path.parent).as_posix() not in packed)
+    if missing:
+        raise ExportError(f"{out.name}: textures missing from the package: {', '.join(missing[:3])}")
+    return out
+
+
 def build_stage(scene: Scene, path: Path | None = None):
     """The ``Usd.Stage`` of ``scene`` (in memory when ``path`` is None)."""
     from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics

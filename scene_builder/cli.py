@@ -65,6 +65,7 @@ def _add_build_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--settle-s", type=_positive, default=3.0, help="seconds of simulation in the stability check (default 3)")
     p.add_argument("--adopt-settled", action="store_true", help="write the poses after the settle simulation instead of the solved ones")
     p.add_argument("--no-usd", action="store_true", help="skip scene.usda")
+    p.add_argument("--usdz", action="store_true", help="also package the USD stage and its textures as one scene.usdz file for hand-off")
     p.add_argument("--no-urdf", action="store_true", help="skip scene.urdf")
     p.add_argument("--no-gltf", action="store_true", help="skip scene.glb")
     p.add_argument("-q", "--quiet", action="store_true", help="no per-stage lines")
@@ -158,7 +159,7 @@ def _cmd_build(args: argparse.Namespace) -> int:
             segmentation_backend=args.segmentation_backend,
         ),
         layout=replace(LayoutConfig(), settle_s=args.settle_s, adopt_settled=args.adopt_settled),
-        export=ExportConfig(usd=not args.no_usd, urdf=not args.no_urdf, gltf=not args.no_gltf, viz=args.viz),
+        export=ExportConfig(usd=not args.no_usd, usdz=args.usdz and not args.no_usd, urdf=not args.no_urdf, gltf=not args.no_gltf, viz=args.viz),
     )
     out = args.out or default_out_dir(args.image)
     result = build(inputs, out, config, progress=not args.quiet)

@@ -88,10 +88,12 @@ class LayoutConfig:
 
 @dataclass(frozen=True)
 class ExportConfig:
-    """Which outputs to write. viz: "save" (OUT/scene.rrd), "spawn" (open the viewer too) or "off"."""
+    """Which outputs to write. usdz: also package the USD stage and its textures as one
+    scene.usdz. viz: "save" (OUT/scene.rrd), "spawn" (open the viewer too) or "off"."""
 
     mjcf: bool = True
     usd: bool = True
+    usdz: bool = False
     urdf: bool = True
     gltf: bool = True
     viz: str = "save"
