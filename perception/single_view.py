@@ -33,7 +33,7 @@ The chain, each step a classical single-view-metrology result:
    depth around it stays unknown, and the estimate carries the vertical vanishing point's up
    direction and a note saying how the scale was set (into the depth BackendUse reason).
 
-Measured with ``python -m perception.bench_depth`` (12 real RGB-D samples, mean): AbsRel 0.263,
+Measured with ``python -m scene_builder.bench.depth`` (12 real RGB-D samples, mean): AbsRel 0.263,
 delta1 0.518, median-scaled 0.253 / 0.586; a constant 2.5 m scores 0.277 / 0.481 / 0.282 / 0.559.
 It is coarse (a room made of floor, ceiling and vertical billboards) but metric, deterministic and
 real. The scale comes entirely from the camera-height prior.

@@ -186,7 +186,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
     from scene_builder.config import BuildConfig, ExportConfig, InputSpec
     from scene_builder.pipeline import build
-    from scene_builder.procedural import compare_to_ground_truth, write_demo_input
+    from scene_builder.bench.render import write_demo_input
+    from scene_builder.bench.truth import compare_to_ground_truth
 
     with tempfile.TemporaryDirectory(prefix="scene-builder-demo-") as tmp:
         sample = write_demo_input(Path(tmp) / "room", seed=args.seed, n_objects=args.objects)
@@ -206,7 +207,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
-    from scene_builder.bench import run_bench
+    from scene_builder.bench.suites import run_bench
 
     run_bench(args.suite, args.rooms, args.data, args.json, seed=args.seed)
     return 0

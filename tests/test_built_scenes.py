@@ -46,7 +46,7 @@ def real_built(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def procedural_built(tmp_path_factory):
-    from scene_builder.procedural import write_demo_input
+    from scene_builder.bench.render import write_demo_input
 
     src = write_demo_input(tmp_path_factory.mktemp("room_in"), seed=PROCEDURAL_SEED, n_objects=6)
     return _build(src, tmp_path_factory.mktemp("room") / "out")

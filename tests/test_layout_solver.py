@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from layout.solver import candidate_pairs, solve_layout_with_stats
-from layout.synthetic import asset_from_pieces, box_asset, box_mesh, clutter, empty_perception, surface_points, table_asset
+from scene_builder.bench.clutter import asset_from_pieces, box_asset, box_mesh, clutter, empty_perception, surface_points, table_asset
 from scene_builder.config import LayoutConfig
 from scene_builder.frames import pose, rot_z, transform_points, yaw_of
 from scene_builder.model import GeneratedAsset, Plane

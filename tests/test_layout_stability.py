@@ -18,7 +18,7 @@ import pytest
 
 from layout.geometry import placements_inside
 from layout.solver import solve_layout_with_stats
-from layout.synthetic import asset_from_pieces, box_asset, box_mesh, empty_perception, hull_mesh
+from scene_builder.bench.clutter import asset_from_pieces, box_asset, box_mesh, empty_perception, hull_mesh
 from scene_builder.config import LayoutConfig
 from scene_builder.frames import pose, rot_z, transform_points
 from scene_builder.model import AssetKind, DeformableSettings, GeneratedAsset, Inertial, Material, Part, Plane
@@ -166,7 +166,7 @@ def test_table_jammed_into_a_shelf_at_a_wall_is_freed():
     """SUN 000005: a table observed inside a shelf that stands against a wall. Whatever the pushes
     do, the result has no overlap (manifold3d intersection volume) and stays near the shelf."""
     from tests.test_layout_solver import _max_intersection_volume
-    from layout.synthetic import table_asset
+    from scene_builder.bench.clutter import table_asset
 
     wall = Plane(np.array([0.0, 1.0, 0.0]), 0.0, "wall", 1000)  # room side: y > 0
     shelf = asset_from_pieces(

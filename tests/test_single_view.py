@@ -83,7 +83,7 @@ def test_metric_depth_on_nyu_without_using_its_depth():
         d1.append(np.mean(np.maximum(p / t, t / p) < 1.25))
         print(name, "AbsRel %.3f  median-scaled %.3f  delta1 %.3f" % (absrel[-1], scaled[-1], d1[-1]))
     # Measured: mean AbsRel 0.25, median-scaled 0.25 (a constant 2.5 m guess scores 0.26 / 0.25
-    # here, see perception/bench_depth.py; a constant 1 m, 0.66). The bound catches a broken
+    # here, see scene_builder/bench/depth.py; a constant 1 m, 0.66). The bound catches a broken
     # floor / horizon, which puts depths off by factors of several.
     assert np.mean(absrel) < 0.35
     assert np.mean(scaled) < 0.35
@@ -106,7 +106,7 @@ def test_beats_a_constant_depth_on_nyu_and_sun_samples():
     """On the NYU v2 and SUN RGB-D samples the room-box depth beats the constant 2.5 m guess on
     AbsRel and delta1, metric and median-scaled (measured: 0.295 / 0.479 / 0.292 / 0.506 against
     0.315 / 0.397 / 0.326 / 0.481)."""
-    from perception.bench_depth import score_depth
+    from scene_builder.bench.depth import score_depth
 
     names = ("nyuv2_metric3d_00000", "nyuv2_metric3d_00050", "nyuv2_metric3d_00100", "open3d_SUN", "sunrgbd_000017_mmdet3d",
              "sunrgbd_imvotenet_000002", "sunrgbd_imvotenet_000003", "sunrgbd_imvotenet_000004", "sunrgbd_imvotenet_000005")

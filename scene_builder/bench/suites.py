@@ -2,7 +2,7 @@
 
 Suites
 ------
-* ``synthetic``: N procedural rooms (:mod:`scene_builder.procedural`, seeds ``seed .. seed+N-1``,
+* ``synthetic``: N procedural rooms (:mod:`scene_builder.bench.procedural`, seeds ``seed .. seed+N-1``,
   5 to 8 objects, every other room with sensor-like depth noise) with exact ground truth: boxes,
   masses, instance masks and clean depth.
 * ``real``: every sample with depth under ``../shared/data/real`` (or a folder given). Only the
@@ -11,10 +11,11 @@ Suites
 
 The baseline
 ------------
-The naive placement of a published scene application: for each perceived object (the same masks
-and depth the pipeline perceived), the axis-aligned box of its depth points **in the camera
-frame**, gravity taken along the camera's +y axis, the floor at the lowest observed point, no
-penetration handling and no settling; free box bodies of density 500 kg/m^3.
+The naive placement of a published scene application (:mod:`scene_builder.bench.baseline`): for
+each perceived object (the same masks and depth the pipeline perceived), the axis-aligned box of
+its depth points **in the camera frame**, gravity taken along the camera's +y axis, the floor at
+the lowest observed point, no penetration handling and no settling; free box bodies of density
+500 kg/m^3.
 
 Both methods are :class:`~scene_builder.model.Scene` objects that go through one code path: the
 project's MJCF exporter (``exporters.write_mjcf``) and its physics check (``layout.verify_scene``:
@@ -42,7 +43,9 @@ from pathlib import Path
 
 import numpy as np
 
-from scene_builder import frames, metrics
+from scene_builder import frames
+from scene_builder.bench import metrics
+from scene_builder.bench.baseline import naive_baseline
 from scene_builder.config import BuildConfig, ExportConfig, InputSpec
 from scene_builder.errors import InputError
 from scene_builder.model import (
@@ -51,12 +54,10 @@ from scene_builder.model import (
     Camera,
     CameraIntrinsics,
     Fidelity,
-    ObjectAsset,
     Observation,
     PerceivedObject,
     Perception,
     PhysicsVerdict,
-    PlacedObject,
     Plane,
     Room,
     Scene,
@@ -67,18 +68,15 @@ __all__ = [
     "MethodScores",
     "SceneResult",
     "Summary",
-    "baseline_box_asset",
     "evaluate_baseline",
     "evaluate_sample",
-    "naive_baseline",
     "oracle_perception",
     "print_result",
     "run_bench",
 ]
 
-BASELINE_DENSITY_KG_M3 = 500.0
 SUITES = ("synthetic", "real")
-DEFAULT_REAL_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+DEFAULT_REAL_DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "real"
 
 DEFINITIONS = {
     "recall": "matched visible true objects / visible true objects (>= 150 visible pixels), pooled over scenes",
@@ -99,59 +97,8 @@ DEFINITIONS = {
 
 
 # --------------------------------------------------------------------------------------------
-# The naive baseline, as a Scene that goes through the project's exporter and physics check
+# Inputs made from ground truth, and the baseline scored like the pipeline
 # --------------------------------------------------------------------------------------------
-
-
-# World X = camera z, world Y = camera -x, world Z = camera -y.
-_BASE_R_WORLD_CAM = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
-
-
-def baseline_box_asset(name: str, label: str, size_m) -> ObjectAsset:
-    """A free, solid, single-part box asset of extents ``size_m`` (3,) (asset frame: x, y, z),
-    density ``BASELINE_DENSITY_KG_M3``, friction of the generation table's wood; mass and inertia
-    by integration over the box (``generation.assembly``, as for every generated asset)."""
-    from generation.assembly import ConvexSolids, PartSpec, assemble_asset, box_solid
-    from generation.materials import material
-
-    half = np.asarray(size_m, dtype=np.float64) / 2.0
-    mat = dataclasses.replace(material("wood"), name="baseline", density_kg_m3=BASELINE_DENSITY_KG_M3, source="naive baseline: one density for everything")
-    part = PartSpec("body", None, ConvexSolids((box_solid([-half[0], -half[1], 0.0], [half[0], half[1], 2.0 * half[2]]),)), mat)
-    return assemble_asset(name, label, [part], kind=AssetKind.RIGID, is_fixed=False, backend="naive-baseline")
-
-
-def naive_baseline(perception: Perception, max_depth_m: float = 10.0) -> Scene:
-    """The naive placement as a :class:`Scene`: for each perceived object, the axis-aligned box of
-    its depth points (its mask on the observed depth) in the camera frame, as a free box asset.
-
-    The scene's world is the camera's axes permuted (world Z = camera -y: gravity along camera +y,
-    world X = camera z), its floor ``z = 0`` at the lowest observed point of the whole image, no
-    walls; every box stays where its camera-frame box is (no penetration handling, no settling).
-    """
-    obs = perception.observation
-    k = obs.intrinsics
-    depth = obs.depth_m.astype(np.float64)
-    valid = (depth > 0) & (depth < max_depth_m)
-    if not valid.any():
-        raise InputError("the observation has no valid depth; the baseline needs depth")
-    pts = k.unproject(depth)
-    floor_y = float(pts[..., 1][valid].max())  # camera y points down: the lowest point has the largest y
-    world_from_camera = frames.pose(_BASE_R_WORLD_CAM, (0.0, 0.0, floor_y))
-    placed = []
-    for o in perception.objects:
-        m = o.mask & valid
-        if not m.any():
-            continue
-        p = pts[m]
-        lo, hi = p.min(axis=0), p.max(axis=0)
-        size_cam = np.maximum(hi - lo, 0.01)  # a flat patch still makes a 1 cm box
-        # The world is a permutation of the camera axes, so the box stays axis-aligned: its
-        # extents along world X, Y, Z are the camera z, x, y sizes.
-        size_w = np.array([size_cam[2], size_cam[0], size_cam[1]])
-        center_w = frames.transform_points(world_from_camera, ((lo + hi) / 2.0)[None])[0]
-        bottom_w = center_w - np.array([0.0, 0.0, size_w[2] / 2.0])
-        placed.append(PlacedObject(baseline_box_asset(o.name, o.label, size_w), frames.pose(np.eye(3), bottom_w), "floor"))
-    return Scene(Camera(k, world_from_camera), Room(), tuple(placed))
 
 
 def oracle_perception(sample_dir: Path, clean_depth: bool = False) -> Perception:
@@ -441,7 +388,7 @@ def _match(pred: list[metrics.ObjectBox], perception: Perception, truth) -> metr
 def evaluate_sample(sample_dir: Path, work_dir: Path, config: BuildConfig) -> SceneResult:
     """Build one sample with the pipeline and the baseline and score both."""
     from scene_builder.pipeline import build
-    from scene_builder.procedural import load_truth
+    from scene_builder.bench.truth import load_truth
 
     s = _sample(Path(sample_dir))
     truth = load_truth(s.path)
@@ -514,7 +461,8 @@ def machine_description() -> dict:
 
 def _suite_samples(suite: str, rooms: int, data_dir: Path | None, seed: int, tmp: Path, n_objects: int | None = None) -> list[Path]:
     if suite == "synthetic":
-        from scene_builder.procedural import make_room, render_room
+        from scene_builder.bench.procedural import make_room
+        from scene_builder.bench.render import render_room
 
         if rooms < 1:
             raise InputError(f"--rooms must be at least 1, got {rooms}")

@@ -1,4 +1,4 @@
-"""Render bench JSON files as Markdown: ``python -m scene_builder.bench_report bench.json real.json [--extras] > BENCHMARKS.md``.
+"""Render bench JSON files as Markdown: ``python -m scene_builder.bench.report bench.json real.json [--extras] > BENCHMARKS.md``.
 
 For each file: the exact command, machine and date, the pipeline-versus-baseline summary table,
 median seconds per stage, and one row per scene; then the metric definitions once. With
@@ -17,7 +17,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from scene_builder.bench import DEFINITIONS, SUMMARY_ROWS, format_value
+from scene_builder.bench.suites import DEFINITIONS, SUMMARY_ROWS, format_value
 from scene_builder.errors import InputError
 
 __all__ = ["EXTRAS", "Extra", "main", "render", "render_extra", "run_extra"]
@@ -37,37 +37,37 @@ class Extra:
 EXTRAS: tuple[Extra, ...] = (
     Extra(
         "Layout solver scaling",
-        "Random clutter of boxes, tables and convex pieces dropped overlapping (`layout.synthetic.clutter`), solved to no "
+        "Random clutter of boxes, tables and convex pieces dropped overlapping (`scene_builder.bench.clutter.clutter`), solved to no "
         "penetration: wall and CPU seconds, iterations, penetration before / after, CPU seconds by phase.",
-        ("-m", "layout.bench_solver"),
+        ("-m", "scene_builder.bench.solver"),
     ),
     Extra(
         "Generation: per-object timings and physics against analytic solids",
-        "One asset per vocabulary category from synthetic half-observed points (`generation.bench`): kind, parts, collision "
+        "One asset per vocabulary category from synthetic half-observed points (`scene_builder.bench.assets`): kind, parts, collision "
         "pieces, mass, seconds per object; then the voxel path (completion, meshing, CoACD).",
-        ("-m", "generation.bench"),
+        ("-m", "scene_builder.bench.assets"),
         markdown=True,
     ),
     Extra(
         "PhysX token counts and encode / decode times",
-        "Voxel parts of the PhysX-Anything representation under each encoding (`generation.physx.bench_tokens`): units and "
+        "Voxel parts of the PhysX-Anything representation under each encoding (`scene_builder.bench.tokens`): units and "
         "Qwen tokens, milliseconds to encode and decode.",
-        ("-m", "generation.physx.bench_tokens"),
+        ("-m", "scene_builder.bench.tokens"),
         markdown=True,
     ),
     Extra(
         "Depth backends",
-        "Every available depth backend on the real RGB-D samples (`perception.bench_depth`): AbsRel, delta1 (metric and median "
+        "Every available depth backend on the real RGB-D samples (`scene_builder.bench.depth`): AbsRel, delta1 (metric and median "
         "scaled), seconds and memory per image. Learned backends appear only where their weights are installed.",
-        ("-m", "perception.bench_depth"),
+        ("-m", "scene_builder.bench.depth"),
     ),
     Extra(
         "Segmentation and naming on procedural rooms",
         "The default (best available) segmentation and naming backends on rendered procedural rooms with ground-truth "
-        "instances (`scene_builder.bench_perception`; `--segmentation NAME`, `--naming NAME` pick others): object recall "
+        "instances (`scene_builder.bench.perception`; `--segmentation NAME`, `--naming NAME` pick others): object recall "
         "at mask IoU 0.5, mean best IoU, category accuracy of the matched objects, seconds of `perceive` per frame. "
         "Here only `depth-clusters` segmentation is available: SAM2 needs its weights.",
-        ("-m", "scene_builder.bench_perception"),
+        ("-m", "scene_builder.bench.perception"),
     ),
 )
 
@@ -164,7 +164,7 @@ def render(paths: list[Path], extras: tuple[ExtraRun, ...] = ()) -> str:
         "object's depth points, gravity along the camera's y axis, the floor at the lowest observed point, no penetration handling, no "
         "settling; its boxes are solid 500 kg/m^3 assets built by `generation.assembly`. Both methods are `Scene`s that go through one "
         "code path: the MJCF exporter (`exporters.write_mjcf`) and the physics check (`layout.verify_scene`: MuJoCo contacts at t = 0, "
-        "3 s of simulation, rendering from the input camera); box metrics against ground truth come from `scene_builder.metrics`.",
+        "3 s of simulation, rendering from the input camera); box metrics against ground truth come from `scene_builder.bench.metrics`.",
         "",
     ]
     for d in docs:
@@ -182,10 +182,10 @@ def render(paths: list[Path], extras: tuple[ExtraRun, ...] = ()) -> str:
         out += ["", "### Per scene", ""] + _scene_rows(d) + [""]
     out += ["## Definitions", ""] + [f"- **{k}**: {v}" for k, v in DEFINITIONS.items()] + [""]
     if extras:
-        from scene_builder.bench import machine_description
+        from scene_builder.bench.suites import machine_description
 
         machine = machine_description()
-        out += ["# Stage benchmarks", "", "Each produced by `make bench` (`python -m scene_builder.bench_report ... --extras`) with the command shown.", ""]
+        out += ["# Stage benchmarks", "", "Each produced by `make bench` (`python -m scene_builder.bench.report ... --extras`) with the command shown.", ""]
         out += [render_extra(r, machine) for r in extras]
     return "\n".join(out)
 
@@ -195,7 +195,7 @@ def main(argv: list[str] | None = None) -> int:
     with_extras = "--extras" in args
     args = [a for a in args if a != "--extras"]
     if not args:
-        print("usage: python -m scene_builder.bench_report BENCH.json [MORE.json ...] [--extras] > BENCHMARKS.md", file=sys.stderr)
+        print("usage: python -m scene_builder.bench.report BENCH.json [MORE.json ...] [--extras] > BENCHMARKS.md", file=sys.stderr)
         return 2
     try:
         for a in args:
