@@ -82,10 +82,11 @@ def build_spec(scene: Scene, out_dir: Path, objects: tuple[PlacedObject, ...] | 
 
     spec.texturedir = TEXTURE_DIR
     bg = scene.room.background
+    observed = bg is not None and len(bg.surface.faces) > 0  # the room's own surface is drawn
     _add_lights(spec)
-    _add_floor(spec, hidden=bg is not None)
+    _add_floor(spec, hidden=observed)
     for i, wall in enumerate(scene.room.walls):
-        _add_wall(spec, i, wall, hidden=bg is not None)
+        _add_wall(spec, i, wall, hidden=observed)
     _add_camera(spec, scene)
     looks = _Looks(spec, Path(out_dir))
     if bg is not None:
@@ -141,7 +142,8 @@ def _add_background(spec, bg: Background, out_dir: Path, looks: _Looks) -> None:
 
     mdir = out_dir / MESH_DIR
     mdir.mkdir(parents=True, exist_ok=True)
-    visuals = [("surface", bg.surface), *((f"object/{n}", m) for n, m in zip(bg.static_names, bg.static_meshes))]
+    visuals = [("surface", bg.surface)] if len(bg.surface.faces) else []
+    visuals += [(f"object/{n}", m) for n, m in zip(bg.static_names, bg.static_meshes)]
     for label, mesh in visuals:
         gname = f"background/{label}"
         fname = names.file_stem("background", *label.split("/")) + ".obj"

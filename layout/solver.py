@@ -43,7 +43,7 @@ from layout.trim import trim_pair
 from layout.support import BACKGROUND, FLOOR, UNSUPPORTED, build_support, is_ancestor, subtree
 from scene_builder.config import LayoutConfig
 from scene_builder.errors import InputError
-from scene_builder.model import AssetKind, Background, GeneratedAsset, LayoutResult, Perception, PlacedObject, Placement, Plane, Scene, SupportEdge
+from scene_builder.model import AssetKind, Background, GeneratedAsset, LayoutResult, Perception, PlacedObject, Placement, Plane, Scene, SupportEdge, TriangleMesh
 
 # Signed distances above -PENETRATION_TOL_M count as touching (resting contacts are exact up to
 # floating point).
@@ -607,7 +607,10 @@ def _static_background(
     every body resting on it, and the collision boxes of its observed structure carved clear of
     the remaining bodies."""
     if background is None:
-        return None
+        if not absorbed:
+            return None
+        # No observed surface (perception built none): the background holds just these objects.
+        background = Background(TriangleMesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)), np.zeros(0, dtype=bool))
     for k in absorbed:
         b = bodies[k]
         background = absorb(background, b.name, b.asset, b.world_from_asset())

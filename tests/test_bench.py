@@ -76,7 +76,8 @@ def test_naive_baseline_on_a_room_penetrates_and_drifts(room, tmp_path):
     # covers most of each silhouette, and its depth is off (box faces are not object surfaces).
     assert len(scores.mask_iou) == len(o.pairs)
     assert 0.3 < np.median(scores.mask_iou) < 0.95
-    assert scores.depth_absrel is not None and 0.01 < scores.depth_absrel < 0.5
+    # Over every pixel with depth: the baseline has no background, so the render misses the room.
+    assert scores.depth_absrel is not None and 0.01 < scores.depth_absrel < 1.0
 
 
 def test_baseline_world_is_the_camera_with_gravity_along_y(room):

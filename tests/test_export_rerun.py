@@ -125,7 +125,7 @@ def test_collision_pieces_hidden_by_the_blueprint_and_eye_at_the_camera(recordin
     reader = RrdReader(str(path))
     bp = list(reader.store(store=reader.blueprints()[0]).stream())
     hidden = {c.entity_path.split("/overrides/")[1].rsplit("/visualizers", 1)[0] for c in bp if "/overrides/" in c.entity_path}
-    assert hidden == {f"world/objects/{o.name}/collision" for o in scene.objects}
+    assert hidden == {f"world/objects/{o.name}/collision" for o in scene.objects} | {"world/background/collision"}
     eye = next(c for c in bp if c.entity_path.endswith("/EyeControls3D")).to_record_batch()
     position = np.asarray(eye.column("EyeControls3D:position").to_pylist()[0][0])
     target = np.asarray(eye.column("EyeControls3D:look_target").to_pylist()[0][0])

@@ -154,12 +154,16 @@ def test_support_graph_of_a_hand_made_stack():
 
 def test_buried_face_is_not_a_support():
     # A solid cabinet decomposed into two stacked pieces: the lower piece's top face (z = 0.4)
-    # lies inside the object. A box observed at 0.45 must not be set on it.
+    # lies inside the object. A box observed at 0.45 must not be set on it; with nothing else
+    # within reach under it (the floor is 45 cm down) it is left where it was seen, as static
+    # background, and the placement says why.
     cabinet = asset_from_pieces("cabinet", "cabinet", [box_mesh([-0.3, -0.4, 0.0], [0.3, 0.4, 0.4]), box_mesh([-0.3, -0.4, 0.4], [0.3, 0.4, 0.8])])
     box = box_asset("box", (0.2, 0.2, 0.2))
     result, _ = solve_layout_with_stats(empty_perception(), (_gen(cabinet, (0, 0, 0)), _gen(box, (0.0, 0.0, 0.45), yaw=0.5)), CFG)
-    assert {e.child: e.parent for e in result.support}["box"] == "floor"
-    assert result.max_penetration_after_m < 1e-5
+    assert "box" not in {e.child for e in result.support} and [o.name for o in result.scene.objects] == ["cabinet"]
+    placement = {p.name: p for p in result.placements}["box"]
+    assert placement.became_background and placement.displacement_m == 0.0 and "nothing seen under it" in placement.reason
+    assert result.scene.room.background is not None and result.scene.room.background.static_names == ("box",)
     # Observed 2 cm sunk into the real top, it rests on the top.
     result, _ = solve_layout_with_stats(empty_perception(), (_gen(cabinet, (0, 0, 0)), _gen(box, (0.0, 0.0, 0.78), yaw=0.5)), CFG)
     assert {e.child: e.parent for e in result.support}["box"] == "cabinet"
@@ -169,20 +173,42 @@ def test_buried_face_is_not_a_support():
 def test_minimal_horizontal_push_split_by_mass():
     a = box_asset("a", (0.4, 0.4, 0.4))
     b = box_asset("b", (0.4, 0.4, 0.4))
-    # 4 cm overlap along x, equal masses: each moves (4 cm + clearance) / 2, along x only.
-    result, _ = solve_layout_with_stats(empty_perception(), (_gen(a, (0.0, 0.0, 0.0)), _gen(b, (0.36, 0.0, 0.0))), CFG)
+    # 10 cm overlap along x (deeper than layout.trim cuts), equal masses: each moves
+    # (10 cm + clearance) / 2, along x only.
+    result, _ = solve_layout_with_stats(empty_perception(), (_gen(a, (0.0, 0.0, 0.0)), _gen(b, (0.30, 0.0, 0.0))), CFG)
     pa, pb = (o.world_from_asset[:3, 3] for o in result.scene.objects)
-    half = (0.04 + CFG.clearance_m) / 2
+    half = (0.10 + CFG.clearance_m) / 2
     np.testing.assert_allclose(pa, [-half, 0.0, 0.0], atol=1e-6)
-    np.testing.assert_allclose(pb, [0.36 + half, 0.0, 0.0], atol=1e-6)
+    np.testing.assert_allclose(pb, [0.30 + half, 0.0, 0.0], atol=1e-6)
     # A heavy (larger) box moves less than a light one.
     big = box_asset("big", (0.8, 0.8, 0.4))
     small = box_asset("small", (0.2, 0.2, 0.2))
-    result, _ = solve_layout_with_stats(empty_perception(), (_gen(big, (0.0, 0.0, 0.0)), _gen(small, (0.45, 0.0, 0.0))), CFG)
+    result, _ = solve_layout_with_stats(empty_perception(), (_gen(big, (0.0, 0.0, 0.0)), _gen(small, (0.41, 0.0, 0.0))), CFG)
     p = {o.name: o.world_from_asset[:3, 3] for o in result.scene.objects}
-    move_big, move_small = abs(p["big"][0]), abs(p["small"][0] - 0.45)
+    move_big, move_small = abs(p["big"][0]), abs(p["small"][0] - 0.41)
     assert move_small > 10 * move_big
-    assert move_big + move_small == pytest.approx(0.05 + CFG.clearance_m, abs=1e-6)
+    assert move_big + move_small == pytest.approx(0.09 + CFG.clearance_m, abs=1e-6)
+
+
+def test_shallow_overlap_is_trimmed_not_pushed():
+    """Two boxes whose hidden backs overlap by 4 cm stay where they were seen: their collision
+    pieces are cut apart at the mid-plane (layout.trim), leaving the clearance, and no volume is
+    shared (manifold3d)."""
+    a = box_asset("a", (0.4, 0.4, 0.4))
+    b = box_asset("b", (0.4, 0.4, 0.4))
+    gen = (_gen(a, (0.0, 0.0, 0.0)), _gen(b, (0.36, 0.0, 0.0)))
+    result, _ = solve_layout_with_stats(empty_perception(), gen, CFG)
+    for g, o in zip(gen, result.scene.objects):
+        np.testing.assert_array_equal(o.world_from_asset, g.world_from_asset)
+    assert all(p.displacement_m == 0.0 for p in result.placements)
+    assert result.max_penetration_after_m < 1e-5
+    assert _max_intersection_volume(result.scene) < 1e-9
+    xa = max(p[:, 0].max() for p in _world_pieces(result.scene.objects[0]))
+    xb = min(p[:, 0].min() for p in _world_pieces(result.scene.objects[1]))
+    assert xa == pytest.approx(0.18 - 0.001, abs=1e-6) and xb == pytest.approx(0.18 + 0.001, abs=1e-6)
+    # Visual meshes and masses are the observed ones.
+    assert result.scene.objects[0].asset.parts[0].visual is a.parts[0].visual
+    assert result.scene.objects[0].asset.mass_kg == a.mass_kg
 
 
 def test_separated_objects_do_not_move():
@@ -249,24 +275,31 @@ def test_yaw_snapping_follows_the_evidence():
     assert placed["cabinet"].asset is cabinet
 
 
-def test_unsupported_rigid_object_high_on_a_wall_is_hung_there():
-    """A picture seen 1.5 m up against a wall is welded where it was seen, not dropped
-    from its pixels; the same box away from walls, or low, still falls to the floor; two
-    overlapping hung objects are still pushed apart."""
+def test_unsupported_object_is_never_welded_in_mid_air_nor_dropped():
+    """A picture seen 1.5 m up against a wall, a box floating in the room and one 40 cm up have
+    nothing under them within reach: none is welded to the wall or dropped metres from its
+    pixels; each stays where it was seen as static background, and the placement says so. A box
+    seen 8 cm above the floor comes down onto it (the move is reported)."""
     walls = (Plane(np.array([1.0, 0.0, 0.0]), 1.0, "wall", 100),)  # x = -1, room at x > -1
     gen = (
         _gen(box_asset("picture", (0.04, 0.6, 0.4)), (-0.95, 0.0, 1.5)),
-        _gen(box_asset("frame", (0.04, 0.6, 0.4)), (-0.95, 0.4, 1.6)),  # overlaps the picture
         _gen(box_asset("floating", (0.04, 0.6, 0.4)), (0.5, 0.0, 1.5)),
         _gen(box_asset("low", (0.04, 0.6, 0.4)), (-0.95, 2.0, 0.4)),
+        _gen(box_asset("near_floor", (0.3, 0.3, 0.3)), (0.5, 2.0, 0.08)),
     )
-    result, stats = solve_layout_with_stats(empty_perception(walls), gen, CFG)
-    placed = {o.name: o for o in result.scene.objects}
-    for name in ("picture", "frame"):
-        assert placed[name].support == "wall" and placed[name].asset.is_fixed
-        assert _bottom(placed[name]) == pytest.approx(_bottom(GeneratedAsset(gen[0].asset, gen[0].world_from_asset, np.zeros((0, 3)))) + (0.1 if name == "frame" else 0.0), abs=1e-9)
-    for name in ("floating", "low"):
-        assert placed[name].support == "floor" and not placed[name].asset.is_fixed
-        assert _bottom(placed[name]) == pytest.approx(0.0, abs=1e-9)
-    assert result.max_penetration_after_m < 1e-5
-    assert _max_intersection_volume(result.scene) < 1e-9
+    result, _ = solve_layout_with_stats(empty_perception(walls), gen, CFG)
+    placements = {p.name: p for p in result.placements}
+    for name in ("picture", "floating", "low"):
+        assert placements[name].became_background and placements[name].displacement_m == 0.0
+        assert "nothing seen under it" in placements[name].reason
+    assert [o.name for o in result.scene.objects] == ["near_floor"]
+    assert not any(o.asset.is_fixed for o in result.scene.objects)
+    bg = result.scene.room.background
+    assert sorted(bg.static_names) == ["floating", "low", "picture"]
+    # Their geometry is in the background exactly where it was seen.
+    for g in gen[:3]:
+        k = bg.static_names.index(g.asset.name)
+        np.testing.assert_allclose(bg.static_meshes[k].vertices_m, transform_points(g.world_from_asset, g.asset.parts[0].visual.vertices_m))
+    near = placements["near_floor"]
+    assert near.support == "floor" and near.lowered_m == pytest.approx(0.08) and "lowered 8 cm onto the floor" in near.reason
+    assert _bottom(result.scene.objects[0]) == pytest.approx(0.0, abs=1e-9)
