@@ -134,30 +134,44 @@ def _yaw_quat(yaw_rad: float) -> list[float]:
     return [float(np.cos(yaw_rad / 2.0)), 0.0, 0.0, float(np.sin(yaw_rad / 2.0))]
 
 
+def background_meshes(bg: Background, out_dir: Path) -> tuple[list[tuple[str, str, TriangleMesh]], list[str]]:
+    """Write the background's mesh files under ``out_dir/meshes`` (shared by MJCF and URDF).
+    Returns the visual meshes as (name, file, mesh) -- ``background/surface`` when there is an
+    observed surface, ``background/object/NAME`` per object that became background -- and the
+    files of the convex pieces (``background/piece/K``), relative to ``meshes/``."""
+    mdir = Path(out_dir) / MESH_DIR
+    mdir.mkdir(parents=True, exist_ok=True)
+    visuals = [("surface", bg.surface)] if len(bg.surface.faces) else []
+    visuals += [(f"object/{n}", m) for n, m in zip(bg.static_names, bg.static_meshes)]
+    out = []
+    for label, mesh in visuals:
+        fname = names.file_stem("background", *label.split("/")) + ".obj"
+        _write_obj(mdir / fname, mesh)
+        out.append((f"background/{label}", fname, mesh))
+    pieces = []
+    for k, piece in enumerate(bg.static_pieces):
+        fname = names.file_stem("background", "piece", str(k)) + ".obj"
+        _write_obj(mdir / fname, piece)
+        pieces.append(fname)
+    return out, pieces
+
+
 def _add_background(spec, bg: Background, out_dir: Path, looks: _Looks) -> None:
     """The static background in the world body: its textured surface and the visual meshes of
     objects that became background (visual only, group BACKGROUND_GROUP), their convex pieces and
     the collision boxes (group COLLISION_GROUP)."""
     import mujoco
 
-    mdir = out_dir / MESH_DIR
-    mdir.mkdir(parents=True, exist_ok=True)
-    visuals = [("surface", bg.surface)] if len(bg.surface.faces) else []
-    visuals += [(f"object/{n}", m) for n, m in zip(bg.static_names, bg.static_meshes)]
-    for label, mesh in visuals:
-        gname = f"background/{label}"
-        fname = names.file_stem("background", *label.split("/")) + ".obj"
-        _write_obj(mdir / fname, mesh)
+    visuals, pieces = background_meshes(bg, out_dir)
+    for gname, fname, mesh in visuals:
         spec.add_mesh(name=gname, file=fname, inertia=mujoco.mjtMeshInertia.mjMESH_INERTIA_SHELL)
         extra = {"material": looks.material(mesh.texture)} if mesh.texture is not None else {"rgba": _mesh_rgba(mesh)}
         spec.worldbody.add_geom(name=gname, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=gname, contype=0, conaffinity=0,
                                 group=BACKGROUND_GROUP, density=0.0, **extra)
     common = dict(group=COLLISION_GROUP, friction=[FLOOR_DYNAMIC_FRICTION, TORSIONAL_FRICTION, ROLLING_FRICTION], condim=CONDIM,
                   solref=list(SOLREF), solimp=list(SOLIMP), rgba=[0.3, 0.5, 0.9, 0.4])
-    for k, piece in enumerate(bg.static_pieces):
+    for k, fname in enumerate(pieces):
         gname = f"background/piece/{k}"
-        fname = names.file_stem("background", "piece", str(k)) + ".obj"
-        _write_obj(mdir / fname, piece)
         spec.add_mesh(name=gname, file=fname)
         spec.worldbody.add_geom(name=gname, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=gname, **common)
     for k in range(bg.box_count):
