@@ -35,6 +35,11 @@ MAX_FREE_SPACE_SHARE = 0.10
 VIOLATION_SAMPLES = 2000
 #: A completed voxel this close to another object's observed surface is that object's.
 OTHERS_CLEARANCE_M = 0.02
+#: Hidden space within this distance of another object's observed surface is shared out by
+#: distance (farther, it stays with the object completing it); surfaces are thinned to this
+#: spacing for the distance queries.
+OWNERSHIP_REACH_M = 0.3
+OWNERSHIP_SPACING_M = 0.01
 #: Completed voxels keep this far in front of the walls.
 WALL_CLEARANCE_M = 0.005
 #: A shape prior or template reaching further than this into a wall is not used.
@@ -79,6 +84,15 @@ def complete_box(fit, label: str, walls=()):
     if d < _DEPTH_COMPLETE_FRACTION * expected:
         return extend_depth(fit, min(expected, depth_to_walls(fit, walls)))
     return fit
+
+
+def _thin(points_m: np.ndarray, spacing_m: float) -> np.ndarray:
+    """One point per occupied ``spacing_m`` grid cell of (N, 3) points (the first, in input
+    order: deterministic)."""
+    k = np.floor(np.asarray(points_m) / spacing_m).astype(np.int64) + (1 << 20)
+    keys = (k[:, 0] << 42) | (k[:, 1] << 21) | k[:, 2]  # 21 bits per axis: +-10 km at 1 cm
+    _, first = np.unique(keys, return_index=True)
+    return np.asarray(points_m)[np.sort(first)]
 
 
 def _median_rgba(colors_rgb: np.ndarray) -> tuple[float, float, float, float]:
@@ -149,7 +163,7 @@ class ShapePriorGenerator:
         else:
             specs = None
 
-        space = FreeSpace(perception.observation, perception.camera)
+        space = FreeSpace(perception.observation, perception.camera, own_mask=obj.mask)
 
         def assemble(specs, kind, soft, description, cfg):
             asset, shift = assemble_asset_with_offset(
@@ -173,8 +187,8 @@ class ShapePriorGenerator:
             size = fit.size_m.copy()
 
         voxel_m = float(size.max()) / config.voxel_resolution
-        others_tree = cKDTree(np.concatenate(others)) if others else None
-        own_tree = cKDTree(obj.points_world_m)
+        others_tree = cKDTree(_thin(np.concatenate(others), OWNERSHIP_SPACING_M)) if others else None
+        own_tree = cKDTree(_thin(obj.points_world_m, OWNERSHIP_SPACING_M))
         walls = perception.room.walls
 
         def blocked(p_box: np.ndarray) -> np.ndarray:
@@ -186,8 +200,11 @@ class ShapePriorGenerator:
             for wall in walls:
                 out |= wall.signed_distance_m(p_world) < WALL_CLEARANCE_M + 0.5 * voxel_m
             if others_tree is not None:
-                d_other, _ = others_tree.query(p_world)
-                d_own, _ = own_tree.query(p_world)
+                # Only voxels near another object can be nearer to it than to this one's surface.
+                d_other, _ = others_tree.query(p_world, distance_upper_bound=OWNERSHIP_REACH_M)
+                near = np.isfinite(d_other)
+                d_own = np.full(len(p_world), np.inf)
+                d_own[near], _ = own_tree.query(p_world[near])
                 out |= (d_other < OTHERS_CLEARANCE_M + 0.5 * voxel_m) | (d_other + 0.5 * voxel_m < d_own)
             return out
 

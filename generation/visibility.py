@@ -2,7 +2,10 @@
 
 A point lies in *seen free space* when it projects into the photo onto a pixel with a valid
 depth and lies in front of that depth by more than the depth's noise: the camera saw something
-behind it, so nothing was there. A generated shape must not fill such space, or rendered from
+behind it, so nothing was there. For the object being shaped (``own_mask``), a point that
+projects outside its silhouette must moreover lie clearly *behind* what was seen there (hidden
+by it), or the object would show where the camera saw something else: its rendered silhouette
+is its mask. A generated shape must not fill such space, or rendered from
 the photo's camera it hides what was seen behind it (a shape prior fitted to a mask that merged
 two things into one wide box, a mirrored completion that pokes out of the silhouette).
 
@@ -20,22 +23,28 @@ from scene_builder.model import Camera, Observation, TriangleMesh
 __all__ = ["FreeSpace", "surface_samples"]
 
 #: Least margin in front of the observed depth before a point counts as seen free (m); the
-#: structured-light noise model of ``perception.room.inlier_threshold_m`` is added on top.
+#: structured-light noise model of ``perception.room.inlier_threshold_m`` is added on top
+#: (2.5 sigma on the object's own pixels, whose surface it is; 1 sigma past its silhouette, where
+#: whatever was seen there is not the object and the margin only absorbs depth noise).
 FREE_MARGIN_M = 0.03
+OFF_MASK_MARGIN_M = 0.01
 
 
 class FreeSpace:
     """Seen free space of one observation (see the module docstring)."""
 
-    def __init__(self, observation: Observation, camera: Camera, margin_m: float = FREE_MARGIN_M) -> None:
+    def __init__(self, observation: Observation, camera: Camera, margin_m: float = FREE_MARGIN_M, own_mask: np.ndarray | None = None) -> None:
+        """own_mask: (H, W) bool pixels of the object being shaped (its own surface), or None."""
         self.depth = np.asarray(observation.depth_m, dtype=np.float64)
         self.k = observation.intrinsics
         self.camera_from_world = np.linalg.inv(camera.world_from_camera)
         self.margin = float(margin_m)
+        self.own = own_mask
 
-    def _lookup(self, points_world_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(N,) point depth along the optical axis and (N,) observed depth at its pixel (0 where
-        outside the image, behind the camera or unobserved)."""
+    def _lookup(self, points_world_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(N,) point depth along the optical axis, (N,) observed depth at its pixel (0 where
+        outside the image, behind the camera or unobserved) and (N,) whether that pixel is the
+        object's own."""
         p = transform_points(self.camera_from_world, np.asarray(points_world_m, dtype=np.float64).reshape(-1, 3))
         z = p[:, 2]
         h, w = self.depth.shape
@@ -47,22 +56,32 @@ class FreeSpace:
         v[ahead] = np.floor(self.k.fy_px * p[ahead, 1] / z[ahead] + self.k.cy_px + 0.5).astype(np.int64)
         inside = ahead & (u >= 0) & (u < w) & (v >= 0) & (v < h)
         obs[inside] = self.depth[v[inside], u[inside]]
-        return z, obs
+        own = np.ones(len(p), dtype=bool)
+        if self.own is not None:
+            own[inside] = self.own[v[inside], u[inside]]
+        return z, obs, own
 
     def tolerance_m(self, depth_m: np.ndarray, extra_m: float = 0.0) -> np.ndarray:
         """Noise margin at observed depth ``depth_m``: FREE_MARGIN_M + 2.5 sigma of the
         structured-light model sigma = 1.425e-3 z^2 (as ``perception.room.inlier_threshold_m``)."""
-        return self.margin + extra_m + 2.5 * 1.425e-3 * np.asarray(depth_m) ** 2
+        return extra_m + self.margin + 2.5 * 1.425e-3 * np.asarray(depth_m) ** 2
 
     def free(self, points_world_m: np.ndarray, extra_margin_m: float = 0.0) -> np.ndarray:
-        """(N,) bool: the (N, 3) world points lie in seen free space."""
-        z, obs = self._lookup(points_world_m)
-        return (obs > 0) & (z < obs - self.tolerance_m(obs, extra_margin_m))
+        """(N,) bool: the (N, 3) world points lie in seen free space, or (with ``own_mask``)
+        would show outside the object's silhouette: in front of, or not clearly behind
+        (OFF_MASK_MARGIN_M + 1 sigma), what was seen at their pixel."""
+        z, obs, own = self._lookup(points_world_m)
+        seen = obs > 0
+        out = seen & (z < obs - self.tolerance_m(obs, extra_margin_m))
+        if self.own is not None:
+            sigma = 1.425e-3 * obs**2
+            out |= seen & ~own & (z < obs + OFF_MASK_MARGIN_M + sigma - extra_margin_m)
+        return out
 
     def violation(self, points_world_m: np.ndarray) -> float:
         """Share of the (N, 3) world points that project onto observed pixels and lie in seen free
         space (0 when none projects onto an observed pixel)."""
-        z, obs = self._lookup(points_world_m)
+        z, obs, _ = self._lookup(points_world_m)
         seen = obs > 0
         if not np.any(seen):
             return 0.0

@@ -38,9 +38,9 @@ from layout.bodies import Body, make_body
 from layout.geometry import clip_half_plane, clip_to_slab_xy, closest_point_in_polygon, horizontal_mtv, placements_inside
 from layout.narrowphase import ConvexWorld
 from layout.snapping import YawSnap, reference_yaw, snap_yaw
-from layout.background import BackgroundSupport, absorb, carve, column_boxes, observed_structure, support_pad
+from layout.background import CARVE_CLEARANCE_M, BackgroundSupport, absorb, carve, column_boxes, observed_structure
 from layout.trim import trim_pair
-from layout.support import BACKGROUND, FLOOR, UNSUPPORTED, build_support, is_ancestor, subtree
+from layout.support import BACKGROUND, FLOOR, UNSUPPORTED, build_support, is_ancestor, pad_bounds, pad_box, subtree
 from scene_builder.config import LayoutConfig
 from scene_builder.errors import InputError
 from scene_builder.model import AssetKind, Background, GeneratedAsset, LayoutResult, Perception, PlacedObject, Placement, Plane, Scene, SupportEdge, TriangleMesh
@@ -571,6 +571,24 @@ class _Solver:
         return worst
 
 
+def _pad_blocked(b: Body, bodies: list[Body]) -> bool:
+    """Whether the pad under ``b`` (resting on the background) would reach into another body."""
+    lo, hi = pad_bounds(*pad_box(b, b.bottom_m))
+    hi[2] -= CARVE_CLEARANCE_M
+    return any(np.any(np.all(lo < o.piece_hi_rel_m + o.position_m, axis=1) & np.all(hi > o.piece_lo_rel_m + o.position_m, axis=1))
+               for o in bodies if o is not b)
+
+
+def _unsupport_blocked_pads(bodies: list[Body]) -> None:
+    """A body resting on the background whose pad would reach into another body (one placed
+    after it in the support graph, e.g. overlapping it from the side) has no clear support seen
+    under it: it is left where it was seen (``UNSUPPORTED``), like any object with nothing under
+    it; what rests on it then rests on the background."""
+    for b in bodies:
+        if b.parent == BACKGROUND and _pad_blocked(b, bodies):
+            b.parent = UNSUPPORTED
+
+
 def _trim_overlaps(solver: _Solver) -> bool:
     """Cut apart the collision pieces of overlapping bodies where the overlap is shallow
     (``layout.trim``), replacing those bodies in place (pose, support and flags kept). Returns
@@ -624,11 +642,16 @@ def _static_background(
     halves = [(hi - lo) / 2.0]
     yaws = [np.zeros(len(lo))]
     for b in movers:
-        if b.parent == BACKGROUND:
-            c, h, yaw = support_pad(b.footprint_rel_m, b.rotation, b.position_m, b.bottom_m)
-            centers.append(c[None])
-            halves.append(h[None])
-            yaws.append(np.array([yaw]))
+        if b.parent != BACKGROUND:
+            continue
+        # The pad spans the object's whole plan extent (it rests on the surface seen around it,
+        # hidden under all of it); _unsupport_blocked_pads made sure nothing else was there.
+        if _pad_blocked(b, bodies):
+            continue
+        c, h, yaw = pad_box(b, b.bottom_m)
+        centers.append(c[None])
+        halves.append(h[None])
+        yaws.append(np.array([yaw]))
     return dataclasses.replace(
         background,
         box_centers_m=np.concatenate(centers),
@@ -698,6 +721,7 @@ def solve_layout_with_stats(
     background = perception.room.background
     ground = BackgroundSupport(background, walls)
     edges, _ = build_support(bodies, walls, solver.vertical_clash, ground.height_under if background is not None else None)
+    _unsupport_blocked_pads(bodies)
     absorbed = [i for i, b in enumerate(bodies) if b.parent == UNSUPPORTED]
     for i in absorbed:
         bodies[i].fixed = True  # left where seen; the others make room around it

@@ -63,6 +63,34 @@ def _near_wall(b: Body, walls: tuple[Plane, ...], reach_m: float = WALL_CONTACT_
     return any(float(np.min(w.signed_distance_m(v))) < reach_m for w in walls)
 
 
+def pad_box(b: Body, height_m: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """The pad under body ``b`` resting on the background at ``height_m`` (its whole plan extent,
+    ``layout.background.support_pad``): centre (3,), half extents (3,), yaw (rad), at the
+    body's current plan position."""
+    from layout.background import support_pad
+
+    plan = np.concatenate([p.verts_rel_m[:, :2] for p in b.pieces])
+    return support_pad(plan, b.rotation, b.position_m, height_m)
+
+
+def pad_bounds(centre: np.ndarray, half: np.ndarray, yaw: float) -> tuple[np.ndarray, np.ndarray]:
+    """World axis-aligned bounds (lo, hi) of a yawed pad box."""
+    ext = np.abs(np.array([[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]])) @ half[:2]
+    return (np.array([centre[0] - ext[0], centre[1] - ext[1], centre[2] - half[2]]),
+            np.array([centre[0] + ext[0], centre[1] + ext[1], centre[2] + half[2]]))
+
+
+def _pad_is_clear(b: Body, height_m: float, others: list[Body], clearance_m: float = 0.002) -> bool:
+    """Whether the pad under ``b`` at ``height_m`` keeps clear of the other bodies' pieces
+    (bounding boxes): where another object fills the space under it, that object is what it
+    would rest on, not the background."""
+    lo, hi = pad_bounds(*pad_box(b, height_m))
+    hi[2] -= clearance_m
+    return not any(
+        np.any(np.all(lo < o.piece_hi_rel_m + o.position_m, axis=1) & np.all(hi > o.piece_lo_rel_m + o.position_m, axis=1)) for o in others
+    )
+
+
 def build_support(
     bodies: list[Body],
     walls: tuple[Plane, ...],
@@ -135,7 +163,7 @@ def build_support(
                 break
         if background is not None:
             h_bg = background(foot, max(MIN_SURFACE_HEIGHT_M, bottom - MAX_DROP_M), bottom + tol)
-            if h_bg is not None:
+            if h_bg is not None and _pad_is_clear(b, h_bg, [bodies[k] for k in placed]):
                 options.append((abs(h_bg - bottom), 1, h_bg, BACKGROUND, -1))
         if bottom <= MAX_DROP_M:
             options.append((abs(bottom), 2, 0.0, FLOOR, -1))
