@@ -202,9 +202,13 @@ def assemble_asset_with_offset(
     observed_points_m: np.ndarray | None = None,
     observed_colors_rgb: np.ndarray | None = None,
     recenter: bool = True,
+    surface_snap=None,
 ) -> tuple[ObjectAsset, np.ndarray]:
     """:func:`assemble_asset`, also returning the (3,) translation added to the input geometry
-    (to put the asset-frame origin at the bottom-centre of the parts' bounding box)."""
+    (to put the asset-frame origin at the bottom-centre of the parts' bounding box).
+    surface_snap: optional callable mapping (V, 3) vertices of a voxel part's visual mesh (input
+    frame) to new positions, before mass properties are computed (``generation.visibility``
+    moves the vertices the camera saw onto the observed depth)."""
     from generation.collision import _hull, _merge_smallest, convex_pieces, is_convex_enough, voxel_convex_pieces
     from generation.meshing import to_model_mesh, vertex_colors
     from generation.physics import combine_inertials, joint_resistance, mass_properties, shell_mass_properties
@@ -219,6 +223,10 @@ def assemble_asset_with_offset(
     visuals, solids = [], []
     for spec in parts:
         v, s = _visual(spec, config)
+        if surface_snap is not None and isinstance(spec.geometry, VoxelGeometry):
+            # The marching-cubes surface lies up to a voxel off the observed one: its vertices
+            # seen by the camera go onto the observed depth (positions only: still watertight).
+            v.vertices = np.asarray(surface_snap(np.asarray(v.vertices, dtype=np.float64)))
         visuals.append(v)
         solids.append(s)
     lo = np.min([v.bounds[0] for v in visuals], axis=0)

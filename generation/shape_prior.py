@@ -40,6 +40,9 @@ OTHERS_CLEARANCE_M = 0.02
 #: spacing for the distance queries.
 OWNERSHIP_REACH_M = 0.3
 OWNERSHIP_SPACING_M = 0.01
+#: Visual vertices within this many voxels of the observed depth on the object's own pixels are
+#: moved onto it.
+SNAP_VOXELS = 1.5
 #: Completed voxels keep this far in front of the walls.
 WALL_CLEARANCE_M = 0.005
 #: A shape prior or template reaching further than this into a wall is not used.
@@ -165,10 +168,11 @@ class ShapePriorGenerator:
 
         space = FreeSpace(perception.observation, perception.camera, own_mask=obj.mask)
 
-        def assemble(specs, kind, soft, description, cfg):
+        def assemble(specs, kind, soft, description, cfg, snap=None):
             asset, shift = assemble_asset_with_offset(
                 obj.name, label, specs, config=cfg, seed=seed, kind=kind, is_fixed=cat.fixed, deformable=soft,
                 description=description, backend=BACKEND_NAME, observed_points_m=pts, observed_colors_rgb=obj.colors_rgb,
+                surface_snap=snap,
             )
             # asset coordinates = box coordinates + shift
             return GeneratedAsset(asset, fit.world_from_box @ pose(np.eye(3), -shift), obj.points_world_m)
@@ -213,5 +217,9 @@ class ShapePriorGenerator:
                           description=f"{label}: observed shell extruded and mirrored", shell_thickness_m=cm.shell_thickness_m,
                           rgba=rgba)]
         description += "; completed from the observed shell, carved to the seen free space"
-        out = assemble(specs, None, None, description, config)
+
+        def snap(v_box: np.ndarray) -> np.ndarray:
+            return transform_points(box_from_world, space.snap(transform_points(fit.world_from_box, v_box), SNAP_VOXELS * voxel_m))
+
+        out = assemble(specs, None, None, description, config, snap)
         return replace(out, asset=replace(out.asset, observed_shape=True))

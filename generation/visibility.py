@@ -78,6 +78,19 @@ class FreeSpace:
             out |= seen & ~own & (z < obs + OFF_MASK_MARGIN_M + sigma - extra_margin_m)
         return out
 
+    def snap(self, points_world_m: np.ndarray, max_move_m: float) -> np.ndarray:
+        """(N, 3) points with those that project onto the object's own pixels (``own_mask``)
+        within ``max_move_m`` of the observed depth there moved along their ray onto it: the
+        surface the camera saw, where a voxel surface only approximates it."""
+        p = np.array(points_world_m, dtype=np.float64).reshape(-1, 3)
+        z, obs, own = self._lookup(p)
+        sel = own & (obs > 0) & (np.abs(z - obs) <= max_move_m) & (z > 1e-6)
+        if not np.any(sel):
+            return p
+        cam = transform_points(self.camera_from_world, p[sel]) * (obs[sel] / z[sel])[:, None]
+        p[sel] = transform_points(np.linalg.inv(self.camera_from_world), cam)
+        return p
+
     def violation(self, points_world_m: np.ndarray) -> float:
         """Share of the (N, 3) world points that project onto observed pixels and lie in seen free
         space (0 when none projects onto an observed pixel)."""

@@ -41,6 +41,8 @@ class Body:
     parent: int = -1  # index of the supporting body; -1 floor, -2 wall, -3 background, -4 none
     support_surface: int = -1  # index into the parent's ``surfaces`` when parent >= 0
     children: list[int] = field(default_factory=list)
+    # Why it is left where seen as static background (parent -4), one line for the report.
+    unsupported_reason: str = ""
 
     @property
     def bottom_m(self) -> float:

@@ -67,6 +67,9 @@ _FAN = np.stack([np.cos(np.radians(np.arange(0.0, 180.0, 7.5))), np.sin(np.radia
 # SUPPORT_INSET_M, and SUPPORT_INSET_FRACTION of the object's narrowest footprint width (a lamp
 # whose centre of mass is 1 cm inside a sofa's back edge topples at the first nudge).
 SUPPORT_INSET_M = 0.01
+# A movable object reaching further than this into a wall is part of the wall (see
+# _unsupport_in_walls); shallower, it is pushed out.
+MAX_WALL_PUSH_M = 0.05
 SUPPORT_INSET_FRACTION = 0.2
 # A soft body sags over an edge until it slides off: its whole footprint is kept on the face
 # (shrunk by SUPPORT_INSET_M); when it does not fit, its footprint is scaled about its centre by
@@ -587,6 +590,20 @@ def _unsupport_blocked_pads(bodies: list[Body]) -> None:
     for b in bodies:
         if b.parent == BACKGROUND and _pad_blocked(b, bodies):
             b.parent = UNSUPPORTED
+            b.unsupported_reason = "what is under it is another object's, with no face to rest on"
+
+
+def _unsupport_in_walls(solver: _Solver) -> None:
+    """A movable body reaching more than MAX_WALL_PUSH_M into a wall would have to move that far
+    to stand in the room: it is wall (a door, a radiator, a picture seen as an object, or a wall
+    plane fitted a little off), left where it was seen as static background."""
+    for k, b in enumerate(solver.bodies):
+        if not len(solver.wall_n) or b.fixed or b.parent == UNSUPPORTED:
+            continue
+        depth = -float(np.min(solver.wall_gaps(k)))
+        if depth > MAX_WALL_PUSH_M:
+            b.parent = UNSUPPORTED
+            b.unsupported_reason = f"reaches {depth * 100:.0f} cm into a wall"
 
 
 def _trim_overlaps(solver: _Solver) -> bool:
@@ -668,7 +685,7 @@ def _placement(g: GeneratedAsset, b: Body, support: str, absorbed: bool, dropped
     yaw = abs((_yaw_deg(b.rotation) - _yaw_deg(g.world_from_asset[:3, :3]) + 180.0) % 360.0 - 180.0)
     reasons = []
     if absorbed:
-        reasons.append("nothing seen under it to rest on: kept where seen as static background")
+        reasons.append(f"{b.unsupported_reason or 'nothing seen under it to rest on'}: kept where seen as static background")
     if dropped:
         reasons.append("no room left on its support: moved to the floor")
     if dist > 0.01 and not absorbed:
@@ -722,6 +739,7 @@ def solve_layout_with_stats(
     ground = BackgroundSupport(background, walls)
     edges, _ = build_support(bodies, walls, solver.vertical_clash, ground.height_under if background is not None else None)
     _unsupport_blocked_pads(bodies)
+    _unsupport_in_walls(solver)
     absorbed = [i for i, b in enumerate(bodies) if b.parent == UNSUPPORTED]
     for i in absorbed:
         bodies[i].fixed = True  # left where seen; the others make room around it

@@ -179,6 +179,7 @@ def build_support(
             parent_name = "wall"
         else:
             b.parent = UNSUPPORTED
+            b.unsupported_reason = "nothing seen under it to rest on"
             h = bottom
             parent_name = "none"
         # The gap as observed: the child's and the support's initial heights.

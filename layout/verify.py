@@ -186,6 +186,23 @@ def _simulate(m, d, scene: Scene, index: _SceneIndex, settle_s: float) -> dict[s
     return {n: (t, np.array(pos[n]), np.array(quat[n])) for n in tracked}
 
 
+#: A depth pixel more than this share off the median of its OUTLIER_WINDOW_PX neighbourhood is an
+#: isolated outlier (sensor speckle, a flying pixel on a depth edge), not a measurement.
+OUTLIER_SHARE = 0.10
+OUTLIER_WINDOW_PX = 5
+
+
+def valid_depth(depth_m: np.ndarray) -> np.ndarray:
+    """(H, W) bool: pixels with a measured depth that agrees within OUTLIER_SHARE with the median
+    of its OUTLIER_WINDOW_PX x OUTLIER_WINDOW_PX neighbourhood (the reference for depth AbsRel:
+    the TUI-NICR Kinect samples have near-zero speckle that would otherwise dominate the mean)."""
+    from scipy.ndimage import median_filter
+
+    d = np.asarray(depth_m, dtype=np.float64)
+    med = median_filter(d, size=OUTLIER_WINDOW_PX, mode="nearest")
+    return (d > 0) & (np.abs(d - med) <= OUTLIER_SHARE * med)
+
+
 class _Renders:
     """RGB (the scene's own lights), depth and object labels rendered from ``input_camera``."""
 
@@ -230,9 +247,10 @@ class _Renders:
         self.code = code
 
     def depth_absrel(self, observed_m: np.ndarray, where: np.ndarray | None = None) -> float:
-        """Mean |d_render - d_obs| / d_obs over pixels with observed depth (and ``where``); a pixel
-        where the render hit nothing counts as relative error 1."""
-        valid = observed_m > 0
+        """Mean |d_render - d_obs| / d_obs over the pixels with a valid observed depth
+        (:func:`valid_depth`; and ``where``); a pixel where the render hit nothing counts as
+        relative error 1."""
+        valid = valid_depth(observed_m)
         if where is not None:
             valid &= where
         if not np.any(valid):

@@ -824,7 +824,8 @@ class Fidelity:
     psnr_db, ssim (unitless, -1..1): the RGB render against the photo (t = 0);
       psnr_settled_db, ssim_settled: after settling.
     depth_absrel (unitless): mean |d_render - d_obs| / d_obs over every pixel with valid observed
-      depth, t = 0 (a pixel where the render hits nothing counts as relative error 1);
+      depth (not an isolated outlier: within 10 % of its 5x5 median), t = 0 (a pixel where the
+      render hits nothing counts as relative error 1);
       depth_absrel_settled: the same after settling; object_depth_absrel: over the movable
       objects' perceived pixels only.
     mask_iou_mean: mean over movable objects of the IoU of their rendered (visible) silhouette
