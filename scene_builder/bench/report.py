@@ -130,6 +130,29 @@ def _machine(m: dict) -> str:
     return f"{m.get('cpu')}, {m.get('cores')} cores, {m.get('memory_gb')} GB RAM, {gpu}; {m.get('os')}; Python {m.get('python')}, MuJoCo {m.get('mujoco')}{load}"
 
 
+def _twin_rows(d: dict) -> list[str]:
+    """Per-scene twin fidelity of the pipeline (render against the photo, depth, silhouettes,
+    displacement, what became background)."""
+    rows = [
+        "| scene | PSNR dB | SSIM | depth AbsRel t = 0 / settled | mask IoU median | displacement median / max (m) | movable / fixed / background | penetration mm t = 0 / settled |",
+        "|---|---:|---:|---|---:|---|---|---|",
+    ]
+    for s in d["scenes"]:
+        p = s.get("pipeline")
+        if s.get("error") or not p:
+            continue
+        ious = sorted(p.get("mask_iou") or [])
+        disp = sorted(p.get("displacement_m") or [])
+        movable = p["n_free"]
+        rows.append(
+            f"| {s['name']} | {_fmt(p.get('psnr_db'), '{:.1f}')} | {_fmt(p.get('ssim'), '{:.2f}')} | "
+            f"{_fmt(p.get('depth_absrel'))} / {_fmt(p.get('depth_absrel_settled'))} | {_fmt(ious[len(ious) // 2] if ious else None, '{:.2f}')} | "
+            f"{_fmt(disp[len(disp) // 2] if disp else None)} / {_fmt(disp[-1] if disp else None)} | {movable} / {p.get('n_fixed', 0)} / {p.get('n_background', 0)} | "
+            f"{_fmt(p['max_penetration_m'], '{:.2f}', 1000)} / {_fmt(p.get('max_penetration_settled_m'), '{:.2f}', 1000)} |"
+        )
+    return rows
+
+
 def _scene_rows(d: dict) -> list[str]:
     rows = [
         "| scene | objects built / true | recall | position error median (m) | max penetration mm (pipeline / baseline) | stable (pipeline / baseline) | depth AbsRel (pipeline / baseline) | seconds |",
@@ -180,6 +203,7 @@ def render(paths: list[Path], extras: tuple[ExtraRun, ...] = ()) -> str:
         if s.get("peak_rss_mb") is not None:
             out.append(f"Peak memory (resident set of the bench process): {s['peak_rss_mb']:.0f} MiB.")
         out += ["", "### Per scene", ""] + _scene_rows(d) + [""]
+        out += ["### Twin fidelity per scene (pipeline)", ""] + _twin_rows(d) + [""]
     out += ["## Definitions", ""] + [f"- **{k}**: {v}" for k, v in DEFINITIONS.items()] + [""]
     if extras:
         from scene_builder.bench.suites import machine_description
