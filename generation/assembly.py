@@ -258,7 +258,7 @@ def assemble_asset_with_offset(
             # the grid is the shape: split its voxels directly (~0.1 s) instead of CoACD on the
             # marching-cubes surface (3-50 s per completed lamp on open3d_TUM)
             g = spec.geometry
-            pieces = voxel_convex_pieces(g.occupancy, g.voxel_size_m, g.origin_m + shift, max_pieces=config.max_collision_pieces)
+            pieces = voxel_convex_pieces(g.occupancy, g.voxel_size_m, g.origin_m + shift, max_pieces=config.max_voxel_pieces)
         else:
             pieces = convex_pieces(
                 v,

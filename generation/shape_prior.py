@@ -35,10 +35,7 @@ MAX_FREE_SPACE_SHARE = 0.10
 VIOLATION_SAMPLES = 2000
 #: A completed voxel this close to another object's observed surface is that object's.
 OTHERS_CLEARANCE_M = 0.02
-#: Hidden space within this distance of another object's observed surface is shared out by
-#: distance (farther, it stays with the object completing it); surfaces are thinned to this
-#: spacing for the distance queries.
-OWNERSHIP_REACH_M = 0.3
+#: Observed surfaces are thinned to this spacing for the ownership distance queries.
 OWNERSHIP_SPACING_M = 0.01
 #: Visual vertices within this many voxels of the observed depth on the object's own pixels are
 #: moved onto it.
@@ -87,6 +84,18 @@ def complete_box(fit, label: str, walls=()):
     if d < _DEPTH_COMPLETE_FRACTION * expected:
         return extend_depth(fit, min(expected, depth_to_walls(fit, walls)))
     return fit
+
+
+def _column(points_world_m: np.ndarray):
+    """(plan outline as a shapely Polygon, bottom, top) of another object's observed points: the
+    convex hull of their plan positions, shrunk by 2 cm, and their 2nd / 98th height
+    percentiles."""
+    import shapely
+
+    p = np.asarray(points_world_m, dtype=np.float64)
+    lo, hi = np.percentile(p[:, 2], [2, 98])
+    hull = shapely.MultiPoint(_thin(p, 0.02)[:, :2]).convex_hull.buffer(-0.02)
+    return hull, float(lo), float(hi)
 
 
 def _thin(points_m: np.ndarray, spacing_m: float) -> np.ndarray:
@@ -194,6 +203,7 @@ class ShapePriorGenerator:
         others_tree = cKDTree(_thin(np.concatenate(others), OWNERSHIP_SPACING_M)) if others else None
         own_tree = cKDTree(_thin(obj.points_world_m, OWNERSHIP_SPACING_M))
         walls = perception.room.walls
+        columns = [_column(o) for o in others]
 
         def blocked(p_box: np.ndarray) -> np.ndarray:
             """Voxel centres this object may not fill: seen free space, behind a wall, or nearer
@@ -204,12 +214,25 @@ class ShapePriorGenerator:
             for wall in walls:
                 out |= wall.signed_distance_m(p_world) < WALL_CLEARANCE_M + 0.5 * voxel_m
             if others_tree is not None:
-                # Only voxels near another object can be nearer to it than to this one's surface.
-                d_other, _ = others_tree.query(p_world, distance_upper_bound=OWNERSHIP_REACH_M)
+                d_own, _ = own_tree.query(p_world)
+                # Another object's surface matters only where it is nearer than this one's.
+                bound = float(d_own.max()) + voxel_m
+                d_other, _ = others_tree.query(p_world, distance_upper_bound=bound)
                 near = np.isfinite(d_other)
-                d_own = np.full(len(p_world), np.inf)
-                d_own[near], _ = own_tree.query(p_world[near])
                 out |= (d_other < OTHERS_CLEARANCE_M + 0.5 * voxel_m) | (d_other + 0.5 * voxel_m < d_own)
+                # Under something else's top, inside its plan outline: that object's body (a bed
+                # under a mat lying on it, whose top the mat hides), unless this object's own
+                # surface is right there.
+                if columns:
+                    import shapely
+
+                    far_own = d_own > 2.0 * voxel_m
+                    for outline, z_lo, z_hi in columns:
+                        inside = (p_world[:, 2] < z_hi) & (p_world[:, 2] > z_lo) & far_own
+                        if np.any(inside):
+                            idx = np.flatnonzero(inside)
+                            inside[idx] = shapely.contains_xy(outline, p_world[idx, 0], p_world[idx, 1])
+                            out |= inside
             return out
 
         geometry = complete_occupancy(pts, cam, size, config.voxel_resolution, mirror_y=True, mirror_x=label in _MIRROR_X, blocked=blocked)

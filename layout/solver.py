@@ -67,6 +67,8 @@ _FAN = np.stack([np.cos(np.radians(np.arange(0.0, 180.0, 7.5))), np.sin(np.radia
 # SUPPORT_INSET_M, and SUPPORT_INSET_FRACTION of the object's narrowest footprint width (a lamp
 # whose centre of mass is 1 cm inside a sofa's back edge topples at the first nudge).
 SUPPORT_INSET_M = 0.01
+# Rounds of cutting overlapping collision pieces apart (layout.trim) before the pushes.
+TRIM_PASSES = 3
 # A movable object reaching further than this into a wall is part of the wall (see
 # _unsupport_in_walls); shallower, it is pushed out.
 MAX_WALL_PUSH_M = 0.05
@@ -398,7 +400,7 @@ class _Solver:
     def keep_on_support(self) -> bool:
         moved = False
         for i, b in enumerate(self.bodies):
-            if b.parent < 0 or b.fixed:
+            if b.parent < 0 or b.fixed or b.support_surface < 0:
                 continue
             s = self.bodies[b.parent]
             region = self.inside_walls(i, self.support_region(i) + s.position_m[:2])
@@ -476,7 +478,7 @@ class _Solver:
         b = self.bodies[i]
         tree = subtree(self.bodies, i)
         region = None
-        if b.parent >= 0:
+        if b.parent >= 0 and b.support_surface >= 0:
             region = self.support_region(i) + self.bodies[b.parent].position_m[:2]
         start = b.position_m[:2].copy()
         angles = np.radians(np.arange(RELOCATE_ANGLES) * 360.0 / RELOCATE_ANGLES)
@@ -626,8 +628,17 @@ def _trim_overlaps(solver: _Solver) -> bool:
             new = make_body(asset, old.world_from_asset())
             new.initial_position_m = old.initial_position_m
             new.parent, new.support_surface, new.children, new.fixed = old.parent, old.support_surface, old.children, old.fixed
+            new.unsupported_reason = old.unsupported_reason
             bodies[k] = new
             changed = True
+    if changed:
+        # Cut pieces may have changed a supporter's top faces: each child rests on the face at
+        # its bottom's height again (the nearest one).
+        for b in bodies:
+            if b.parent >= 0:
+                faces = bodies[b.parent].surfaces
+                heights = np.array([bodies[b.parent].position_m[2] + f.height_rel_m for f in faces])
+                b.support_surface = int(np.argmin(np.abs(heights - b.bottom_m))) if len(faces) else -1
     return changed
 
 
@@ -746,7 +757,9 @@ def solve_layout_with_stats(
     for i, b in enumerate(bodies):
         solver.world.set_position(i, b.position_m)
     lap("support")
-    if _trim_overlaps(solver):
+    for _ in range(TRIM_PASSES):  # a cut changes the pieces: look again
+        if not _trim_overlaps(solver):
+            break
         solver = _Solver(bodies, walls, config, seed)
     lap("trim")
     iterations, converged = solver.run(int(config.max_iterations))

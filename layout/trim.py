@@ -8,9 +8,12 @@ cut apart by a plane: along the axis of least overlap (the face normals of both 
 separating-axis test), each piece keeps its side of the mid-plane minus half the clearance. A cut
 convex piece is still convex (the hull of its kept vertices and of the plane's crossings).
 
-Only overlaps up to :data:`MAX_TRIM_M` deep are trimmed (deeper ones are a perception error that
-the solver resolves by moving the lighter object); visual meshes, masses and inertias are left
-as they are.
+Overlaps up to :data:`MAX_TRIM_M` deep are cut at the mid-plane. A deeper overlap is cut only
+where the two objects' visual meshes stay on their own sides of the cut (the pieces bulged into
+each other, as hulls of voxel staircases do: the objects themselves do not overlap there); the
+cut then lies between the visuals. Otherwise it is a real overlap (a perception error) that the
+solver resolves by moving the lighter object. Visual meshes, masses and inertias are left as
+they are.
 """
 
 from __future__ import annotations
@@ -101,15 +104,50 @@ def _world(mesh: TriangleMesh, world_from_asset: np.ndarray) -> np.ndarray:
     return mesh.vertices_m @ world_from_asset[:3, :3].T + world_from_asset[:3, 3]
 
 
+def _inside(points: np.ndarray, hull_vertices: np.ndarray) -> np.ndarray:
+    """(N,) bool: which points lie inside the convex hull of ``hull_vertices``."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    if len(points) == 0:
+        return np.zeros(0, dtype=bool)
+    try:
+        eq = ConvexHull(hull_vertices).equations
+    except (QhullError, ValueError):
+        return np.zeros(len(points), dtype=bool)
+    return np.all(points @ eq[:, :3].T + eq[:, 3] <= 1e-9, axis=1)
+
+
+def _cut_offset(n: np.ndarray, c: float, depth: float, va_vis: np.ndarray, vb_vis: np.ndarray, ma: np.ndarray, mb: np.ndarray,
+                max_depth_m: float) -> float | None:
+    """Where to cut two overlapping pieces along ``n`` (A on the negative side): the mid-plane
+    ``c`` for a shallow overlap; for a deep one the offset nearest ``c`` that keeps A's visual
+    vertices inside B's piece on A's side and B's inside A's piece on B's side, give or take
+    ``max_depth_m`` (None when no such offset exists: the objects themselves overlap there)."""
+    if depth <= max_depth_m:
+        return c
+    a_in = va_vis[_inside(va_vis, mb)] @ n
+    b_in = vb_vis[_inside(vb_vis, ma)] @ n
+    # The visuals may end up to max_depth_m on the wrong side (their own shallow overlap: voxel
+    # surfaces are up to a voxel off), no more.
+    lo = float(a_in.max()) - max_depth_m if len(a_in) else -np.inf
+    hi = float(b_in.min()) + max_depth_m if len(b_in) else np.inf
+    if lo > hi:
+        return None
+    return float(np.clip(c, lo, hi))
+
+
 def trim_pair(
     a: ObjectAsset, ta: np.ndarray, b: ObjectAsset, tb: np.ndarray, max_depth_m: float = MAX_TRIM_M
 ) -> tuple[ObjectAsset, ObjectAsset, float, float]:
     """Cut apart every pair of overlapping collision pieces of assets ``a`` and ``b`` (placed at
-    the (4, 4) poses ``ta``, ``tb``) whose overlap is at most ``max_depth_m``. Returns the two
-    assets (unchanged objects when nothing was cut), the deepest overlap cut, and the deepest
-    overlap left (too deep to cut, or a part would lose its last piece)."""
+    the (4, 4) poses ``ta``, ``tb``): at the mid-plane when the overlap is at most
+    ``max_depth_m`` deep, between the two visuals when deeper (see the module docstring).
+    Returns the two assets (unchanged objects when nothing was cut), the deepest overlap cut, and
+    the deepest overlap left (the visuals overlap, or a part would lose its last piece)."""
     pieces_a = {p.name: list(p.collision) for p in a.parts}
     pieces_b = {p.name: list(p.collision) for p in b.parts}
+    vis_a = np.concatenate([_world(p.visual, ta) for p in a.parts])
+    vis_b = np.concatenate([_world(p.visual, tb) for p in b.parts])
     cut_depth, left_depth = 0.0, 0.0
     for pa_name in pieces_a:
         for pb_name in pieces_b:
@@ -124,7 +162,8 @@ def trim_pair(
                     n, c, depth = separating_plane(va, vb)
                     if depth <= 0.0:
                         continue
-                    if depth > max_depth_m:
+                    c = _cut_offset(n, c, depth, vis_a, vis_b, va, vb, max_depth_m)
+                    if c is None:
                         left_depth = max(left_depth, depth)
                         continue
                     # Plane in each asset's frame: n . (R v + t) = c  ->  (R^T n) . v = c - n . t

@@ -14,7 +14,7 @@ import numpy as np
 from scene_builder.config import LayoutConfig
 from scene_builder.errors import ExportError, InputError
 from scene_builder.frames import matrix_from_quat_wxyz, pose
-from scene_builder.model import AssetKind, Fidelity, ObjectVerdict, Perception, PhysicsVerdict, PlacedObject, Scene, Trajectory
+from scene_builder.model import AssetKind, Fidelity, LayoutResult, ObjectVerdict, Perception, PhysicsVerdict, PlacedObject, Scene, Trajectory
 
 TOPPLE_DEG = 30.0
 RECORD_HZ = 30.0
@@ -398,3 +398,55 @@ def settled_scene(scene: Scene, verdict: PhysicsVerdict) -> Scene:
 
 
 adopt_settled = settled_scene
+
+
+def unstable_objects(verdict: PhysicsVerdict, scene: Scene, config: LayoutConfig) -> dict[str, str]:
+    """The movable objects that did not stay at rest in the settle simulation, with one line
+    saying how they moved (object name -> reason)."""
+    out = {}
+    for v in verdict.objects:
+        if v.fixed:
+            continue
+        o = scene.object(v.name)
+        if o.asset.kind is AssetKind.DEFORMABLE:
+            if v.drift_m > max(config.stable_drift_m, DEFORMABLE_SAG_FRACTION * float(o.asset.size_m[2])):
+                out[v.name] = f"slid {v.drift_m * 100:.0f} cm in the {config.settle_s:g} s settle simulation"
+        elif v.drift_m > config.stable_drift_m or v.rotation_deg > config.stable_rotation_deg:
+            how = "toppled" if v.toppled else ("turned" if v.drift_m <= config.stable_drift_m else "moved")
+            out[v.name] = f"{how} ({v.drift_m * 100:.1f} cm, {v.rotation_deg:.0f} deg) in the {config.settle_s:g} s settle simulation"
+    return out
+
+
+def make_background(layout: LayoutResult, reasons: dict[str, str]) -> LayoutResult:
+    """``layout`` with the objects named in ``reasons`` made part of the static background where
+    they are (``layout.background.absorb``); what rested on them now rests on the background.
+    Their placements say why (the reason, then "kept where seen as static background")."""
+    import dataclasses
+
+    from layout.background import absorb
+
+    scene = layout.scene
+    bg = scene.room.background
+    if bg is None:
+        from scene_builder.model import Background, TriangleMesh
+
+        bg = Background(TriangleMesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)), np.zeros(0, dtype=bool))
+    kept = []
+    for o in scene.objects:
+        if o.name in reasons:
+            bg = absorb(bg, o.name, o.asset, o.world_from_asset)
+        else:
+            kept.append(dataclasses.replace(o, support="background") if o.support in reasons else o)
+    room = dataclasses.replace(scene.room, background=bg)
+    new_scene = Scene(camera=scene.camera, room=room, objects=tuple(kept))
+    support = tuple(
+        dataclasses.replace(e, parent="background") if e.parent in reasons else e for e in layout.support if e.child not in reasons
+    )
+    placements = tuple(
+        dataclasses.replace(p, became_background=True, displacement_m=0.0, yaw_change_deg=0.0, lowered_m=0.0, support="none",
+                            reason=f"{reasons[p.name]}: kept where seen as static background")
+        if p.name in reasons
+        else (dataclasses.replace(p, support="background") if p.support in reasons else p)
+        for p in layout.placements
+    )
+    return dataclasses.replace(layout, scene=new_scene, support=support, placements=placements)

@@ -55,6 +55,8 @@ class GenerationConfig:
 
     voxel_resolution: voxels along the longest side of an object's grid (PhysX-Omni uses 64).
     coacd_threshold: CoACD concavity threshold. max_collision_pieces: bound on convex pieces per part.
+    max_voxel_pieces: the same bound for parts completed from observed voxels (irregular scanned
+    shapes: with fewer, hulls bridge concavities where neighbours stand).
     cache_dir: where convex decompositions are cached (keyed by mesh hash); None disables it.
     backend: registry name or "auto". photo_textures: texture every asset with the photo,
     projected from the input camera.
@@ -63,6 +65,7 @@ class GenerationConfig:
     voxel_resolution: int = 48
     coacd_threshold: float = 0.08
     max_collision_pieces: int = 12
+    max_voxel_pieces: int = 32
     max_visual_faces: int = 4000
     cache_dir: Path | None = None
     backend: str = "auto"

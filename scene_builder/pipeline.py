@@ -2,9 +2,10 @@
 
     perceive        photo (+ depth) -> observation, gravity-aligned camera, room, objects
     generate_assets each object -> simulation-ready asset and its observed pose
-    solve_layout    assets -> penetration-free, supported placement in the world
+    solve_layout    assets -> penetration-free, supported placement in the world, as seen
     write_mjcf      scene -> OUT/scene.xml (MuJoCo)
-    verify_scene    MuJoCo: penetration at rest, settle drift, render-and-compare
+    verify_scene    MuJoCo: penetration over all pairs, settle drift, render-and-compare
+    make_background objects that do not stay at rest -> static background (then verify again)
     export_scene    scene -> OUT/scene.usda, scene.urdf, scene.glb
     record_scene    everything -> OUT/scene.rrd (rerun)
     write_report    OUT/scene.json, OUT/report.json
@@ -27,6 +28,11 @@ from typing import Callable, Iterator
 from scene_builder.config import BuildConfig, InputSpec
 from scene_builder.errors import InputError
 from scene_builder.model import ExportedFiles, Fidelity, LayoutResult, Perception, PhysicsVerdict, Scene
+
+
+#: Rounds of turning objects that do not stay at rest into static background (what rested on
+#: them may in turn move).
+UNSTABLE_ROUNDS = 2
 
 
 @dataclass(frozen=True)
@@ -103,7 +109,7 @@ def build(inputs: InputSpec, out_dir: Path, config: BuildConfig = BuildConfig(),
     # Stages are imported here, not at module level, so `scene-builder --help` stays instant.
     from exporters import export_scene, record_scene, write_mjcf
     from generation import generate_assets
-    from layout import settled_scene, solve_layout, verify_scene
+    from layout import make_background, settled_scene, solve_layout, unstable_objects, verify_scene
     from perception import perceive
     from scene_builder.report import build_report, write_report
 
@@ -124,6 +130,18 @@ def build(inputs: InputSpec, out_dir: Path, config: BuildConfig = BuildConfig(),
             mjcf_path = write_mjcf(scene, staging)
         with log.stage("physics check", lambda: _verdict_summary(verdict)):
             verdict, fidelity = verify_scene(mjcf_path, scene, config.layout, perceived)
+        for _ in range(UNSTABLE_ROUNDS):
+            # An object that does not stay at rest where it was seen (a thin frame toppling off
+            # a shelf) cannot stand there physically: it becomes static background, not moved.
+            unstable = unstable_objects(verdict, scene, config.layout)
+            if not unstable:
+                break
+            with log.stage("unstable to background", lambda: f"{len(unstable)} objects; {_verdict_summary(verdict)}"):
+                layout = make_background(layout, unstable)
+                scene = layout.scene
+                shutil.rmtree(staging / "meshes", ignore_errors=True)  # the old objects' meshes
+                mjcf_path = write_mjcf(scene, staging)
+                verdict, fidelity = verify_scene(mjcf_path, scene, config.layout, perceived)
         if config.layout.adopt_settled:
             with log.stage("adopt settled", lambda: _verdict_summary(verdict)):
                 scene = settled_scene(scene, verdict)
