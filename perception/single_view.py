@@ -41,7 +41,8 @@ real. The scale comes entirely from the camera-height prior.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Protocol
 
 import numpy as np
 
@@ -295,6 +296,60 @@ def estimate_geometry(
 
 
 # --------------------------------------------------------------------------------------------
+# Detected objects of known size (optional: a box detector's output)
+# --------------------------------------------------------------------------------------------
+
+#: Detector class names (COCO) of floor-standing things -> the vocabulary category whose typical
+#: size (``scene_builder.vocabulary``) they get.
+BOX_CATEGORIES = {
+    "bed": "bed", "couch": "sofa", "sofa": "sofa", "chair": "chair", "dining table": "table", "table": "table",
+    "desk": "desk", "toilet": "toilet", "refrigerator": "refrigerator", "oven": "oven", "potted plant": "plant",
+}
+#: Categories whose box top stands about above their front foot, so that their typical height can
+#: set the scale (a table's or bed's box top is its far edge or headboard, so they are left out).
+HEIGHT_CATEGORIES = frozenset({"chair", "sofa", "toilet", "refrigerator"})
+
+
+@dataclass(frozen=True, eq=False)
+class Detections:
+    """A box detector's answer for one image. boxes_xyxy_px: (K, 4) float (x0, y0, x1, y1) in the
+    pixels of the image it was given; labels: K class names; scores: (K,) float in [0, 1]."""
+
+    boxes_xyxy_px: np.ndarray
+    labels: tuple[str, ...]
+    scores: np.ndarray
+
+
+class BoxDetector(Protocol):
+    """Named boxes in a photo (a learned detector; optional for single-view depth)."""
+
+    def detect(self, rgb: np.ndarray) -> Detections:
+        """rgb: (H, W, 3) uint8."""
+        ...
+
+
+@dataclass(frozen=True)
+class PlacedBox:
+    """A detected object stood on the floor as a cuboid: category (vocabulary label), box_px
+    (u0, v0, u1, v1) in the analysis image, score, front_m (forward distance of its front face
+    from the camera, horizontal), depth_m and height_m (its category's typical size), and whether
+    the box runs out of the image at the bottom or the top."""
+
+    category: str
+    box_px: tuple[float, float, float, float]
+    score: float
+    front_m: float
+    depth_m: float
+    height_m: float
+    cut_bottom: bool
+    cut_top: bool
+
+    @property
+    def back_m(self) -> float:
+        return self.front_m + self.depth_m
+
+
+# --------------------------------------------------------------------------------------------
 # Close-ups of one object (product photos)
 # --------------------------------------------------------------------------------------------
 
@@ -357,6 +412,7 @@ class SingleViewDepth:
         max_depth_m: float = 10.0,
         default_fov_deg: float = 60.0,
         seed: int = 0,
+        detector: "BoxDetector | None" = None,
     ) -> None:
         if not (camera_height_m > 0 and ceiling_height_m > camera_height_m and max_depth_m > 0):
             raise InputError("single-view depth: need 0 < camera height < ceiling height and a positive max depth")
@@ -377,43 +433,63 @@ class SingleViewDepth:
         self.last_geometry: SingleViewGeometry | None = None
         self.last_closeup: CloseUp | None = None
         self.closeup_surroundings = False  # close-ups: depth only on the object (0 = unknown around it)
+        self.detector = detector
+        self.min_box_score = 0.25  # detections below are ignored
+        self.height_prior_weight = 1.0  # of the camera-height prior against each object (weight = its score)
+        self.last_objects: tuple[PlacedBox, ...] = ()
+        self.last_camera_height_m = camera_height_m
+        self.last_scale_note: str | None = None
 
     def estimate(self, rgb: np.ndarray, intrinsics: CameraIntrinsics | None = None) -> DepthEstimate:
         """rgb: (H, W, 3) uint8. Returns (H, W) float32 metric depth; focal_px is set when the
-        focal length was estimated from vanishing points."""
+        focal length was estimated from vanishing points.
+
+        Everything is analysed at most ``work_px`` on the long side (the result is a piecewise
+        planar room, so nothing is lost, and a 12 MP photo costs what a VGA one does); the depth
+        is resized back to the input's size. ``last_geometry`` is in the analysis image's pixels.
+        """
+        from PIL import Image
+
         arr = np.asarray(rgb)
         if arr.ndim != 3 or arr.shape[2] != 3 or arr.dtype != np.uint8:
             raise InputError(f"expected an (H, W, 3) uint8 RGB image, got {arr.shape} {arr.dtype}")
-        geo = estimate_geometry(arr, intrinsics, self.default_fov_deg, self.seed)
-        self.last_geometry = geo
         h, w = arr.shape[:2]
-        if intrinsics is not None:
-            fx, fy, cx, cy = intrinsics.fx_px, intrinsics.fy_px, intrinsics.cx_px, intrinsics.cy_px
-        else:
-            fx = fy = geo.focal_px
-            cx, cy = (w - 1) / 2.0, (h - 1) / 2.0
-        # Superpixels and the floor run at <= 640 px on the long side (the result is a
-        # piecewise-planar room, so nothing is lost), then the depth is resized back.
         scale = min(1.0, self.work_px / max(h, w))
+        small = arr
         if scale < 1.0:
-            from PIL import Image
-
             sw, sh = max(1, int(round(w * scale))), max(1, int(round(h * scale)))
             small = np.asarray(Image.fromarray(arr).resize((sw, sh), Image.Resampling.BILINEAR))
-            sx, sy = sw / w, sh / h
-            d_small = self._depth(small, geo.gravity_cam, fx * sx, fy * sy, (cx + 0.5) * sx - 0.5, (cy + 0.5) * sy - 0.5)
-            depth = np.asarray(Image.fromarray(d_small.astype(np.float32)).resize((w, h), Image.Resampling.BILINEAR))
+        sh, sw = small.shape[:2]
+        sx, sy = sw / w, sh / h
+        k_small = None if intrinsics is None else intrinsics.scaled(sw, sh)
+        geo = estimate_geometry(small, k_small, self.default_fov_deg, self.seed)
+        self.last_geometry = geo
+        if k_small is not None:
+            fx, fy, cx, cy = k_small.fx_px, k_small.fy_px, k_small.cx_px, k_small.cy_px
         else:
-            depth = self._depth(arr, geo.gravity_cam, fx, fy, cx, cy)
-        focal = geo.focal_px if geo.focal_source == "vanishing-points" else None
+            fx = fy = geo.focal_px
+            cx, cy = (sw - 1) / 2.0, (sh - 1) / 2.0
+        boxes = self.detector.detect(small) if self.detector is not None else None
         self.last_closeup = None
-        closeup = closeup_box_px(geo.segments, h, w)
+        closeup = closeup_box_px(geo.segments, sh, sw)
         if closeup is not None:
-            depth, self.last_closeup = self._closeup_depth(closeup, fx, fy, cx, cy, h, w)
+            d_small, cu = self._closeup_depth(closeup, fx, fy, cx, cy, sh, sw)
+            u0, v0, u1, v1 = cu.box_px
+            self.last_closeup = replace(cu, box_px=(u0 / sx, v0 / sy, u1 / sx, v1 / sy))  # input pixels
+        else:
+            d_small = self._depth(small, geo.gravity_cam, fx, fy, cx, cy, boxes)
+        if (sh, sw) != (h, w):
+            resample = Image.Resampling.NEAREST if closeup is not None else Image.Resampling.BILINEAR
+            depth = np.asarray(Image.fromarray(d_small.astype(np.float32)).resize((w, h), resample))
+        else:
+            depth = d_small
+        focal = geo.focal_px / sx if geo.focal_source == "vanishing-points" else None
         note = up = None
         if self.last_closeup is not None:
             # the close-up has no floor to fit; its gravity is the vertical vanishing point's
             note, up = self.last_closeup.note, -geo.gravity_cam
+        elif self.last_scale_note:
+            note = self.last_scale_note
         return DepthEstimate(depth_m=depth.astype(np.float32), focal_px=focal, note=note, up_cam=up)
 
     def _closeup_depth(self, box_px: tuple[float, float, float, float], fx: float, fy: float, cx: float, cy: float,
@@ -448,44 +524,58 @@ class SingleViewDepth:
 
     # -- internals ---------------------------------------------------------------------------
 
-    def _depth(self, rgb: np.ndarray, g: np.ndarray, fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
+    def _depth(self, rgb: np.ndarray, g: np.ndarray, fx: float, fy: float, cx: float, cy: float,
+               boxes: "Detections | None" = None) -> np.ndarray:
         """(H, W) float64 depth of a box room (floor, ceiling, back and side walls) with the
-        objects that stand on the floor as vertical billboards in front of it.
+        objects that stand on the floor in front of it.
 
         Occluders hide the floor contact of whatever stands behind them, so the floor-wall
         boundary of a column says where the *occluder* stands, not the wall: only superpixels
         that touch the boundary and are bounded above (they end below the top of the image and
         are narrower than half of it) stand at their contact; everything else above the floor
-        is the room, whose walls are placed at the farthest plausible floor contacts.
+        is the room, whose walls are placed at the farthest plausible floor contacts. Detected
+        floor-standing objects (``boxes``) become cuboids of their category's typical size
+        standing on the floor at their box's bottom edge, and their heights refine the camera
+        height (:meth:`_camera_height`).
         """
         h, w = rgb.shape[:2]
         u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
         rays = np.stack([(u - cx) / fx, (v - cy) / fy, np.ones_like(u)], axis=-1)  # (H, W, 3), z = 1
         down = rays @ g  # (H, W): height drop per unit depth along each ray
-        floor_z = np.where(down > 1e-6, self.camera_height_m / np.maximum(down, 1e-6), np.inf)
-        up = self.ceiling_height_m - self.camera_height_m
+        # Horizontal camera axes: forward f (optical axis with gravity removed), right r.
+        fwd = np.array([0.0, 0.0, 1.0]) - g[2] * g
+        fwd /= np.linalg.norm(fwd)
+        right = np.cross(g, fwd)  # x right in a level camera (g = +y, f = +z -> r = +x)
+        placed = self._place_boxes(boxes, rays, down, fwd, h, w)
+        cam_h = self._camera_height(placed, rays, down, g)
+        placed = [replace(b, front_m=b.front_m * cam_h) for b in placed]  # metres, now the height is known
+        floor_z = np.where(down > 1e-6, cam_h / np.maximum(down, 1e-6), np.inf)
+        up = max(self.ceiling_height_m - cam_h, 0.3)
         ceil_z = np.where(down < -1e-6, up / np.maximum(-down, 1e-6), np.inf)
 
+        in_box = np.zeros((h, w), dtype=np.bool_)
+        for b in placed:
+            u0, v0, u1, v1 = b.box_px
+            in_box[int(v0) : int(np.ceil(v1)) + 1, int(u0) : int(np.ceil(u1)) + 1] = True
         labels = self._superpixels(rgb)
-        floor = self._floor_mask(rgb, labels, down)
+        floor = self._floor_mask(rgb, labels, down, cam_h, exclude=in_box) & ~in_box
         boundary = self._boundary_rows(floor)  # (W,) float: top row of the bottom floor run
         cols = np.arange(w)
         b_rows = np.clip(boundary.astype(np.int64), 0, h - 1)
         has_floor = floor[np.clip(b_rows + 1, 0, h - 1), cols] | floor[b_rows, cols]
 
-        # Horizontal camera axes: forward f (optical axis with gravity removed), right r.
-        fwd = np.array([0.0, 0.0, 1.0]) - g[2] * g
-        fwd /= np.linalg.norm(fwd)
-        right = np.cross(g, fwd)  # x right in a level camera (g = +y, f = +z -> r = +x)
         contact = rays[b_rows, cols] * np.minimum(floor_z[b_rows, cols], self.max_floor_depth_m)[:, None]  # (W, 3)
         c_fwd, c_right = contact @ fwd, contact @ right
 
         # Back wall: a Manhattan plane facing the camera at the farthest plausible floor contact
-        # (upper quantile over the columns that see floor), within the room's expected extent.
+        # (upper quantile over the columns that see floor), within the room's expected extent,
+        # and behind every detected object.
         if has_floor.sum() >= max(3, w // 20):
             back_m = float(np.quantile(c_fwd[has_floor], self.back_wall_quantile))
         else:
             back_m = self.default_room_depth_m
+        if placed:
+            back_m = max(back_m, min(max(b.back_m for b in placed) + 0.2, self.max_room_depth_m))
         back_m = float(np.clip(back_m, self.min_room_depth_m, self.max_room_depth_m))
         # Side walls: just beyond the widest floor contact on each side, at least half a room
         # width out (a photo rarely shows the side walls' floor line).
@@ -511,7 +601,7 @@ class SingleViewDepth:
         foot[labels[above[has_floor], cols[has_floor]]] = True
         obj_lab = foot & (top_row > 0.02 * h) & ((umax - umin + 1) < self.max_object_width_frac * w)
         obj_lab[np.unique(labels[floor])] = False
-        obj = obj_lab[labels] & ~floor & (v < b_rows[None, :])
+        obj = obj_lab[labels] & ~floor & (v < b_rows[None, :]) & ~in_box
 
         # Vertical billboard through each column's contact: the point of each ray closest to the
         # vertical line through the contact (solve s * r = X_c + t * g in least squares).
@@ -520,12 +610,96 @@ class SingleViewDepth:
         rc = np.sum(rays * col_contact, axis=-1)
         gc = col_contact @ g
         s = (rc - down * gc) / np.maximum(rr - down * down, 1e-9)
-        obj_z = np.where(self.camera_height_m - s * down > self.ceiling_height_m, ceil_z, s)
+        obj_z = np.where(cam_h - s * down > self.ceiling_height_m, ceil_z, s)
         obj &= obj_z < room  # an object stands inside the room
 
         depth = np.where(floor, np.minimum(floor_z, room), np.where(obj, obj_z, room))
+        for b in placed:  # detected objects: where a ray meets the cuboid before the room
+            hit = self._cuboid_depth(b, rays, down, r_fwd, cam_h, h, w)
+            depth = np.where(np.isfinite(hit) & (hit < depth), hit, depth)
+        self.last_objects = tuple(placed)
         depth = np.where(np.isfinite(depth) & (depth > 0), depth, self.max_depth_m)
         return np.clip(depth, 0.1, self.max_depth_m)
+
+    def _place_boxes(self, boxes: "Detections | None", rays: np.ndarray, down: np.ndarray, fwd: np.ndarray,
+                     h: int, w: int) -> list["PlacedBox"]:
+        """The detections of floor-standing categories of known size (:data:`BOX_CATEGORIES`) whose
+        bottom edge lies below the horizon, as PlacedBox with their front and back distances for a
+        camera 1 m above the floor (scaled by the camera height later)."""
+        from scene_builder.vocabulary import category
+
+        out: list[PlacedBox] = []
+        if boxes is None:
+            return out
+        for (x0, y0, x1, y1), lab, score in zip(np.asarray(boxes.boxes_xyxy_px, dtype=np.float64), boxes.labels, boxes.scores):
+            name = BOX_CATEGORIES.get(str(lab))
+            if name is None or score < self.min_box_score:
+                continue
+            u0, u1 = float(np.clip(x0, 0, w - 1)), float(np.clip(x1, 0, w - 1))
+            v0, v1 = float(np.clip(y0, 0, h - 1)), float(np.clip(y1, 0, h - 1))
+            if (u1 - u0) * (v1 - v0) < 0.002 * h * w or (u1 - u0) > 0.95 * w:
+                continue
+            uc = int(round(0.5 * (u0 + u1)))
+            vb = int(round(v1))
+            if down[vb, uc] <= 0.02:  # its foot is at or above the horizon: not on this floor
+                continue
+            cut = vb >= h - 2  # runs out of the image at the bottom: its front is nearer still
+            front = float(rays[vb, uc] @ fwd / down[vb, uc]) * (0.9 if cut else 1.0)
+            depth_x, _, height_z = category(name).typical_size_m
+            out.append(PlacedBox(name, (u0, v0, u1, v1), float(score), front, depth_x, height_z, cut, v0 <= 1.0))
+        return out
+
+    def _camera_height(self, placed: list["PlacedBox"], rays: np.ndarray, down: np.ndarray, g: np.ndarray) -> float:
+        """Camera height above the floor: the prior, refined by the detected objects whose full
+        height is in view and whose top stands above their front foot (chairs, sofas, toilets,
+        refrigerators; single-view metrology: with the foot on the floor, the ratio of the
+        object's height to the camera's follows from the two image rows alone). A weighted
+        geometric mean of the prior (weight ``height_prior_weight``) and each estimate (weight
+        its detection score), clipped to 0.9-1.9 m. Records ``last_camera_height_m`` and
+        ``last_scale_note``."""
+        logs, weights, used = [np.log(self.camera_height_m)], [self.height_prior_weight], []
+        for b in placed:
+            if b.cut_bottom or b.cut_top or b.category not in HEIGHT_CATEGORIES:
+                continue
+            u0, v0, u1, v1 = b.box_px
+            uc, vb, vt = int(round(0.5 * (u0 + u1))), int(round(v1)), int(round(v0))
+            contact = rays[vb, uc] / down[vb, uc]  # the foot, for a camera 1 m above the floor
+            r = rays[vt, uc]
+            # the point of the top row's ray closest to the vertical through the foot
+            s = (r @ contact - (r @ g) * (contact @ g)) / max(r @ r - (r @ g) ** 2, 1e-9)
+            ratio = 1.0 - s * float(r @ g)  # object height / camera height
+            if not 0.15 < ratio < 2.5:
+                continue
+            logs.append(np.log(b.height_m / ratio))
+            weights.append(b.score)
+            used.append(b.category)
+        cam_h = float(np.clip(np.exp(np.average(logs, weights=weights)), 0.9, 1.9))
+        self.last_camera_height_m = cam_h
+        if used:
+            self.last_scale_note = (f"metric scale from a {self.camera_height_m:.1f} m camera-height prior and the typical height of "
+                                    f"{len(used)} detected object(s) ({', '.join(sorted(set(used)))}): camera {cam_h:.2f} m above the floor")
+        else:
+            self.last_scale_note = None
+        return cam_h
+
+    @staticmethod
+    def _cuboid_depth(b: "PlacedBox", rays: np.ndarray, down: np.ndarray, r_fwd: np.ndarray, cam_h: float,
+                      h: int, w: int) -> np.ndarray:
+        """(H, W) depth where the rays inside the object's box meet its cuboid (front face at
+        ``front_m``, ``depth_m`` deep, ``height_m`` high, standing on the floor), inf elsewhere."""
+        out = np.full((h, w), np.inf)
+        u0, v0, u1, v1 = b.box_px
+        sl = (slice(int(v0), int(np.ceil(v1)) + 1), slice(int(u0), int(np.ceil(u1)) + 1))
+        f, d = r_fwd[sl], down[sl]
+        front, back = b.front_m, b.back_m
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_front = front / f
+            hgt = cam_h - t_front * d
+            t_top = np.where(d > 1e-6, (cam_h - b.height_m) / d, np.inf)
+            on_top = (hgt > b.height_m) & (t_top * f >= front) & (t_top * f <= back)
+        z = np.where((hgt >= 0) & (hgt <= b.height_m), t_front, np.where(on_top, t_top, np.inf))
+        out[sl] = z
+        return out
 
     def _superpixels(self, rgb: np.ndarray) -> np.ndarray:
         """(H, W) int64 Felzenszwalb superpixel labels 0..K-1 (scale grows with image size)."""
@@ -535,9 +709,11 @@ class SingleViewDepth:
         scale = 200.0 * (h * w) / (640 * 480)
         return felzenszwalb(rgb, scale=scale, sigma=0.8, min_size=int(max(50, 0.0005 * h * w))).astype(np.int64)
 
-    def _floor_mask(self, rgb: np.ndarray, labels: np.ndarray, down: np.ndarray) -> np.ndarray:
+    def _floor_mask(self, rgb: np.ndarray, labels: np.ndarray, down: np.ndarray, cam_h: float,
+                    exclude: np.ndarray | None = None) -> np.ndarray:
         """(H, W) bool floor pixels: superpixels grown from the bottom rows, below the horizon,
-        close in colour (Lab) to the bottom-centre seed."""
+        close in colour (Lab) to the bottom-centre seed. exclude: (H, W) bool pixels kept out of
+        the seed (detected objects), unless they cover more than 90 % of the seed band."""
         from skimage.color import rgb2lab
 
         h, w = labels.shape
@@ -549,7 +725,10 @@ class SingleViewDepth:
         below = np.bincount(labels.ravel(), weights=(down > 0.02).ravel().astype(np.float64), minlength=n_lab)
         below_frac = below / np.maximum(counts, 1)
         # The seed band skips the outermost 3% (NYU-style frames have a constant border).
-        band = labels[int(h * 0.85) : int(h * 0.97), int(w * 0.05) : int(w * 0.95)]
+        rows, cols = slice(int(h * 0.85), int(h * 0.97)), slice(int(w * 0.05), int(w * 0.95))
+        band = labels[rows, cols]
+        if exclude is not None and (~exclude[rows, cols]).sum() >= 0.1 * band.size:
+            band = band[~exclude[rows, cols]]
         seed_labels, seed_counts = np.unique(band, return_counts=True)
         # Seed: the superpixels covering the bottom band, weighted by their share of it.
         seed_colour = (mean_lab[seed_labels] * seed_counts[:, None]).sum(0) / seed_counts.sum()
@@ -559,7 +738,7 @@ class SingleViewDepth:
         # read as floor kilometres away).
         top_row = np.full(n_lab, h, dtype=np.int64)
         np.minimum.at(top_row, labels.ravel(), np.repeat(np.arange(h), w))
-        far_floor = np.array([self.camera_height_m / max(float(down[r, :].max()), 1e-6) for r in range(h)])
+        far_floor = np.array([cam_h / max(float(down[r, :].max()), 1e-6) for r in range(h)])
         candidate = (below_frac > 0.95) & (dist < self.floor_colour_dist) & (far_floor[np.minimum(top_row, h - 1)] < self.max_floor_depth_m)
         # Grow through 4-neighbour adjacency from the bottom-touching candidates.
         adj_a = np.concatenate([labels[:, :-1].ravel(), labels[:-1, :].ravel()])
