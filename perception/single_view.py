@@ -1,42 +1,57 @@
-"""Metric depth from one photo with no learned weights (backend ``"single-view-geometry"``).
+"""Metric depth from one photo (backend ``"single-view-geometry"``): classical single-view room
+layout, with no learned weights, optionally helped by a box detector's objects of known size.
 
-The chain, each step a classical single-view-metrology result:
+The chain, each step a classical single-view-metrology result (all of it on the photo downscaled
+to at most ``work_px`` = 640 px on the long side, so that any photo costs what a VGA one does):
 
 1. **Line segments**: Canny edges and the probabilistic Hough transform (scikit-image).
-2. **Vanishing points** (RANSAC over segment-pair intersections, consistency measured as the angle
-   between a segment and the line from its midpoint to the candidate point, which works for finite
-   and infinite points alike): first the vertical one (among near-vertical segments), then the
-   strongest horizontal one.
-3. **Camera**: gravity in the camera frame is the direction of the vertical vanishing point, which
-   gives pitch and roll. Without known intrinsics, two orthogonal finite vanishing points v1, v2
-   give the focal length, f^2 = -(v1 - c).(v2 - c) (principal point c at the image centre).
-4. **Floor plane**: the camera-height prior puts the floor 1.3 m below the camera (chest to eye
-   level of a standing photographer; the NYU / SUN RGB-D capture rigs are within about 0.3 m).
-   Every pixel below the horizon then has a floor depth ``z = h / (g . K^-1 [u, v, 1])``.
+2. **Manhattan frame** (:func:`manhattan_frame`): gravity and two horizontal room directions found
+   jointly. Vertical hypotheses come from a RANSAC vertical vanishing point and from intersections
+   of pairs of near-vertical segments; each is completed by every horizontal direction pair at
+   2 deg steps and scored by the length of the segments pointing at one of the three vanishing
+   points; the winner is refined on a 0.5 deg pitch/roll grid. (Consistency is the angle between
+   a segment and the line from its midpoint to the point, for finite and infinite points alike.)
+   On the 12 real RGB-D samples gravity is 0.4-5 deg from the floor plane fitted to their depth.
+3. **Camera**: pitch and roll from gravity. Without known intrinsics the focal length is the field
+   of view (40-100 deg) whose best Manhattan frame scores highest, kept when it beats the default
+   60 deg by 3 % (a close-up, with no perspective, keeps the default).
+4. **Floor plane and scale**: the camera-height prior puts the floor 1.3 m below the camera (chest
+   to eye level of a standing photographer; the capture rigs of the real samples are at
+   1.1-1.7 m). Every pixel below the horizon then has a floor depth ``z = h / (g . K^-1 [u, v, 1])``.
+   With a detector, each detected chair, sofa, toilet or refrigerator whose whole height is in view
+   gives the camera height by single-view metrology (its foot on the floor, its typical height
+   from ``vocabulary``); the estimate is a score-weighted geometric mean with the prior.
 5. **Floor region**: Felzenszwalb superpixels connected to the bottom of the image, below the
-   horizon, and of floor-like colour are grown into the floor; per column, the top of the floor
-   run that starts at the bottom is the floor-wall / floor-object boundary (median-filtered across
-   columns).
-6. **Room box** (Manhattan prior): the back wall faces the camera at the 60th percentile of the
-   floor contacts' forward distances (2-5 m), the side walls stand just beyond the widest floor
-   contact on each side (at least 1.2 m out), the ceiling at ``ceiling_height_m``. Occluders hide
-   the floor contact of what stands behind them, so a column's boundary is *not* taken as its
-   wall's foot.
-7. **Objects**: superpixels right above the boundary that are bounded above (they end below the
-   image top and are narrower than 3/4 of it) stand as vertical billboards on their column's
-   floor contact, when that is in front of the room box.
-8. **Close-ups** (``closeup_box_px``): a head-on photo of one large object (>= 60 % of the line
-   length frame-aligned, >= 25 % horizontal, the lines' box covering >= 40 % of the image; true
-   on all 10 URDFormer cabinet photos, false on the room photos) has no floor to scale by: its
-   front face becomes a plane at the distance that gives it the typical width and height of the
-   floor-standing articulated category whose proportions match best (``vocabulary``), the
-   depth around it stays unknown, and the estimate carries the vertical vanishing point's up
-   direction and a note saying how the scale was set (into the depth BackendUse reason).
+   horizon, and of the floor's colour (seeded from the bottom rows, detected objects left out) are
+   grown into the floor; per column, the top of the floor run that starts at the bottom is the
+   floor-wall / floor-object boundary (median-filtered across columns).
+6. **Room box** (Manhattan prior, Hedau et al. 2009 / Lee et al. 2009 style, with the box's faces
+   placed from the floor's extent rather than from learned surface labels): the back wall faces
+   the camera at the 60th percentile of the floor contacts' forward distances (2-5 m) and behind
+   the largest detected object, the side walls stand just beyond the widest floor contact on each
+   side (at least 1.2 m out), the ceiling at ``ceiling_height_m``. Occluders hide the floor contact
+   of what stands behind them, so a column's boundary is *not* taken as its wall's foot.
+7. **Objects stand at their floor contact**: superpixels right above the boundary that are bounded
+   above (they end below the image top and are narrower than 3/4 of it) stand as vertical
+   billboards on their column's floor contact, when that is in front of the room box. Detected
+   floor-standing objects (beds, sofas, chairs, tables, ...: :data:`BOX_CATEGORIES`) become
+   cuboids of their category's typical size whose front face stands on the floor where the box's
+   bottom edge meets it (a bed's top face and headboard recede as the real ones do).
+8. **Close-ups** (``closeup_box_px``): a head-on photo of one large object (>= 30 segments,
+   >= 60 % of the line length frame-aligned, >= 25 % horizontal and >= 25 % vertical, the lines'
+   box covering >= 40 % of the image; true on all 10 URDFormer cabinet photos, false on all 19
+   room photos) has no floor to scale by: its front face becomes a plane at the distance that
+   gives it the typical width and height of the floor-standing articulated category whose
+   proportions match best (``vocabulary``), the depth around it stays unknown, and the estimate
+   carries the vertical vanishing point's up direction and a note saying how the scale was set
+   (into the depth BackendUse reason).
 
-Measured with ``python -m perception.bench_depth`` (12 real RGB-D samples, mean): AbsRel 0.263,
-delta1 0.518, median-scaled 0.253 / 0.586; a constant 2.5 m scores 0.277 / 0.481 / 0.282 / 0.559.
-It is coarse (a room made of floor, ceiling and vertical billboards) but metric, deterministic and
-real. The scale comes entirely from the camera-height prior.
+Measured with ``python -m scene_builder.bench_single_photo --skip-time`` (12 real RGB-D samples
+used as plain photos, their depth only for scoring; BENCHMARKS.md): median AbsRel 0.269 with no
+weights and 0.195 with the COCO detector (``centernet-mbv3-coco``), against 0.281 for a constant
+2.5 m (and 0.278 for this module before the Manhattan search and the objects of known size).
+It is coarse (a room made of floor, ceiling, walls, billboards and cuboids) but metric,
+deterministic and real.
 """
 
 from __future__ import annotations
