@@ -608,6 +608,7 @@ class SingleViewDepth:
             cx, cy = (sw - 1) / 2.0, (sh - 1) / 2.0
         boxes = self.detector.detect(small) if self.detector is not None else None
         self.last_closeup = None
+        self.last_objects, self.last_scale_note, self.last_camera_height_m = (), None, self.camera_height_m
         closeup = closeup_box_px(geo.segments, sh, sw)
         if closeup is not None:
             d_small, cu = self._closeup_depth(closeup, fx, fy, cx, cy, sh, sw)
@@ -625,8 +626,15 @@ class SingleViewDepth:
         if self.last_closeup is not None:
             # the close-up has no floor to fit; its gravity is the vertical vanishing point's
             note, up = self.last_closeup.note, -geo.gravity_cam
-        elif self.last_scale_note:
-            note = self.last_scale_note
+        else:
+            parts = []
+            if self.detector is not None:
+                cats = sorted({b.category for b in self.last_objects})
+                parts.append(f"{len(self.last_objects)} detected objects of known size stood on the floor as cuboids ({', '.join(cats)})"
+                             if cats else "the detector found no floor-standing object of known size")
+            if self.last_scale_note:
+                parts.append(self.last_scale_note)
+            note = "; ".join(parts) or None
         return DepthEstimate(depth_m=depth.astype(np.float32), focal_px=focal, note=note, up_cam=up)
 
     def _closeup_depth(self, box_px: tuple[float, float, float, float], fx: float, fy: float, cx: float, cy: float,

@@ -1,7 +1,7 @@
 """Single-photo benchmark: depth from one photo against sensor depth, and perception time per photo.
 
 Run: ``python -m scene_builder.bench_single_photo [--data ../shared/data] [--models-dir DIR]
-[--skip-depth] [--skip-time] [--large]``.
+[--skip-depth] [--skip-time] [--large]`` (the models dir defaults to ../shared/models when present).
 
 Depth: every real sample of ``DATA/real`` with depth aligned to its RGB is used as a plain photo
 (its depth only for scoring); intrinsics from its camera.json when it has one, as the CLI would.
@@ -85,9 +85,9 @@ def _suites(data: Path, large: bool, tmp: Path) -> dict[str, list[tuple[str, "ob
     return suites
 
 
-def time_rows(data: Path, models_dir: Path | None, large: bool = False) -> list[dict]:
+def time_rows(data: Path, models_dir: Path | None, large: bool = False, on_row=None) -> list[dict]:
     """One row per (suite, photo): perception seconds, objects found, depth backend (or the
-    error's class when perception refused the photo)."""
+    error's class when perception refused the photo). on_row: called with each row as it is done."""
     from perception.perceive import perceive
     from scene_builder.config import PerceptionConfig
     from scene_builder.errors import SceneBuilderError
@@ -97,20 +97,24 @@ def time_rows(data: Path, models_dir: Path | None, large: bool = False) -> list[
     with tempfile.TemporaryDirectory() as tmp:
         for suite, items in _suites(data, large, Path(tmp)).items():
             for name, spec in items:
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), time.process_time()
                 try:
                     p = perceive(spec, cfg)
                     n, depth = len(p.objects), next(b.backend for b in p.backends if b.task == "depth")
                 except SceneBuilderError as err:
                     n, depth = 0, type(err).__name__
-                rows.append(dict(suite=suite, photo=name, seconds=time.perf_counter() - t0, objects=n, depth=depth))
+                rows.append(dict(suite=suite, photo=name, seconds=time.perf_counter() - t0, cpu_s=time.process_time() - c0, objects=n, depth=depth))
+                if on_row is not None:
+                    on_row(rows[-1])
     return rows
 
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=Path(__file__).resolve().parents[1].parent / "shared" / "data")
-    parser.add_argument("--models-dir", type=Path, default=None)
+    shared_models = Path(__file__).resolve().parents[1].parent / "shared" / "models"
+    parser.add_argument("--models-dir", type=Path, default=shared_models if shared_models.is_dir() else None,
+                        help="where the COCO detector is looked up (default: ../shared/models when present)")
     parser.add_argument("--skip-depth", action="store_true")
     parser.add_argument("--skip-time", action="store_true")
     parser.add_argument("--large", action="store_true", help="also time a 12 MP upscaled photo (plain and RGB-D)")
@@ -130,16 +134,29 @@ def main(argv: list[str] | None = None) -> None:
             print(f"| **{stat}** ({len(samples)}) | " + " | ".join(cells) + " |")
         print()
     if not args.skip_time:
-        rows = time_rows(args.data, args.models_dir, args.large)
-        print("| suite | photos | median s | slowest | slowest s |")
+        import sys
+
+        def progress(r: dict) -> None:
+            print(f"{r['suite']:10s} {r['photo']:32s} {r['seconds']:6.1f} s wall {r['cpu_s']:6.1f} s CPU  {r['objects']:2d} objects  depth {r['depth']}", file=sys.stderr, flush=True)
+
+        rows = time_rows(args.data, args.models_dir, args.large, on_row=progress)
+        import os
+
+        print(f"Load average at the end: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores (wall seconds grow with it; "
+              "CPU seconds are the process's own, all threads).")
+        print()
+        print("| suite | photos | median s wall / CPU | slowest | its s wall / CPU |")
         print("|---|---|---|---|---|")
         for suite in dict.fromkeys(r["suite"] for r in rows):
             rs = [r for r in rows if r["suite"] == suite]
             worst = max(rs, key=lambda r: r["seconds"])
-            print(f"| {suite} | {len(rs)} | {np.median([r['seconds'] for r in rs]):.1f} | {worst['photo']} | {worst['seconds']:.1f} |")
+            print(f"| {suite} | {len(rs)} | {np.median([r['seconds'] for r in rs]):.1f} / {np.median([r['cpu_s'] for r in rs]):.1f} | "
+                  f"{worst['photo']} | {worst['seconds']:.1f} / {worst['cpu_s']:.1f} |")
         print()
+        print("| suite | photo | s wall | s CPU | objects | depth |")
+        print("|---|---|---|---|---|---|")
         for r in rows:
-            print(f"{r['suite']:10s} {r['photo']:32s} {r['seconds']:6.1f} s  {r['objects']:2d} objects  depth {r['depth']}")
+            print(f"| {r['suite']} | {r['photo']} | {r['seconds']:.1f} | {r['cpu_s']:.1f} | {r['objects']} | {r['depth']} |")
 
 
 if __name__ == "__main__":
