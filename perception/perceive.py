@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from perception.backends import PerceptionRegistries, build_registries
@@ -186,24 +188,31 @@ def _fill_silhouettes(kept: list[tuple[np.ndarray, np.ndarray]], labels: np.ndar
     return out
 
 
-def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perception:
+def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step: Callable[[str], None] | None = None) -> Perception:
     """Load and check the input, find gravity, floor, walls and the objects.
 
+    on_step: called with a short text as each step starts (the CLI shows it live).
     Raises InputError for unusable input and EmptySceneError when no object is found.
     """
+    step = on_step or (lambda _text: None)
+    step("loading the photo")
     loaded = load_input(inputs, config)
     registries = build_registries(config)
+    size = f"{loaded.rgb.shape[1]}x{loaded.rgb.shape[0]}" + (f" (from {loaded.rgb_full.shape[1]}x{loaded.rgb_full.shape[0]})" if loaded.rgb_full is not None else "")
+    step(f"depth, {size}" if loaded.depth_m is not None else f"estimating depth from the photo, {size}")
     depth_m, k, depth_source, backends, up_hint = _resolve_depth(loaded, registries, config)
     backends.insert(0, BackendUse("intrinsics", k.source, f"{k.fx_px:.1f} px focal length ({k.width_px}x{k.height_px})"))
-    observation = Observation(str(loaded.image_path), loaded.rgb, depth_m, k, depth_source)
+    observation = Observation(str(loaded.image_path), loaded.rgb, depth_m, k, depth_source, loaded.rgb_full)
 
     points_cam = k.unproject(depth_m)
     valid = (depth_m > 0) & (depth_m < config.max_depth_m)
+    step(f"gravity, floor and walls (depth: {depth_source})")
     frame = estimate_room(points_cam, valid, seed, up_hint=up_hint)
     backends.append(frame.gravity)
 
     segmenter, seg_use = registries.segmentation.resolve(config.segmentation_backend)
     backends.append(seg_use)
+    step(f"segmenting objects ({seg_use.backend})")
     geometric = bool(getattr(segmenter, "accepts_gravity", False))
     if geometric:
         masks: InstanceMasks = segmenter.segment(loaded.rgb, depth_m, k, frame.background, up_cam=frame.up_cam)
@@ -228,6 +237,7 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
 
     namer, name_use = registries.naming.resolve(config.naming_backend)
     backends.append(name_use)
+    step(f"naming {len(kept)} objects ({name_use.backend})")
 
     # Left to right (mask centroid column, then row) for a stable, readable numbering.
     def centroid(mp):

@@ -221,9 +221,12 @@ class BackendUse:
 class Observation:
     """What the camera saw, as loaded and checked.
 
-    rgb: (H, W, 3) uint8, EXIF orientation already applied.
+    rgb: (H, W, 3) uint8, EXIF orientation already applied, at the analysis resolution that the
+      depth, the intrinsics and every object mask share (a large photo is downscaled for analysis).
     depth_m: (H, W) float32 planar depth in metres, 0.0 where invalid. Either from a sensor
       (``depth_source == "sensor"``) or estimated (``depth_source`` names the backend).
+    rgb_full: (H', W', 3) uint8, the photo at its stored resolution when it was downscaled for
+      analysis (the same view: intrinsics scale by W' / W), for textures; None when rgb is it.
     """
 
     image_path: str
@@ -231,9 +234,21 @@ class Observation:
     depth_m: np.ndarray
     intrinsics: CameraIntrinsics
     depth_source: str
+    rgb_full: np.ndarray | None = None
+
+    @property
+    def photo_rgb(self) -> np.ndarray:
+        """(H', W', 3) uint8: the photo at full resolution (``rgb_full``, else ``rgb``)."""
+        return self.rgb if self.rgb_full is None else self.rgb_full
 
     def __post_init__(self) -> None:
         _freeze(self, "rgb", np.uint8, (None, None, 3))
+        if self.rgb_full is not None:
+            _freeze(self, "rgb_full", np.uint8, (None, None, 3))
+            fh, fw = self.rgb_full.shape[:2]
+            h, w = self.rgb.shape[:2]
+            if abs(fw / fh - w / h) > 0.02 * (w / h):
+                raise ValueError("Observation.rgb_full: aspect ratio differs from rgb's (not the same view)")
         _freeze(self, "depth_m", np.float32, self.rgb.shape[:2])
         if float(self.depth_m.min(initial=0.0)) < 0.0:
             raise ValueError("Observation.depth_m: negative depth")

@@ -73,6 +73,29 @@ class StageLog:
             self._console.print(f"[green]✓[/green] {name:<14} {seconds:7.2f} s{extra}")
 
     @contextmanager
+    def live(self, name: str, detail: Callable[[], str] | None = None) -> Iterator[Callable[[str], None]]:
+        """A stage with no known length (perception, the physics check): a spinner, the stage's
+        current step and the elapsed time stay on screen while it runs (rich, transient); yields a
+        step(text) callback that replaces the step shown. The stage's line is printed as usual."""
+        if self._console is None:
+            with self.stage(name, detail):
+                yield lambda _text: None
+            return
+        from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+        with self.stage(name, detail):
+            with Progress(
+                SpinnerColumn(),
+                TextColumn(f"{name:<14}"),
+                TimeElapsedColumn(),
+                TextColumn("[dim]{task.description}"),
+                console=self._console,
+                transient=True,
+            ) as bar:
+                task = bar.add_task("", total=None)
+                yield lambda text: bar.update(task, description=text)
+
+    @contextmanager
     def loop(self, name: str, total: int) -> Iterator[Callable[[str], None]]:
         """A stage that loops over objects: yields a tick(name) callback that advances a bar."""
         if self._console is None or total == 0:
@@ -119,8 +142,8 @@ def build(inputs: InputSpec, out_dir: Path, config: BuildConfig = BuildConfig(),
     total_start = time.perf_counter()
     staging = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-", dir=out_dir.parent))
     try:
-        with log.stage("perception", lambda: _perception_summary(perceived)):
-            perceived = perceive(inputs, config.perception, config.seed)
+        with log.live("perception", lambda: _perception_summary(perceived)) as step:
+            perceived = perceive(inputs, config.perception, config.seed, on_step=step)
         with log.loop("generation", len(perceived.objects)) as tick:
             generated = generate_assets(perceived, config.generation, config.seed, on_object=tick)
         with log.stage("layout", lambda: f"{len(layout.support)} support edges, {layout.iterations} iterations"):
@@ -128,7 +151,8 @@ def build(inputs: InputSpec, out_dir: Path, config: BuildConfig = BuildConfig(),
         scene = layout.scene
         with log.stage("export mjcf"):
             mjcf_path = write_mjcf(scene, staging)
-        with log.stage("physics check", lambda: _verdict_summary(verdict)):
+        with log.live("physics check", lambda: _verdict_summary(verdict)) as step:
+            step(f"{config.layout.settle_s:g} s of simulation, then render-and-compare")
             verdict, fidelity = verify_scene(mjcf_path, scene, config.layout, perceived)
         for _ in range(UNSTABLE_ROUNDS):
             # An object that does not stay at rest where it was seen (a thin frame toppling off
@@ -143,7 +167,8 @@ def build(inputs: InputSpec, out_dir: Path, config: BuildConfig = BuildConfig(),
                 mjcf_path = write_mjcf(scene, staging)
                 verdict, fidelity = verify_scene(mjcf_path, scene, config.layout, perceived)
         if config.layout.adopt_settled:
-            with log.stage("adopt settled", lambda: _verdict_summary(verdict)):
+            with log.live("adopt settled", lambda: _verdict_summary(verdict)) as step:
+                step("re-checking the settled poses")
                 scene = settled_scene(scene, verdict)
                 mjcf_path = write_mjcf(scene, staging)
                 verdict, fidelity = verify_scene(mjcf_path, scene, config.layout, perceived)

@@ -54,4 +54,7 @@ def test_stage_benchmarks_run_in_their_own_process_and_are_pasted_with_their_com
     assert md[0].startswith("## Fake table") and "\n| 10 | 0.2 |\n" in md[0] and "```" not in md[0]
     assert "- command: `python -c print('N = 10 took 0.2 s')`" in md[1] and "```\nN = 10 took 0.2 s\n```" in md[1]
     assert "**Failed (exit status 1)**" in md[2] and "```" in md[2]
-    assert {e.argv[-1] for e in report.EXTRAS} == {"scene_builder.bench.solver", "scene_builder.bench.assets", "scene_builder.bench.tokens", "scene_builder.bench.depth", "scene_builder.bench.perception"}
+    assert {e.argv[e.argv.index("-m") + 1] for e in report.EXTRAS} == {
+        "scene_builder.bench.solver", "scene_builder.bench.assets", "scene_builder.bench.tokens", "scene_builder.bench.depth",
+        "scene_builder.bench.perception", "scene_builder.bench.single_photo",
+    }

@@ -129,3 +129,59 @@ def test_beats_a_constant_depth_on_nyu_and_sun_samples():
     print("single-view", o.round(3), "constant 2.5 m", c.round(3))
     assert o[0] < c[0] and o[2] < c[2]  # AbsRel, metric and median-scaled
     assert o[1] > c[1] and o[3] > c[3]  # delta1, metric and median-scaled
+
+
+def test_camera_height_from_an_object_of_known_height():
+    """Single-view metrology: a chair (typical height 0.9 m) standing 4 m ahead of a level camera
+    1.6 m above the floor spans rows 327-440; alone it gives the camera height, and with the
+    1.3 m prior (equal weight) the geometric mean of the two."""
+    from perception.single_view import PlacedBox
+
+    f, w, h = 500.0, 640, 480
+    cx, cy = (w - 1) / 2, (h - 1) / 2
+    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    rays = np.stack([(u - cx) / f, (v - cy) / f, np.ones_like(u)], axis=-1)
+    g = np.array([0.0, 1.0, 0.0])
+    down = rays @ g
+    chair = PlacedBox("chair", (300.0, cy + f * 0.7 / 4.0, 340.0, cy + f * 1.6 / 4.0), 1.0, 4.0 / 1.6, 0.5, 0.9, False, False)
+    est = SingleViewDepth()
+    est.height_prior_weight = 1e-6
+    assert est._camera_height([chair], rays, down, g) == pytest.approx(1.6, rel=0.02)
+    assert "chair" in est.last_scale_note
+    est.height_prior_weight = 1.0
+    assert est._camera_height([chair], rays, down, g) == pytest.approx(np.sqrt(1.3 * 1.6), rel=0.02)
+    # an object cut off by the image edge says nothing about the height
+    cut = PlacedBox("chair", chair.box_px, 1.0, 2.5, 0.5, 0.9, True, False)
+    assert est._camera_height([cut], rays, down, g) == pytest.approx(1.3) and est.last_scale_note is None
+
+
+@pytest.mark.slow
+def test_detected_beds_stand_on_the_floor():
+    """With the COCO detector the beds of the SUN RGB-D bedroom photos become cuboids standing on
+    the floor at their box's bottom edge, and the photo's depth error drops (measured: AbsRel
+    0.289 -> 0.052 and 0.328 -> 0.132)."""
+    pytest.importorskip("onnxruntime")
+    from scene_builder.bench.depth import score_depth
+    from perception.learned.centernet import CenterNetDetector
+    from tests.conftest import MODELS
+
+    det = CenterNetDetector(require(MODELS / "centernet_mbv3_coco.onnx"))
+    for name in ("sunrgbd_imvotenet_000003", "sunrgbd_imvotenet_000004"):
+        rgb, gt, k, _ = _load(name)
+        plain = score_depth(SingleViewDepth().estimate(rgb, k).depth_m, gt).absrel
+        est = SingleViewDepth(detector=det)
+        depth = est.estimate(rgb, k).depth_m
+        with_boxes = score_depth(depth, gt).absrel
+        print(name, "AbsRel %.3f -> %.3f" % (plain, with_boxes))
+        assert with_boxes < 0.8 * plain and with_boxes < 0.2
+        beds = [b for b in est.last_objects if b.category == "bed"]
+        assert beds, [b.category for b in est.last_objects]
+        # the front face of the largest bed stands where its box's bottom edge meets the floor
+        bed = max(beds, key=lambda b: (b.box_px[2] - b.box_px[0]) * (b.box_px[3] - b.box_px[1]))
+        s = 640.0 / max(rgb.shape[:2])  # boxes are in the <= 640 px analysis image
+        u0, v0, u1, v1 = bed.box_px
+        uc, vb = int(round((u0 + u1) / 2 / s)), int(round(v1 / s)) - 2
+        geo = est.last_geometry
+        ray = np.array([(uc - k.cx_px) / k.fx_px, (vb - k.cy_px) / k.fy_px, 1.0])
+        floor_z = est.last_camera_height_m / float(ray @ geo.gravity_cam)
+        assert depth[vb, uc] == pytest.approx(floor_z, rel=0.1)

@@ -62,6 +62,15 @@ EXTRAS: tuple[Extra, ...] = (
         ("-m", "scene_builder.bench.depth"),
     ),
     Extra(
+        "Single photo: depth and perception time",
+        "The real RGB-D samples used as plain photos, their depth only for scoring (`scene_builder.bench.single_photo`): "
+        "AbsRel and delta1 of single-photo depth per sample with their median, against a constant 2.5 m, with no weights and "
+        "with the COCO detector's objects of known size; then `perceive` seconds per photo for every suite (plain photos, "
+        "real samples plain and RGB-D, a 12 MP upscaled photo plain and RGB-D) with the slowest named.",
+        ("-m", "scene_builder.bench.single_photo", "--large"),
+        markdown=True,
+    ),
+    Extra(
         "Segmentation and naming on procedural rooms",
         "The default (best available) segmentation and naming backends on rendered procedural rooms with ground-truth "
         "instances (`scene_builder.bench.perception`; `--segmentation NAME`, `--naming NAME` pick others): object recall "
