@@ -9,7 +9,8 @@ whatever hides them: the crop's pixels outside the object's mask are replaced by
 the nearest mask pixel, so hidden surfaces get a plausible fill from the object's own visible
 colours. The texture moves with the object (the coordinates are fixed at the observed pose).
 
-The crop keeps the photo's full resolution.
+The crop keeps the photo's full resolution (``Observation.photo_rgb``, the stored photo when
+perception analysed a downscaled copy).
 """
 
 from __future__ import annotations
@@ -53,9 +54,16 @@ def object_texture(rgb: np.ndarray, mask: np.ndarray, name: str) -> tuple[Textur
 def photo_textured(generated: GeneratedAsset, obj: PerceivedObject, observation: Observation, camera: Camera) -> GeneratedAsset:
     """``generated`` with every visual mesh of its asset textured with the photo (see the module
     docstring). Deformables keep their colours (a MuJoCo flex carries no texture)."""
-    texture, (r0, c0) = object_texture(observation.rgb, obj.mask, generated.asset.name)
+    photo = observation.photo_rgb  # full resolution when the analysis ran downscaled
+    mask = obj.mask
+    scale = photo.shape[1] / observation.rgb.shape[1]
+    if photo.shape[:2] != observation.rgb.shape[:2]:
+        import cv2
+
+        mask = cv2.resize(mask.astype(np.uint8), (photo.shape[1], photo.shape[0]), interpolation=cv2.INTER_NEAREST) > 0
+    texture, (r0, c0) = object_texture(photo, mask, generated.asset.name)
     th, tw = texture.image_rgb.shape[:2]
-    k = camera.intrinsics
+    k = camera.intrinsics.scaled(photo.shape[1], photo.shape[0]) if scale != 1.0 else camera.intrinsics
     camera_from_asset = np.linalg.inv(camera.world_from_camera) @ generated.world_from_asset
     parts = []
     for part in generated.asset.parts:

@@ -21,7 +21,8 @@ Method:
    the far corner's depth, so the far surface continues under the near one's edge: seen from
    the camera there is no crack, seen from elsewhere no sheet (``keep_stretched`` keeps the
    sheets).
-4. **Texture**: the photo at full resolution, with the pixels of movable objects inpainted from
+4. **Texture**: the photo at full resolution (``Observation.photo_rgb``), with the pixels of
+   movable objects inpainted from
    their surroundings (so that what an object hides looks plausible when it is moved); a node's
    ``uv`` is its image position (see :mod:`scene_builder.model` for the convention).
 
@@ -207,7 +208,14 @@ def observed_background(
     observed = (valid & ~node_obj).ravel()
     if not keep_stretched:
         verts, faces, uv, observed = _tuck_stretched(verts, faces, uv, observed, rays.reshape(-1, 3), filled.ravel(), camera)
-    texture = Texture("background", _inpaint_colour(rgb, obj_px))
+    photo = observation.photo_rgb  # full resolution when the analysis ran downscaled
+    if photo.shape[:2] != (h, w):
+        import cv2
+
+        obj_full = cv2.resize(obj_px.astype(np.uint8), (photo.shape[1], photo.shape[0]), interpolation=cv2.INTER_NEAREST) > 0
+    else:
+        obj_full = obj_px
+    texture = Texture("background", _inpaint_colour(photo, obj_full))
     surface = TriangleMesh(verts, faces, uv=np.clip(uv, 0.0, 1.0), texture=texture)
     return Background(surface=surface, surface_observed=observed)
 

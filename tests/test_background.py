@@ -89,3 +89,17 @@ def test_texture_is_the_photo_with_objects_inpainted(built):
     # No red board left in the texture: its pixels take the room's colours.
     inside = tex[tf.BOARD_ROWS, tf.BOARD_COLS].reshape(-1, 3).astype(int)
     assert np.mean(inside[:, 0] - inside[:, 1]) < 40
+
+
+def test_texture_keeps_the_full_resolution_photo():
+    """A photo analysed downscaled (Observation.rgb_full) is textured at its stored resolution."""
+    import dataclasses
+
+    obs, board = tf.observation()
+    full = np.repeat(np.repeat(obs.rgb, 3, axis=0), 3, axis=1)
+    big = dataclasses.replace(obs, rgb_full=full)
+    bg = observed_background(big, tf.camera(), (tf.wall(),), (board,))
+    tex = bg.surface.texture.image_rgb
+    assert tex.shape == full.shape
+    mask_full = np.repeat(np.repeat(board.mask, 3, axis=0), 3, axis=1)
+    np.testing.assert_array_equal(tex[~mask_full], full[~mask_full])
