@@ -69,9 +69,6 @@ _FAN = np.stack([np.cos(np.radians(np.arange(0.0, 180.0, 7.5))), np.sin(np.radia
 SUPPORT_INSET_M = 0.01
 # Rounds of cutting overlapping collision pieces apart (layout.trim) before the pushes.
 TRIM_PASSES = 3
-# A movable object reaching further than this into a wall is part of the wall (see
-# _unsupport_in_walls); shallower, it is pushed out.
-MAX_WALL_PUSH_M = 0.05
 SUPPORT_INSET_FRACTION = 0.2
 # A soft body sags over an edge until it slides off: its whole footprint is kept on the face
 # (shrunk by SUPPORT_INSET_M); when it does not fit, its footprint is scaled about its centre by
@@ -148,7 +145,7 @@ class _Solver:
         self.checked: dict[tuple[int, int], tuple[int, int]] = {}
         self.push_count: dict[tuple[int, int], int] = {}
         self._regions: dict[int, tuple[tuple[int, int], np.ndarray]] = {}
-        self.dropped: list[int] = []  # bodies moved from an object's top to the floor
+        self.stuck: list[int] = []  # bodies with no room left where seen: left there as background
 
     # -- state -------------------------------------------------------------------------------
     def boxes(self) -> tuple[np.ndarray, np.ndarray]:
@@ -285,8 +282,8 @@ class _Solver:
         def branch(path: list[int]) -> int:
             out = -1
             for k in path:
-                if k in common:
-                    break
+                if k in common or (self.bodies[k].fixed and out >= 0):
+                    break  # a fixed supporter (left where seen) carries nothing away
                 out = k
             return out
 
@@ -508,11 +505,11 @@ class _Solver:
                 moved = True
                 continue
             # No room left on the support (two cabinets on one cabinet's top): the lighter side
-            # that rests on an object comes down to the floor, to its nearest free spot there.
+            # that rests on an object cannot stand where it was seen; it stays there as static
+            # background (never dropped to the floor metres from its pixels).
             on_object = [m for m in ordered if self.bodies[m].parent >= 0]
             if on_object:
-                self.drop_to_floor(on_object[0])
-                self.relocate(on_object[0])
+                self.leave_where_seen(on_object[0], "no room on its support clear of its neighbours")
                 moved = True
         for k in self.wall_violators():
             if not len(self.wall_violators([k])):
@@ -525,8 +522,7 @@ class _Solver:
             if any(self.relocate(m) for m in chain if not self.bodies[m].fixed):
                 moved = True
             elif self.bodies[k].parent >= 0 and not self.bodies[k].fixed:
-                self.drop_to_floor(k)
-                self.relocate(k)
+                self.leave_where_seen(k, "its support's stable spots all reach into a wall")
                 moved = True
         return moved
 
@@ -538,18 +534,20 @@ class _Solver:
         which = list(range(len(self.bodies))) if which is None else which
         return [k for k in which if float(np.min(self.wall_gaps(k))) < -PENETRATION_TOL_M]
 
-    def drop_to_floor(self, i: int) -> None:
-        """Re-parent body i (with what rests on it) from its supporting object to the floor."""
+    def leave_where_seen(self, i: int, reason: str) -> None:
+        """Put body i (with what rests on it) back where it was seen and fix it there: it becomes
+        static background after the solve (``stuck``); the others make room around it."""
         b = self.bodies[i]
-        self.bodies[b.parent].children.remove(i)
-        b.parent, b.support_surface = FLOOR, -1
+        if b.parent >= 0:
+            self.bodies[b.parent].children.remove(i)
+        b.parent, b.support_surface, b.fixed, b.unsupported_reason = UNSUPPORTED, -1, True, reason
         self._regions.pop(i, None)
-        dz = -b.bottom_m
+        delta = b.initial_position_m - b.position_m
         for k in subtree(self.bodies, i):
-            self.bodies[k].position_m[2] += dz
+            self.bodies[k].position_m += delta
             self.world.set_position(k, self.bodies[k].position_m)
             self.version[k] += 1
-        self.dropped.append(i)
+        self.stuck.append(i)
 
     def penetrating_pair(self, i: int, j: int) -> bool:
         for a, b in self.piece_pairs(i, j, 0.0):
@@ -561,14 +559,21 @@ class _Solver:
     # -- measurement ---------------------------------------------------------------------------
     def max_penetration(self) -> float:
         """Deepest overlap (m) between pieces of distinct objects, and of objects with the floor
-        and the walls, measured exactly (GJK/EPA)."""
+        and the walls, measured exactly (GJK/EPA). Objects left where seen as static background
+        (``UNSUPPORTED``) join the room's static geometry: their overlaps with each other, the
+        floor and the walls are not overlaps between bodies."""
         worst = 0.0
         lo, hi = self.boxes()
+        static = [b.parent == UNSUPPORTED for b in self.bodies]
         for i, j in candidate_pairs(lo, hi, 0.0):
+            if static[i] and static[j]:
+                continue
             for a, b in self.piece_pairs(int(i), int(j), 0.0):
                 d, _ = self.world.distance(self.world.geom_ids[i][a], self.world.geom_ids[j][b], 0.0)
                 worst = max(worst, -d)
         for b in self.bodies:
+            if b.parent == UNSUPPORTED:
+                continue
             worst = max(worst, -b.bottom_m)
             if self.walls:
                 v = b.world_vertices()
@@ -595,15 +600,15 @@ def _unsupport_blocked_pads(bodies: list[Body]) -> None:
             b.unsupported_reason = "what is under it is another object's, with no face to rest on"
 
 
-def _unsupport_in_walls(solver: _Solver) -> None:
-    """A movable body reaching more than MAX_WALL_PUSH_M into a wall would have to move that far
+def _unsupport_in_walls(solver: _Solver, max_push_m: float) -> None:
+    """A movable body reaching more than ``max_push_m`` into a wall would have to move that far
     to stand in the room: it is wall (a door, a radiator, a picture seen as an object, or a wall
     plane fitted a little off), left where it was seen as static background."""
     for k, b in enumerate(solver.bodies):
         if not len(solver.wall_n) or b.fixed or b.parent == UNSUPPORTED:
             continue
         depth = -float(np.min(solver.wall_gaps(k)))
-        if depth > MAX_WALL_PUSH_M:
+        if depth > max_push_m:
             b.parent = UNSUPPORTED
             b.unsupported_reason = f"reaches {depth * 100:.0f} cm into a wall"
 
@@ -647,7 +652,7 @@ def _yaw_deg(rotation: np.ndarray) -> float:
 
 
 def _static_background(
-    background: Background | None, bodies: list[Body], absorbed: list[int], walls: tuple[Plane, ...]
+    background: Background | None, bodies: list[Body], absorbed: list[int], walls: tuple[Plane, ...], seen: dict[str, np.ndarray]
 ) -> Background | None:
     """The background with the objects in ``absorbed`` (body indices) made part of it, a pad under
     every body resting on it, and the collision boxes of its observed structure carved clear of
@@ -659,7 +664,7 @@ def _static_background(
         background = Background(TriangleMesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)), np.zeros(0, dtype=bool))
     for k in absorbed:
         b = bodies[k]
-        background = absorb(background, b.name, b.asset, b.world_from_asset())
+        background = absorb(background, b.name, b.asset, seen[b.name])  # exactly where it was seen
     lo, hi = column_boxes(observed_structure(background, walls))
     movers = [b for k, b in enumerate(bodies) if k not in set(absorbed)]
     if movers:
@@ -688,7 +693,7 @@ def _static_background(
     )
 
 
-def _placement(g: GeneratedAsset, b: Body, support: str, absorbed: bool, dropped: bool) -> Placement:
+def _placement(g: GeneratedAsset, b: Body, support: str, absorbed: bool) -> Placement:
     """How far ``b`` ended from where ``g`` was seen, and why."""
     seen = g.world_from_asset[:3, 3]
     delta = b.position_m - seen
@@ -697,14 +702,12 @@ def _placement(g: GeneratedAsset, b: Body, support: str, absorbed: bool, dropped
     reasons = []
     if absorbed:
         reasons.append(f"{b.unsupported_reason or 'nothing seen under it to rest on'}: kept where seen as static background")
-    if dropped:
-        reasons.append("no room left on its support: moved to the floor")
     if dist > 0.01 and not absorbed:
         if abs(delta[2]) > 0.01:
             reasons.append(f"{'lowered' if delta[2] < 0 else 'raised'} {abs(delta[2]) * 100:.0f} cm onto the {support if support in ('floor', 'background', 'wall') else support}")
         if float(np.linalg.norm(delta[:2])) > 0.01:
             reasons.append(f"pushed {float(np.linalg.norm(delta[:2])) * 100:.0f} cm sideways out of interpenetration")
-    if yaw > 1.0:
+    if yaw > 1.0 and not absorbed:
         reasons.append(f"turned {yaw:.0f} deg to align with the walls")
     return Placement(g.asset.name, 0.0 if absorbed else dist, 0.0 if absorbed else yaw, support, absorbed, "; ".join(reasons),
                      0.0 if absorbed else float(-delta[2]))
@@ -750,7 +753,7 @@ def solve_layout_with_stats(
     ground = BackgroundSupport(background, walls)
     edges, _ = build_support(bodies, walls, solver.vertical_clash, ground.height_under if background is not None else None)
     _unsupport_blocked_pads(bodies)
-    _unsupport_in_walls(solver)
+    _unsupport_in_walls(solver, config.max_wall_push_m)
     absorbed = [i for i, b in enumerate(bodies) if b.parent == UNSUPPORTED]
     for i in absorbed:
         bodies[i].fixed = True  # left where seen; the others make room around it
@@ -773,15 +776,11 @@ def solve_layout_with_stats(
     lap("solve")
     after = solver.max_penetration()
     lap("measure_after")
-    for i in solver.dropped:
-        b = bodies[i]
-        k = next(n for n, e in enumerate(edges) if e.child == b.name)
-        edges[k] = SupportEdge(child=b.name, parent="floor", contact_gap_m=float(b.initial_position_m[2] + b.lo_rel_m[2]))
+    absorbed = sorted(set(absorbed) | set(solver.stuck))
 
     by_name = {b.name: b for b in bodies}
     parent_of = {e.child: e.parent for e in edges}
     absorbed_names = {bodies[i].name for i in absorbed}
-    dropped_names = {bodies[i].name for i in solver.dropped}
     # What rests on an object that became background rests on the background.
     parent_of = {c: ("background" if p in absorbed_names else p) for c, p in parent_of.items()}
     edges = [dataclasses.replace(e, parent=parent_of[e.child]) for e in edges]
@@ -790,12 +789,13 @@ def solve_layout_with_stats(
         for g in generated
         if g.asset.name not in absorbed_names
     )
-    room = dataclasses.replace(perception.room, background=_static_background(background, bodies, absorbed, walls))
+    seen = {g.asset.name: g.world_from_asset for g in generated}
+    room = dataclasses.replace(perception.room, background=_static_background(background, bodies, absorbed, walls, seen))
     scene = Scene(camera=perception.camera, room=room, objects=placed)
     edge_order = {n: k for k, n in enumerate(names)}
     support = tuple(sorted((e for e in edges if e.child not in absorbed_names), key=lambda e: edge_order[e.child]))
     placements = tuple(
-        _placement(g, by_name[g.asset.name], parent_of[g.asset.name], g.asset.name in absorbed_names, g.asset.name in dropped_names)
+        _placement(g, by_name[g.asset.name], parent_of[g.asset.name], g.asset.name in absorbed_names)
         for g in generated
     )
     lap("background")

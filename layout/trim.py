@@ -104,6 +104,28 @@ def _world(mesh: TriangleMesh, world_from_asset: np.ndarray) -> np.ndarray:
     return mesh.vertices_m @ world_from_asset[:3, :3].T + world_from_asset[:3, 3]
 
 
+#: Points spread over each visual mesh to find where it lies inside the other object's pieces.
+VISUAL_SAMPLES = 3000
+
+
+def _surface_points(vertices: np.ndarray, faces: np.ndarray, count: int = VISUAL_SAMPLES) -> np.ndarray:
+    """The mesh's vertices plus ``count`` points spread over its faces by area (fixed seed:
+    deterministic), (V + count, 3): a face can cross a piece none of its corners is in."""
+    if len(faces) == 0:
+        return vertices
+    t = vertices[faces]
+    area = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+    if area.sum() <= 0:
+        return vertices
+    rng = np.random.default_rng(0)
+    f = rng.choice(len(t), size=count, p=area / area.sum())
+    r1, r2 = rng.random(count), rng.random(count)
+    flip = r1 + r2 > 1.0
+    r1[flip], r2[flip] = 1.0 - r1[flip], 1.0 - r2[flip]
+    pts = t[f, 0] + r1[:, None] * (t[f, 1] - t[f, 0]) + r2[:, None] * (t[f, 2] - t[f, 0])
+    return np.concatenate([vertices, pts])
+
+
 def _inside(points: np.ndarray, hull_vertices: np.ndarray) -> np.ndarray:
     """(N,) bool: which points lie inside the convex hull of ``hull_vertices``."""
     from scipy.spatial import ConvexHull, QhullError
@@ -122,15 +144,16 @@ def _cut_offset(n: np.ndarray, c: float, depth: float, va_vis: np.ndarray, vb_vi
     """Where to cut two overlapping pieces along ``n`` (A on the negative side): the mid-plane
     ``c`` for a shallow overlap; for a deep one the offset nearest ``c`` that keeps A's visual
     vertices inside B's piece on A's side and B's inside A's piece on B's side, give or take
-    ``max_depth_m`` (None when no such offset exists: the objects themselves overlap there)."""
+    half of ``max_depth_m`` (None when no such offset exists: the objects themselves overlap
+    there by more than ``max_depth_m``)."""
     if depth <= max_depth_m:
         return c
     a_in = va_vis[_inside(va_vis, mb)] @ n
     b_in = vb_vis[_inside(vb_vis, ma)] @ n
-    # The visuals may end up to max_depth_m on the wrong side (their own shallow overlap: voxel
-    # surfaces are up to a voxel off), no more.
-    lo = float(a_in.max()) - max_depth_m if len(a_in) else -np.inf
-    hi = float(b_in.min()) + max_depth_m if len(b_in) else np.inf
+    # The visuals themselves may overlap by up to max_depth_m (voxel surfaces are up to a voxel
+    # off), each reaching at most half of that past the cut; a deeper visual overlap is real.
+    lo = float(a_in.max()) - max_depth_m / 2 if len(a_in) else -np.inf
+    hi = float(b_in.min()) + max_depth_m / 2 if len(b_in) else np.inf
     if lo > hi:
         return None
     return float(np.clip(c, lo, hi))
@@ -146,8 +169,8 @@ def trim_pair(
     the deepest overlap left (the visuals overlap, or a part would lose its last piece)."""
     pieces_a = {p.name: list(p.collision) for p in a.parts}
     pieces_b = {p.name: list(p.collision) for p in b.parts}
-    vis_a = np.concatenate([_world(p.visual, ta) for p in a.parts])
-    vis_b = np.concatenate([_world(p.visual, tb) for p in b.parts])
+    vis_a = np.concatenate([_surface_points(_world(p.visual, ta), p.visual.faces) for p in a.parts])
+    vis_b = np.concatenate([_surface_points(_world(p.visual, tb), p.visual.faces) for p in b.parts])
     cut_depth, left_depth = 0.0, 0.0
     for pa_name in pieces_a:
         for pb_name in pieces_b:

@@ -13,6 +13,9 @@ from scene_builder.frames import pose, rot_z, transform_points, yaw_of
 from scene_builder.model import GeneratedAsset, Plane
 
 CFG = LayoutConfig()
+# The clutter is dropped at random, half-sizes deep into its walls: there the walls push
+# everything out (a perceived object that deep in a wall would be left as background).
+CLUTTER = LayoutConfig(max_wall_push_m=1.0)
 
 
 def _gen(asset, xyz, yaw=0.0, points=None):
@@ -58,7 +61,7 @@ def test_broad_phase_matches_brute_force():
 
 def test_clutter_has_no_interpenetration_and_everything_rests():
     perception, generated = clutter(40, seed=1)
-    result, stats = solve_layout_with_stats(perception, generated, CFG)
+    result, stats = solve_layout_with_stats(perception, generated, CLUTTER)
     assert stats.converged
     assert result.max_penetration_before_m > 0.1  # the clutter really overlapped
     assert result.max_penetration_after_m < 1e-4
@@ -93,7 +96,7 @@ def test_solved_clutter_is_stable_in_mujoco(tmp_path):
     from tests.test_layout_verify import write_fixture_mjcf
 
     perception, generated = clutter(12, seed=5, mix=(0.6, 0.0, 0.2, 0.2))
-    result = solve_layout_with_stats(perception, generated, CFG)[0]
+    result = solve_layout_with_stats(perception, generated, CLUTTER)[0]
     assert result.max_penetration_before_m > 0.05
     assert any(e.parent not in ("floor", "wall") for e in result.support)
     verdict, _ = verify_scene(write_fixture_mjcf(result.scene, tmp_path / "c.xml"), result.scene, CFG)
@@ -223,9 +226,14 @@ def test_fixed_furniture_does_not_move_and_walls_push_out():
     walls = (Plane(np.array([1.0, 0.0, 0.0]), 1.0, "wall", 100), Plane(np.array([0.0, -1.0, 0.0]), 2.0, "wall", 50))
     counter = box_asset("counter", (0.6, 1.5, 0.9), label="counter", fixed=True)
     box = box_asset("box", (0.4, 0.4, 0.4))
-    # The box overlaps the counter and sticks 10 cm through the x = -1 wall; a second box is
-    # through the y = 2 wall.
-    gen = (_gen(counter, (0.0, 0.0, 0.0)), _gen(box, (-0.9, 0.5, 0.0)), _gen(box_asset("other", (0.3, 0.3, 0.3)), (2.0, 1.9, 0.0)))
+    # The box overlaps the counter and sticks 4 cm through the x = -1 wall; a second box is 3 cm
+    # through the y = 2 wall; a third 15 cm through it (more than max_wall_push_m: it is wall).
+    gen = (
+        _gen(counter, (0.0, 0.0, 0.0)),
+        _gen(box, (-0.84, 0.5, 0.0)),
+        _gen(box_asset("other", (0.3, 0.3, 0.3)), (1.0, 1.88, 0.0)),
+        _gen(box_asset("in_wall", (0.3, 0.3, 0.3)), (-1.0, 1.9, 0.0)),
+    )
     result, stats = solve_layout_with_stats(empty_perception(walls), gen, CFG)
     assert stats.converged
     placed = {o.name: o for o in result.scene.objects}
@@ -234,21 +242,25 @@ def test_fixed_furniture_does_not_move_and_walls_push_out():
         v = np.concatenate(_world_pieces(placed[name]))
         for w in walls:
             assert w.signed_distance_m(v).min() >= CFG.clearance_m - 1e-4
+    deep = {p.name: p for p in result.placements}["in_wall"]
+    assert deep.became_background and "reaches 15 cm into a wall" in deep.reason and "in_wall" not in placed
     assert result.max_penetration_after_m < 1e-5
     assert _max_intersection_volume(result.scene) < 1e-9
 
 
 def test_determinism_and_input_order_independence():
     perception, generated = clutter(25, seed=7)
-    r1 = solve_layout_with_stats(perception, generated, CFG, seed=3)[0]
-    r2 = solve_layout_with_stats(perception, generated, CFG, seed=3)[0]
-    r3 = solve_layout_with_stats(perception, tuple(reversed(generated)), CFG, seed=3)[0]
+    r1 = solve_layout_with_stats(perception, generated, CLUTTER, seed=3)[0]
+    r2 = solve_layout_with_stats(perception, generated, CLUTTER, seed=3)[0]
+    r3 = solve_layout_with_stats(perception, tuple(reversed(generated)), CLUTTER, seed=3)[0]
     for a, b in zip(r1.scene.objects, r2.scene.objects):
         np.testing.assert_array_equal(a.world_from_asset, b.world_from_asset)
     p3 = {o.name: o.world_from_asset for o in r3.scene.objects}
     for a in r1.scene.objects:
         np.testing.assert_allclose(a.world_from_asset, p3[a.name], atol=1e-12)
-    assert [o.name for o in r3.scene.objects] == [g.asset.name for g in reversed(generated)]
+    left = {p.name for p in r1.placements if p.became_background}
+    assert left == {p.name for p in r3.placements if p.became_background}
+    assert [o.name for o in r3.scene.objects] == [g.asset.name for g in reversed(generated) if g.asset.name not in left]
     assert r1.support == r2.support
 
 
