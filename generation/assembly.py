@@ -152,6 +152,17 @@ def _material(spec: PartSpec) -> Material:
     return material(spec.material, spec.rgba)
 
 
+#: Snapping a voxel part's surface onto the observed depth may change its volume by this share.
+SNAP_MAX_VOLUME_CHANGE = 0.25
+
+
+def _inertia_ok(mesh) -> bool:
+    """Whether a closed mesh has positive volume and a positive-definite inertia tensor."""
+    if not float(mesh.volume) > 0.0:
+        return False
+    return bool(np.linalg.eigvalsh(np.asarray(mesh.moment_inertia, dtype=np.float64)).min() > 0.0)
+
+
 def _visual(spec: PartSpec, config: GenerationConfig):
     """(visual trimesh, convex solids as trimeshes or None)."""
     import trimesh
@@ -226,7 +237,13 @@ def assemble_asset_with_offset(
         if surface_snap is not None and isinstance(spec.geometry, VoxelGeometry):
             # The marching-cubes surface lies up to a voxel off the observed one: its vertices
             # seen by the camera go onto the observed depth (positions only: still watertight).
-            v.vertices = np.asarray(surface_snap(np.asarray(v.vertices, dtype=np.float64)))
+            # A snap that folds the surface (volume lost, inertia no longer positive definite:
+            # a thin part seen edge-on) is not kept.
+            before = np.array(v.vertices, dtype=np.float64)
+            volume = float(v.volume)
+            v.vertices = np.asarray(surface_snap(before))
+            if not (abs(float(v.volume) - volume) <= SNAP_MAX_VOLUME_CHANGE * abs(volume) and _inertia_ok(v)):
+                v.vertices = before
         visuals.append(v)
         solids.append(s)
     lo = np.min([v.bounds[0] for v in visuals], axis=0)

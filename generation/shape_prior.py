@@ -200,15 +200,20 @@ class ShapePriorGenerator:
             size = fit.size_m.copy()
 
         voxel_m = float(size.max()) / config.voxel_resolution
-        others_tree = cKDTree(_thin(np.concatenate(others), OWNERSHIP_SPACING_M)) if others else None
+        others_thin = [_thin(o, OWNERSHIP_SPACING_M) for o in others]
+        others_tree = cKDTree(np.concatenate(others_thin)) if others else None
+        # Each thinned point's owner's bottom (2nd height percentile): hidden space below an
+        # object's observed bottom is never that object's (it rests on what is there).
+        others_bottom = np.concatenate([np.full(len(t), np.percentile(o[:, 2], 2)) for t, o in zip(others_thin, others)]) if others else None
         own_tree = cKDTree(_thin(obj.points_world_m, OWNERSHIP_SPACING_M))
         walls = perception.room.walls
         columns = [_column(o) for o in others]
 
         def blocked(p_box: np.ndarray) -> np.ndarray:
             """Voxel centres this object may not fill: seen free space, behind a wall, or nearer
-            to another object's observed surface than to its own (hidden space between two
-            objects is shared out by distance, so their completions do not overlap)."""
+            to another object's observed surface than to its own and not below that object's
+            bottom (hidden space between two objects is shared out by distance, so their
+            completions do not overlap; a supporter keeps its top under what stands on it)."""
             p_world = transform_points(fit.world_from_box, p_box)
             out = space.free(p_world, extra_margin_m=0.5 * voxel_m)
             for wall in walls:
@@ -217,9 +222,11 @@ class ShapePriorGenerator:
                 d_own, _ = own_tree.query(p_world)
                 # Another object's surface matters only where it is nearer than this one's.
                 bound = float(d_own.max()) + voxel_m
-                d_other, _ = others_tree.query(p_world, distance_upper_bound=bound)
+                d_other, idx = others_tree.query(p_world, distance_upper_bound=bound)
                 near = np.isfinite(d_other)
-                out |= (d_other < OTHERS_CLEARANCE_M + 0.5 * voxel_m) | (d_other + 0.5 * voxel_m < d_own)
+                above = np.zeros(len(p_world), dtype=bool)
+                above[near] = p_world[near, 2] >= others_bottom[idx[near]] - 0.5 * voxel_m
+                out |= (d_other < OTHERS_CLEARANCE_M + 0.5 * voxel_m) | ((d_other + 0.5 * voxel_m < d_own) & above)
                 # Under something else's top, inside its plan outline: that object's body (a bed
                 # under a mat lying on it, whose top the mat hides), unless this object's own
                 # surface is right there.

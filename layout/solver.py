@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from layout.bodies import Body, make_body
+from layout.bodies import Body, make_body, rebuilt, with_legs
 from layout.geometry import clip_half_plane, clip_to_slab_xy, closest_point_in_polygon, horizontal_mtv, placements_inside
 from layout.narrowphase import ConvexWorld
 from layout.snapping import YawSnap, reference_yaw, snap_yaw
@@ -630,11 +630,7 @@ def _trim_overlaps(solver: _Solver) -> bool:
             old = bodies[k]
             if asset is old.asset:
                 continue
-            new = make_body(asset, old.world_from_asset())
-            new.initial_position_m = old.initial_position_m
-            new.parent, new.support_surface, new.children, new.fixed = old.parent, old.support_surface, old.children, old.fixed
-            new.unsupported_reason = old.unsupported_reason
-            bodies[k] = new
+            bodies[k] = rebuilt(old, asset)
             changed = True
     if changed:
         # Cut pieces may have changed a supporter's top faces: each child rests on the face at
@@ -702,6 +698,8 @@ def _placement(g: GeneratedAsset, b: Body, support: str, absorbed: bool) -> Plac
     reasons = []
     if absorbed:
         reasons.append(f"{b.unsupported_reason or 'nothing seen under it to rest on'}: kept where seen as static background")
+    if b.legs_m > 0.0 and not absorbed:
+        reasons.append(f"stands where seen on {b.legs_m * 100:.0f} cm collision legs down to the {support} (its feet were not seen)")
     if dist > 0.01 and not absorbed:
         if abs(delta[2]) > 0.01:
             reasons.append(f"{'lowered' if delta[2] < 0 else 'raised'} {abs(delta[2]) * 100:.0f} cm onto the {support if support in ('floor', 'background', 'wall') else support}")
@@ -751,7 +749,12 @@ def solve_layout_with_stats(
     lap("measure_before")
     background = perception.room.background
     ground = BackgroundSupport(background, walls)
-    edges, _ = build_support(bodies, walls, solver.vertical_clash, ground.height_under if background is not None else None)
+    edges, _ = build_support(bodies, walls, solver.vertical_clash, ground.height_under if background is not None else None, config.max_lower_m)
+    for i, b in enumerate(bodies):
+        if b.legs_m > 0.0 and b.parent != UNSUPPORTED:
+            bodies[i] = with_legs(b)
+    if any(b.legs_m > 0.0 for b in bodies):
+        solver = _Solver(bodies, walls, config, seed)
     _unsupport_blocked_pads(bodies)
     _unsupport_in_walls(solver, config.max_wall_push_m)
     absorbed = [i for i, b in enumerate(bodies) if b.parent == UNSUPPORTED]

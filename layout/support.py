@@ -96,6 +96,7 @@ def build_support(
     walls: tuple[Plane, ...],
     clash: Callable[[int, int, float], float] | None = None,
     background: Callable[[np.ndarray, float, float], float | None] | None = None,
+    max_lower_m: float = 0.02,
 ) -> tuple[list[SupportEdge], list[int]]:
     """Assign each body its support and set its height so that it rests exactly on it.
 
@@ -111,7 +112,8 @@ def build_support(
     background). Updates ``position_m[2]``, ``parent``, ``support_surface`` and ``children`` in
     place. Returns the edges (in processing order) and the processing order.
     Among the candidates the one nearest to the observed bottom wins (ties: an object's face,
-    then the background, then the floor).
+    then the background, then the floor). A rigid body more than ``max_lower_m`` above its
+    support keeps its height (``legs_m`` is set: it will stand on collision legs).
 
     ``clash(child, support, z)``: penetration depth (m) of the child placed at height z against the
     support. A face that the child, set on it, would sink into the rest of the support (the top
@@ -189,7 +191,12 @@ def build_support(
         else:
             h_obs = h
         edges.append(SupportEdge(child=b.name, parent=parent_name, contact_gap_m=float(bottom - h_obs)))
-        b.position_m[2] += h - bottom
+        if bottom - h > max_lower_m and b.parent not in (UNSUPPORTED, WALL) and b.asset.kind is not AssetKind.DEFORMABLE:
+            # Seen standing higher than its support: its feet were not seen (thin legs, a dark
+            # plinth cut from its mask). It stays where it was seen, on legs down to the support.
+            b.legs_m = float(bottom - h)
+        else:
+            b.position_m[2] += h - bottom
         placed_lo[len(placed)] = b.position_m[:2] + b.lo_rel_m[:2]
         placed_hi[len(placed)] = b.position_m[:2] + b.hi_rel_m[:2]
         placed.append(i)

@@ -79,13 +79,15 @@ class LayoutConfig:
     settle_s: simulated seconds of the stability check. adopt_settled: replace solved poses with
     the settled ones. max_wall_push_m: a movable object reaching further than this into a wall is
     wall (a door, a radiator, an off wall plane): it stays where seen as static background;
-    shallower, it is pushed out. clearance_m: gap kept between neighbouring objects by the solver.
+    shallower, it is pushed out. max_lower_m: an object seen at most this far above its support
+    is set down on it; higher, it keeps its height and stands on collision legs. clearance_m: gap kept between neighbouring objects by the solver.
     stable_drift_m, stable_rotation_deg: the per-object bounds for ``stable``.
     """
 
     settle_s: float = 3.0
     adopt_settled: bool = False
     max_wall_push_m: float = 0.05
+    max_lower_m: float = 0.02
     clearance_m: float = 0.002
     max_iterations: int = 200
     stable_drift_m: float = 0.01

@@ -13,9 +13,10 @@ from scene_builder.frames import pose, rot_z, transform_points, yaw_of
 from scene_builder.model import GeneratedAsset, Plane
 
 CFG = LayoutConfig()
-# The clutter is dropped at random, half-sizes deep into its walls: there the walls push
-# everything out (a perceived object that deep in a wall would be left as background).
-CLUTTER = LayoutConfig(max_wall_push_m=1.0)
+# The clutter is dropped at random, half-sizes deep into its walls and up to 5 cm above the floor:
+# there the walls push everything out and everything comes down (a perceived object that deep
+# in a wall would be left as background, one seen 5 cm up would stand on legs).
+CLUTTER = LayoutConfig(max_wall_push_m=1.0, max_lower_m=0.1)
 
 
 def _gen(asset, xyz, yaw=0.0, points=None):
@@ -291,13 +292,13 @@ def test_unsupported_object_is_never_welded_in_mid_air_nor_dropped():
     """A picture seen 1.5 m up against a wall, a box floating in the room and one 40 cm up have
     nothing under them within reach: none is welded to the wall or dropped metres from its
     pixels; each stays where it was seen as static background, and the placement says so. A box
-    seen 8 cm above the floor comes down onto it (the move is reported)."""
+    seen 1.5 cm above the floor comes down onto it (the move is reported)."""
     walls = (Plane(np.array([1.0, 0.0, 0.0]), 1.0, "wall", 100),)  # x = -1, room at x > -1
     gen = (
         _gen(box_asset("picture", (0.04, 0.6, 0.4)), (-0.95, 0.0, 1.5)),
         _gen(box_asset("floating", (0.04, 0.6, 0.4)), (0.5, 0.0, 1.5)),
         _gen(box_asset("low", (0.04, 0.6, 0.4)), (-0.95, 2.0, 0.4)),
-        _gen(box_asset("near_floor", (0.3, 0.3, 0.3)), (0.5, 2.0, 0.08)),
+        _gen(box_asset("near_floor", (0.3, 0.3, 0.3)), (0.5, 2.0, 0.015)),
     )
     result, _ = solve_layout_with_stats(empty_perception(walls), gen, CFG)
     placements = {p.name: p for p in result.placements}
@@ -313,5 +314,27 @@ def test_unsupported_object_is_never_welded_in_mid_air_nor_dropped():
         k = bg.static_names.index(g.asset.name)
         np.testing.assert_allclose(bg.static_meshes[k].vertices_m, transform_points(g.world_from_asset, g.asset.parts[0].visual.vertices_m))
     near = placements["near_floor"]
-    assert near.support == "floor" and near.lowered_m == pytest.approx(0.08) and "lowered 8 cm onto the floor" in near.reason
+    assert near.support == "floor" and near.lowered_m == pytest.approx(0.015) and "lowered 2 cm onto the floor" in near.reason
     assert _bottom(result.scene.objects[0]) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_object_seen_above_its_support_stands_on_legs(tmp_path):
+    """A nightstand seen 8 cm above the floor (its dark plinth cut from its mask) keeps its
+    height: it stands on four collision legs down to the floor, nothing visual is added, and it
+    is at rest in MuJoCo."""
+    from exporters import write_mjcf
+    from layout import verify_scene
+
+    stand = box_asset("stand", (0.4, 0.5, 0.5))
+    gen = (_gen(stand, (0.0, 0.0, 0.08)),)
+    result, _ = solve_layout_with_stats(empty_perception(), gen, CFG)
+    placed = result.scene.object("stand")
+    np.testing.assert_array_equal(placed.world_from_asset, gen[0].world_from_asset)
+    p = result.placements[0]
+    assert p.support == "floor" and p.displacement_m == 0.0 and "8 cm collision legs" in p.reason
+    root = placed.asset.root
+    assert len(root.collision) == 1 + 4 and root.visual is stand.root.visual and placed.asset.mass_kg == stand.mass_kg
+    assert _bottom(placed) == pytest.approx(0.0, abs=1e-9)
+    verdict, _ = verify_scene(write_mjcf(result.scene, tmp_path), result.scene, CFG)
+    assert verdict.max_penetration_m < 1e-3 and verdict.stable and verdict.settle_max_drift_m < 2e-3
+
