@@ -129,6 +129,7 @@ class _Solver:
         self.rng = np.random.default_rng(seed)
         self.walls = walls
         self.clearance = float(config.clearance_m)
+        self.max_push = float(config.max_push_m)
         self.world = ConvexWorld([b.pieces for b in bodies])
         # Walls are vertical planes: an object's distance to a wall is the minimum over its
         # (fixed-rotation) vertices of n . v, precomputed once, plus n . position.
@@ -313,6 +314,14 @@ class _Solver:
         if amount <= 0.0:
             self.checked[(i, j)] = (self.version[i], self.version[j])
             return False
+        if amount > self.max_push:
+            # Clearing this overlap sideways would move what was seen too far (a table under a
+            # blanket seen on it): the lighter movable side cannot stand where it was seen.
+            sides = [m for m, sh in ((mover_i, share_i), (mover_j, share_j)) if sh > 0.0]
+            k = min(sides, key=lambda m: (self.tree_mass(m), self.bodies[m].name))
+            other = bodies[j if k == mover_i else i].name
+            self.leave_where_seen(k, f"would have to move {amount * 100:.0f} cm sideways to clear {other}")
+            return True
         self.push_count[(i, j)] = pushes + 1
         if pushes >= ESCALATE_AFTER_PUSHES:
             # Over-relax inside jams: each repeated push leaves a little more room (up to
@@ -759,6 +768,10 @@ def solve_layout_with_stats(
     _unsupport_in_walls(solver, config.max_wall_push_m)
     absorbed = [i for i, b in enumerate(bodies) if b.parent == UNSUPPORTED]
     for i in absorbed:
+        if bodies[i].asset.kind is AssetKind.DEFORMABLE:
+            # Static now: no flex box, its own collision pieces (which layout.trim can cut).
+            bodies[i] = rebuilt(bodies[i], dataclasses.replace(bodies[i].asset, kind=AssetKind.RIGID, deformable=None))
+            solver = _Solver(bodies, walls, config, seed)
         bodies[i].fixed = True  # left where seen; the others make room around it
     for i, b in enumerate(bodies):
         solver.world.set_position(i, b.position_m)

@@ -80,7 +80,9 @@ class LayoutConfig:
     the settled ones. max_wall_push_m: a movable object reaching further than this into a wall is
     wall (a door, a radiator, an off wall plane): it stays where seen as static background;
     shallower, it is pushed out. max_lower_m: an object seen at most this far above its support
-    is set down on it; higher, it keeps its height and stands on collision legs. clearance_m: gap kept between neighbouring objects by the solver.
+    is set down on it; higher, it keeps its height and stands on collision legs. max_push_m: an
+    overlap that a sideways push of more than this would clear leaves the lighter object where
+    it was seen, as static background. clearance_m: gap kept between neighbouring objects by the solver.
     stable_drift_m, stable_rotation_deg: the per-object bounds for ``stable``.
     """
 
@@ -88,6 +90,7 @@ class LayoutConfig:
     adopt_settled: bool = False
     max_wall_push_m: float = 0.05
     max_lower_m: float = 0.02
+    max_push_m: float = 0.25
     clearance_m: float = 0.002
     max_iterations: int = 200
     stable_drift_m: float = 0.01

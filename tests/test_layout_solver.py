@@ -7,16 +7,13 @@ import numpy as np
 import pytest
 
 from layout.solver import candidate_pairs, solve_layout_with_stats
-from scene_builder.bench.clutter import asset_from_pieces, box_asset, box_mesh, clutter, empty_perception, surface_points, table_asset
+from scene_builder.bench.clutter import asset_from_pieces, clutter_layout_config, box_asset, box_mesh, clutter, empty_perception, surface_points, table_asset
 from scene_builder.config import LayoutConfig
 from scene_builder.frames import pose, rot_z, transform_points, yaw_of
 from scene_builder.model import GeneratedAsset, Plane
 
 CFG = LayoutConfig()
-# The clutter is dropped at random, half-sizes deep into its walls and up to 5 cm above the floor:
-# there the walls push everything out and everything comes down (a perceived object that deep
-# in a wall would be left as background, one seen 5 cm up would stand on legs).
-CLUTTER = LayoutConfig(max_wall_push_m=1.0, max_lower_m=0.1)
+CLUTTER = clutter_layout_config()
 
 
 def _gen(asset, xyz, yaw=0.0, points=None):

@@ -213,9 +213,10 @@ def test_long_pillow_on_a_short_one_finds_another_support(tmp_path):
 
 
 def test_two_cabinets_on_one_small_top_one_comes_down():
-    """open3d NYU: two heavy cabinets observed on one small cabinet's top that holds only one.
-    One rests on the top; the other cannot stand where it was seen and stays there as static
-    background (it is not dropped to the floor); nothing movable overlaps."""
+    """open3d NYU: two heavy cabinets observed on one small cabinet's top that holds only one, and
+    half a metre into each other. What cannot stand where it was seen stays there as static
+    background, exactly where seen (nothing is dropped to the floor or pushed half a metre);
+    nothing movable overlaps."""
     from tests.test_layout_solver import _max_intersection_volume
 
     base = box_asset("base", (0.54, 1.2, 0.7), label="cabinet")
@@ -228,12 +229,13 @@ def test_two_cabinets_on_one_small_top_one_comes_down():
     placement = {p.name: p for p in result.placements}
     kept = [n for n in ("cab_a", "cab_b") if not placement[n].became_background]
     left = [n for n in ("cab_a", "cab_b") if placement[n].became_background]
-    assert len(kept) == 1 and len(left) == 1 and placement[kept[0]].support == "base"
-    assert "no room on its support" in placement[left[0]].reason
-    k = result.scene.room.background.static_names.index(left[0])
-    seen = {g.asset.name: g for g in gen}[left[0]]
-    np.testing.assert_allclose(result.scene.room.background.static_meshes[k].vertices_m,
-                               transform_points(seen.world_from_asset, seen.asset.parts[0].visual.vertices_m))
+    assert left and all(placement[n].support == "base" and placement[n].displacement_m < 0.25 for n in kept)
+    for n in left:
+        assert "kept where seen as static background" in placement[n].reason
+        k = result.scene.room.background.static_names.index(n)
+        seen = {g.asset.name: g for g in gen}[n]
+        np.testing.assert_allclose(result.scene.room.background.static_meshes[k].vertices_m,
+                                   transform_points(seen.world_from_asset, seen.asset.parts[0].visual.vertices_m))
 
 
 def test_rigid_object_on_a_pillow_rests_on_the_floor_instead(tmp_path):

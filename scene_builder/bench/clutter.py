@@ -133,6 +133,16 @@ def empty_perception(walls: tuple[Plane, ...] = (), width_px: int = 64, height_p
     return Perception(observation=obs, camera=Camera(k, world_from_camera), room=Room(walls), objects=())
 
 
+def clutter_layout_config():
+    """The layout settings for :func:`clutter`: it drops objects at random, half-sizes deep into
+    its walls, up to 5 cm above the floor and tens of centimetres into each other, to exercise the
+    solver's pushes; with the defaults (meant for perceived objects) much of it would be left where
+    it was dropped as background or stand on legs."""
+    from scene_builder.config import LayoutConfig
+
+    return LayoutConfig(max_wall_push_m=1.0, max_lower_m=0.1, max_push_m=10.0)
+
+
 def clutter(
     n: int, seed: int = 0, points_per_object: int = 60, mix: tuple[float, float, float, float] = (0.6, 0.2, 0.1, 0.1)
 ) -> tuple[Perception, tuple[GeneratedAsset, ...]]:
