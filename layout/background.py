@@ -13,6 +13,10 @@ that is not itself an object, and the background's collision geometry.
   they leave a vertical gap, each run a box whose top is the run's highest point (so boxes follow
   the observed heights, not a voxel grid), merged along x where neighbours agree; then carved
   clear of every object (:func:`carve`).
+* :class:`HiddenBelow` answers "was the space right under this object seen?": an object with
+  nothing seen under it whose underside space the camera could not see (hidden behind the
+  object itself or a nearer one) stands on what lies below; one the camera saw through under it
+  (a picture on a wall, a lamp hung from the ceiling) hangs, and becomes background.
 * :func:`absorb`: objects that cannot stand where they were seen join the background.
 """
 
@@ -23,11 +27,12 @@ import dataclasses
 import numpy as np
 
 from scene_builder.frames import transform_points
-from scene_builder.model import Background, ObjectAsset, Plane, TriangleMesh
+from scene_builder.model import Background, Camera, ObjectAsset, Observation, Plane, TriangleMesh
 
 __all__ = [
     "BackgroundSupport",
     "CELL_M",
+    "HiddenBelow",
     "PAD_THICKNESS_M",
     "SUPPORT_REACH_M",
     "absorb",
@@ -153,10 +158,73 @@ class BackgroundSupport:
         return float(np.median(t[near]))
 
 
-def support_pad(footprint_rel_m: np.ndarray, rotation: np.ndarray, position_m: np.ndarray, height_m: float) -> tuple[np.ndarray, np.ndarray, float]:
+#: HiddenBelow: the slab under an object that is tested (from its bottom down this far, not into
+#: the floor), the least margin in front of the observed depth for a sample to count as seen
+#: through, and the share of seen samples above which the space counts as seen.
+UNDER_SLAB_M = 0.40
+SEEN_MARGIN_M = 0.05
+SEEN_FREE_SHARE = 0.25
+
+
+class HiddenBelow:
+    """Whether the space right under an object was hidden from the camera.
+
+    Samples points on a grid inside the object's footprint, in the slab from UNDER_SLAB_M below
+    its bottom up to 3 cm below it, and projects them into the photo: a sample whose pixel saw
+    something farther than the sample by more than SEEN_MARGIN_M (plus the sensor's noise) was
+    seen through, so that space is empty. Written here rather than shared with
+    ``generation.visibility`` because stage packages do not import each other.
+    """
+
+    def __init__(self, observation: Observation, camera: Camera) -> None:
+        self.depth = np.asarray(observation.depth_m, dtype=np.float64)
+        k = observation.intrinsics
+        self.k = (k.fx_px, k.fy_px, k.cx_px, k.cy_px)
+        self.camera_from_world = np.linalg.inv(camera.world_from_camera)
+
+    def __call__(self, footprint_world_m: np.ndarray, bottom_m: float) -> bool:
+        """True when fewer than SEEN_FREE_SHARE of the samples under the (K, 2) footprint with an
+        observed depth were seen through (the space under it is hidden)."""
+        import shapely
+
+        foot = np.asarray(footprint_world_m, dtype=np.float64)
+        if len(foot) < 3 or bottom_m <= 0.05:
+            return True
+        poly = shapely.Polygon(foot)
+        lo, hi = foot.min(axis=0), foot.max(axis=0)
+        gx, gy = np.meshgrid(np.linspace(lo[0], hi[0], 7)[1:-1], np.linspace(lo[1], hi[1], 7)[1:-1])
+        xy = np.stack([gx.ravel(), gy.ravel()], axis=1)
+        xy = xy[shapely.contains_xy(poly, xy[:, 0], xy[:, 1])]
+        if len(xy) == 0:
+            xy = foot.mean(axis=0, keepdims=True)
+        zs = np.linspace(max(0.02, bottom_m - UNDER_SLAB_M), bottom_m - 0.03, 6)
+        pts = np.concatenate([np.column_stack([xy, np.full(len(xy), z)]) for z in zs])
+        cam = transform_points(self.camera_from_world, pts)
+        fx, fy, cx, cy = self.k
+        ahead = cam[:, 2] > 0.05
+        u = np.full(len(cam), -1, dtype=np.int64)
+        v = np.full(len(cam), -1, dtype=np.int64)
+        u[ahead] = np.floor(fx * cam[ahead, 0] / cam[ahead, 2] + cx).astype(np.int64)
+        v[ahead] = np.floor(fy * cam[ahead, 1] / cam[ahead, 2] + cy).astype(np.int64)
+        h, w = self.depth.shape
+        inside = ahead & (u >= 0) & (u < w) & (v >= 0) & (v < h)
+        obs = np.zeros(len(cam))
+        obs[inside] = self.depth[v[inside], u[inside]]
+        known = inside & np.isfinite(obs) & (obs > 0)
+        if not known.any():
+            return True
+        # 2.5 sigma of a structured-light sensor's depth noise (sigma = 1.425e-3 z^2, Khoshelham 2012).
+        seen = obs[known] > cam[known, 2] + SEEN_MARGIN_M + 2.5 * 1.425e-3 * obs[known] ** 2
+        return float(seen.mean()) < SEEN_FREE_SHARE
+
+
+def support_pad(
+    footprint_rel_m: np.ndarray, rotation: np.ndarray, position_m: np.ndarray, height_m: float, bottom_m: float | None = None
+) -> tuple[np.ndarray, np.ndarray, float]:
     """The box under an object resting on the background: its footprint's bounding rectangle in
-    the object's own (yawed) axes, from ``height_m - PAD_THICKNESS_M`` (not below the floor) up to
-    ``height_m``. footprint_rel_m: (K, 2) relative to the object's position in world axes.
+    the object's own (yawed) axes, from ``height_m - PAD_THICKNESS_M`` (not below the floor; or
+    from ``bottom_m``, a column standing in for a hidden support) up to ``height_m``.
+    footprint_rel_m: (K, 2) relative to the object's position in world axes.
     Returns centre (3,), half extents (3,) and yaw (rad)."""
     yaw = float(np.arctan2(rotation[1, 0], rotation[0, 0]))
     c, s = np.cos(yaw), np.sin(yaw)
@@ -164,7 +232,7 @@ def support_pad(footprint_rel_m: np.ndarray, rotation: np.ndarray, position_m: n
     lo, hi = local.min(axis=0), local.max(axis=0)
     mid = 0.5 * (lo + hi)
     centre_xy = position_m[:2] + np.array([[c, -s], [s, c]]) @ mid
-    bottom = max(0.0, height_m - PAD_THICKNESS_M)
+    bottom = max(0.0, height_m - PAD_THICKNESS_M if bottom_m is None else bottom_m)
     thickness = max(height_m - bottom, 1e-3)
     centre = np.array([centre_xy[0], centre_xy[1], height_m - thickness / 2.0])
     half = np.array([max((hi - lo)[0] / 2.0, 1e-3), max((hi - lo)[1] / 2.0, 1e-3), thickness / 2.0])

@@ -45,6 +45,8 @@ class Body:
     unsupported_reason: str = ""
     # Seen this far above its support: it keeps its height and stands on collision legs.
     legs_m: float = 0.0
+    hidden_support: bool = False  # legs stand on a support found below a hidden underside
+    pad_bottom_m: float | None = None  # its background pad is a column from here (hidden support)
 
     @property
     def bottom_m(self) -> float:
@@ -102,7 +104,7 @@ def rebuilt(b: Body, asset: ObjectAsset) -> Body:
     new = make_body(asset, b.world_from_asset())
     new.initial_position_m = b.initial_position_m
     new.parent, new.support_surface, new.children, new.fixed = b.parent, b.support_surface, b.children, b.fixed
-    new.unsupported_reason, new.legs_m = b.unsupported_reason, b.legs_m
+    new.unsupported_reason, new.legs_m, new.hidden_support, new.pad_bottom_m = b.unsupported_reason, b.legs_m, b.hidden_support, b.pad_bottom_m
     return new
 
 

@@ -38,7 +38,7 @@ from layout.bodies import Body, make_body, rebuilt, with_legs
 from layout.geometry import clip_half_plane, clip_to_slab_xy, closest_point_in_polygon, horizontal_mtv, placements_inside
 from layout.narrowphase import ConvexWorld
 from layout.snapping import YawSnap, reference_yaw, snap_yaw
-from layout.background import CARVE_CLEARANCE_M, BackgroundSupport, absorb, carve, column_boxes, observed_structure
+from layout.background import CARVE_CLEARANCE_M, BackgroundSupport, HiddenBelow, absorb, carve, column_boxes, observed_structure
 from layout.trim import trim_pair
 from layout.support import BACKGROUND, FLOOR, UNSUPPORTED, build_support, is_ancestor, pad_bounds, pad_box, subtree
 from scene_builder.config import LayoutConfig
@@ -707,8 +707,11 @@ def _placement(g: GeneratedAsset, b: Body, support: str, absorbed: bool) -> Plac
     reasons = []
     if absorbed:
         reasons.append(f"{b.unsupported_reason or 'nothing seen under it to rest on'}: kept where seen as static background")
+    if b.pad_bottom_m is not None and not absorbed:
+        reasons.append(f"rests where seen on a static {(b.bottom_m - b.pad_bottom_m) * 100:.0f} cm column standing in for the support hidden under it")
     if b.legs_m > 0.0 and not absorbed:
-        reasons.append(f"stands where seen on {b.legs_m * 100:.0f} cm collision legs down to the {support} (its feet were not seen)")
+        why = "the space under it was hidden from the camera" if b.hidden_support else "its feet were not seen"
+        reasons.append(f"stands where seen on {b.legs_m * 100:.0f} cm collision legs down to the {support} ({why})")
     if dist > 0.01 and not absorbed:
         if abs(delta[2]) > 0.01:
             reasons.append(f"{'lowered' if delta[2] < 0 else 'raised'} {abs(delta[2]) * 100:.0f} cm onto the {support if support in ('floor', 'background', 'wall') else support}")
@@ -758,7 +761,8 @@ def solve_layout_with_stats(
     lap("measure_before")
     background = perception.room.background
     ground = BackgroundSupport(background, walls)
-    edges, _ = build_support(bodies, walls, solver.vertical_clash, ground.height_under if background is not None else None, config.max_lower_m)
+    hidden = HiddenBelow(perception.observation, perception.camera)
+    edges, _ = build_support(bodies, walls, solver.vertical_clash, ground.height_under if background is not None else None, config.max_lower_m, hidden)
     for i, b in enumerate(bodies):
         if b.legs_m > 0.0 and b.parent != UNSUPPORTED:
             bodies[i] = with_legs(b)

@@ -5,8 +5,11 @@ the vertical placement that makes each resting contact exact.
 An object rests on the highest support found in a band around where it was seen: from
 :data:`MAX_DROP_M` below its observed bottom to :data:`SUPPORT_TOL_M` above. Nothing falls
 further than that: an object with nothing under it in the band is not dropped to whatever lies
-metres below; it is left where it was seen, unsupported, and the layout makes it part of the
-static background (built-in furniture against a wall hangs on the wall instead)."""
+metres below. If the camera could not see under it (hidden behind itself or a nearer object),
+it keeps its height and stands on collision legs on the highest support below; if the camera saw
+through the space under it, it hangs, is left where it was seen, unsupported, and the layout
+makes it part of the static background (built-in furniture against a wall hangs on the wall
+instead)."""
 
 from __future__ import annotations
 
@@ -39,6 +42,9 @@ WALL_CONTACT_M = 0.05
 # object would drop further than its observed bottom can be wrong (legs hidden behind a nearer
 # object are extended to the floor by generation, ``generation.pose.floor_snap_height_m``).
 MAX_DROP_M = 0.15
+# A hidden gap under an object up to this share of its own height is its own hidden lower part
+# (legs); a larger one is something else's (a static column stands in for it).
+HIDDEN_OWN_SHARE = 0.5
 
 
 def _footprint_world(b: Body) -> np.ndarray:
@@ -70,7 +76,7 @@ def pad_box(b: Body, height_m: float) -> tuple[np.ndarray, np.ndarray, float]:
     from layout.background import support_pad
 
     plan = np.concatenate([p.verts_rel_m[:, :2] for p in b.pieces])
-    return support_pad(plan, b.rotation, b.position_m, height_m)
+    return support_pad(plan, b.rotation, b.position_m, height_m, b.pad_bottom_m)
 
 
 def pad_bounds(centre: np.ndarray, half: np.ndarray, yaw: float) -> tuple[np.ndarray, np.ndarray]:
@@ -97,6 +103,7 @@ def build_support(
     clash: Callable[[int, int, float], float] | None = None,
     background: Callable[[np.ndarray, float, float], float | None] | None = None,
     max_lower_m: float = 0.02,
+    hidden: Callable[[np.ndarray, float], bool] | None = None,
 ) -> tuple[list[SupportEdge], list[int]]:
     """Assign each body its support and set its height so that it rests exactly on it.
 
@@ -114,6 +121,11 @@ def build_support(
     Among the candidates the one nearest to the observed bottom wins (ties: an object's face,
     then the background, then the floor). A rigid body more than ``max_lower_m`` above its
     support keeps its height (``legs_m`` is set: it will stand on collision legs).
+    ``hidden(footprint_world (K, 2), bottom_m)``: whether the space under the body was hidden from
+    the camera (``layout.background.HiddenBelow``); a rigid, free body with no candidate in the
+    band whose underside was hidden takes the highest candidate at any depth below, on legs
+    (``hidden_support`` is set), or, more than MAX_DROP_M above the floor or the background,
+    rests on the background on a pad column from there (``pad_bottom_m`` is set).
 
     ``clash(child, support, z)``: penetration depth (m) of the child placed at height z against the
     support. A face that the child, set on it, would sink into the rest of the support (the top
@@ -123,7 +135,7 @@ def build_support(
     edges: list[SupportEdge] = []
     placed: list[int] = []
     for b in bodies:
-        b.parent, b.support_surface, b.children = FLOOR, -1, []
+        b.parent, b.support_surface, b.children, b.pad_bottom_m = FLOOR, -1, [], None
     # Plan boxes of the bodies placed so far (vectorised prefilter of candidate supports).
     placed_lo = np.zeros((len(bodies), 2))
     placed_hi = np.zeros((len(bodies), 2))
@@ -136,41 +148,61 @@ def build_support(
         min_face_area = DEFORMABLE_MIN_FACE_AREA * polygon_area(foot) if soft else 0.0
         lo_xy = foot.min(axis=0)
         hi_xy = foot.max(axis=0)
-        candidates: list[tuple[float, float, int, int]] = []  # (height, overlap, -body, surface)
-        n_placed = len(placed)
-        near = np.nonzero(
-            np.all(placed_lo[:n_placed] <= hi_xy, axis=1) & np.all(placed_hi[:n_placed] >= lo_xy, axis=1)
-        )[0]
-        for j in (placed[k] for k in near):
-            s = bodies[j]
-            if not soft and s.asset.kind is AssetKind.DEFORMABLE:
-                # A soft body sags under a rigid load and tips it (a chair on a cushion tilted 11 deg
-                # in 3 s on open3d_TUM): rigid objects rest on the next support below instead.
-                continue
-            for k, surf in enumerate(s.surfaces):
-                h = float(s.position_m[2] + surf.height_rel_m)
-                if h < max(MIN_SURFACE_HEIGHT_M, bottom - MAX_DROP_M) or h > bottom + tol or polygon_area(surf.polygon_rel_m) < min_face_area:
+        def search(drop_m: float) -> list[tuple[float, int, float, int, int]]:
+            candidates: list[tuple[float, float, int, int]] = []  # (height, overlap, -body, surface)
+            n_placed = len(placed)
+            near = np.nonzero(
+                np.all(placed_lo[:n_placed] <= hi_xy, axis=1) & np.all(placed_hi[:n_placed] >= lo_xy, axis=1)
+            )[0]
+            for j in (placed[k] for k in near):
+                s = bodies[j]
+                if not soft and s.asset.kind is AssetKind.DEFORMABLE:
+                    # A soft body sags under a rigid load and tips it (a chair on a cushion tilted 11 deg
+                    # in 3 s on open3d_TUM): rigid objects rest on the next support below instead.
                     continue
-                frac = _overlap_fraction(foot, surf.polygon_rel_m + s.position_m[:2])
-                if frac < MIN_FOOTPRINT_OVERLAP:
-                    continue
-                candidates.append((h, frac, -j, k))
-        # The support nearest to the observed bottom wins (ties: an object's face, then the
-        # background, then the floor): the object moves as little as it can.
-        options: list[tuple[float, int, float, int, int]] = []  # (|gap|, rank, h, parent, surface)
-        for h, _, neg_j, k in sorted(candidates, reverse=True):
-            z = float(b.position_m[2] + h - bottom)
-            if clash is None or clash(i, -neg_j, z) <= SUPPORT_CLASH_TOL_M:
-                options.append((abs(h - bottom), 0, h, -neg_j, k))
-                break
-        if background is not None:
-            h_bg = background(foot, max(MIN_SURFACE_HEIGHT_M, bottom - MAX_DROP_M), bottom + tol)
-            if h_bg is not None and _pad_is_clear(b, h_bg, [bodies[k] for k in placed]):
-                options.append((abs(h_bg - bottom), 1, h_bg, BACKGROUND, -1))
-        if bottom <= MAX_DROP_M:
-            options.append((abs(bottom), 2, 0.0, FLOOR, -1))
+                for k, surf in enumerate(s.surfaces):
+                    h = float(s.position_m[2] + surf.height_rel_m)
+                    if h < max(MIN_SURFACE_HEIGHT_M, bottom - drop_m) or h > bottom + tol or polygon_area(surf.polygon_rel_m) < min_face_area:
+                        continue
+                    frac = _overlap_fraction(foot, surf.polygon_rel_m + s.position_m[:2])
+                    if frac < MIN_FOOTPRINT_OVERLAP:
+                        continue
+                    candidates.append((h, frac, -j, k))
+            # The support nearest to the observed bottom wins (ties: an object's face, then the
+            # background, then the floor): the object moves as little as it can.
+            options: list[tuple[float, int, float, int, int]] = []  # (|gap|, rank, h, parent, surface)
+            for h, _, neg_j, k in sorted(candidates, reverse=True):
+                z = float(b.position_m[2] + h - bottom)
+                if clash is None or clash(i, -neg_j, z) <= SUPPORT_CLASH_TOL_M:
+                    options.append((abs(h - bottom), 0, h, -neg_j, k))
+                    break
+            if background is not None:
+                h_bg = background(foot, max(MIN_SURFACE_HEIGHT_M, bottom - drop_m), bottom + tol)
+                if h_bg is not None and _pad_is_clear(b, h_bg, [bodies[k] for k in placed]):
+                    options.append((abs(h_bg - bottom), 1, h_bg, BACKGROUND, -1))
+            if bottom <= drop_m:
+                options.append((abs(bottom), 2, 0.0, FLOOR, -1))
+            return options
+
+        options = search(MAX_DROP_M)
+        hidden_under = False
+        seen_under = False
+        if not options and hidden is not None and not soft and not b.fixed:
+            seen_under = not hidden(foot, bottom)
+        if not options and hidden is not None and not soft and not b.fixed and not seen_under:
+            # Nothing seen within reach under it, and the camera could not see under it either:
+            # whatever holds it up is hidden (a nightstand behind the bed, a bed's own frame).
+            # It keeps its height and stands on legs down to the highest support below.
+            options = search(np.inf)
+            hidden_under = bool(options)
         if options:
             _, _, h, j, k = min(options)
+            if hidden_under and j in (FLOOR, BACKGROUND) and bottom - h > max(MAX_DROP_M, HIDDEN_OWN_SHARE * b.height_m):
+                # Far above the floor or the background below, for its size: a static column
+                # from there up to its bottom stands in for the hidden support (it stays put when
+                # the object is picked up). Nearer (a bed's frame hidden by its own cover), or on
+                # another object, it stands on legs.
+                b.pad_bottom_m, h, j, k = h, bottom, BACKGROUND, -1
             b.parent, b.support_surface = j, k
             if j >= 0:
                 bodies[j].children.append(i)
@@ -181,7 +213,7 @@ def build_support(
             parent_name = "wall"
         else:
             b.parent = UNSUPPORTED
-            b.unsupported_reason = "nothing seen under it to rest on"
+            b.unsupported_reason = "hangs: the camera saw empty space under it" if seen_under else "nothing seen under it to rest on"
             h = bottom
             parent_name = "none"
         # The gap as observed: the child's and the support's initial heights.
@@ -195,6 +227,7 @@ def build_support(
             # Seen standing higher than its support: its feet were not seen (thin legs, a dark
             # plinth cut from its mask). It stays where it was seen, on legs down to the support.
             b.legs_m = float(bottom - h)
+            b.hidden_support = hidden_under
         else:
             b.position_m[2] += h - bottom
         placed_lo[len(placed)] = b.position_m[:2] + b.lo_rel_m[:2]

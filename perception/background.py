@@ -104,6 +104,7 @@ def fill_depth_behind(
     floor = Plane(np.array([0.0, 0.0, 1.0]), 0.0, "floor")
     planes = [floor, *walls]
     t = _plane_depths(rays_cam.reshape(-1, 3)[idx], camera, planes)  # (P, n)
+    t_floor = t[0].copy()
     low = lower_m.reshape(-1)[idx]
     t = np.where(t > low[None, :], t, np.inf)
     best = t.min(axis=0)
@@ -123,6 +124,12 @@ def fill_depth_behind(
             filled = np.full((h, w), 2.5)
         filled = np.where(np.isfinite(filled) & (filled > 0), filled, far)
         out[rest] = np.minimum(np.maximum(filled[rest], lower_m[rest]), cap)
+    # Nothing filled lies below the floor: a node's depth stops where its ray meets the floor
+    # (inpainting across a far, dark region can otherwise bend the surface metres under it).
+    # (At an object's floor contact its lower bound can lie past the floor by the margin; the
+    # floor still wins there: the object hides that node.)
+    under = np.isfinite(t_floor) & (flat[idx] > t_floor)
+    flat[idx[under]] = t_floor[under]
     return out
 
 
@@ -232,7 +239,12 @@ def _tuck_stretched(verts, faces, uv, observed, rays, depth, camera: Camera):
     sf = faces[stretched]
     n0 = len(verts)
     new_ids = n0 + np.arange(sf.size).reshape(-1, 3)
-    new_cam = rays[sf.ravel()] * np.repeat(far[stretched], 3)[:, None]
+    new_depth = np.repeat(far[stretched], 3)
+    # Not pushed under the floor: a near floor node tucked back to a far corner's depth stops
+    # where its ray meets the floor.
+    floor = Plane(np.array([0.0, 0.0, 1.0]), 0.0, "floor")
+    new_depth = np.minimum(new_depth, _plane_depths(rays[sf.ravel()], camera, [floor])[0])
+    new_cam = rays[sf.ravel()] * new_depth[:, None]
     new_verts = transform_points(camera.world_from_camera, new_cam)
     faces = faces.copy()
     faces[stretched] = new_ids

@@ -156,14 +156,15 @@ def test_support_graph_of_a_hand_made_stack():
 def test_buried_face_is_not_a_support():
     # A solid cabinet decomposed into two stacked pieces: the lower piece's top face (z = 0.4)
     # lies inside the object. A box observed at 0.45 must not be set on it; with nothing else
-    # within reach under it (the floor is 45 cm down) it is left where it was seen, as static
+    # within reach under it (the floor is 45 cm down, the space under it unseen, and a column
+    # down to the floor would pass through the cabinet) it is left where it was seen, as static
     # background, and the placement says why.
     cabinet = asset_from_pieces("cabinet", "cabinet", [box_mesh([-0.3, -0.4, 0.0], [0.3, 0.4, 0.4]), box_mesh([-0.3, -0.4, 0.4], [0.3, 0.4, 0.8])])
     box = box_asset("box", (0.2, 0.2, 0.2))
     result, _ = solve_layout_with_stats(empty_perception(), (_gen(cabinet, (0, 0, 0)), _gen(box, (0.0, 0.0, 0.45), yaw=0.5)), CFG)
     assert "box" not in {e.child for e in result.support} and [o.name for o in result.scene.objects] == ["cabinet"]
     placement = {p.name: p for p in result.placements}["box"]
-    assert placement.became_background and placement.displacement_m == 0.0 and "nothing seen under it" in placement.reason
+    assert placement.became_background and placement.displacement_m == 0.0 and "another object's" in placement.reason
     assert result.scene.room.background is not None and result.scene.room.background.static_names == ("box",)
     # Observed 2 cm sunk into the real top, it rests on the top.
     result, _ = solve_layout_with_stats(empty_perception(), (_gen(cabinet, (0, 0, 0)), _gen(box, (0.0, 0.0, 0.78), yaw=0.5)), CFG)
@@ -287,21 +288,22 @@ def test_yaw_snapping_follows_the_evidence():
 
 def test_unsupported_object_is_never_welded_in_mid_air_nor_dropped():
     """A picture seen 1.5 m up against a wall, a box floating in the room and one 40 cm up have
-    nothing under them within reach: none is welded to the wall or dropped metres from its
-    pixels; each stays where it was seen as static background, and the placement says so. A box
-    seen 1.5 cm above the floor comes down onto it (the move is reported)."""
+    nothing under them within reach, and the camera saw through the space under them: none is
+    welded to the wall or dropped metres from its pixels; each hangs where it was seen as static
+    background, and the placement says so. A box seen 1.5 cm above the floor comes down onto it
+    (the move is reported)."""
     walls = (Plane(np.array([1.0, 0.0, 0.0]), 1.0, "wall", 100),)  # x = -1, room at x > -1
     gen = (
         _gen(box_asset("picture", (0.04, 0.6, 0.4)), (-0.95, 0.0, 1.5)),
         _gen(box_asset("floating", (0.04, 0.6, 0.4)), (0.5, 0.0, 1.5)),
-        _gen(box_asset("low", (0.04, 0.6, 0.4)), (-0.95, 2.0, 0.4)),
+        _gen(box_asset("low", (0.04, 0.6, 0.4)), (-0.95, 0.65, 0.4)),
         _gen(box_asset("near_floor", (0.3, 0.3, 0.3)), (0.5, 2.0, 0.015)),
     )
-    result, _ = solve_layout_with_stats(empty_perception(walls), gen, CFG)
+    result, _ = solve_layout_with_stats(empty_perception(walls, depth_m=20.0), gen, CFG)
     placements = {p.name: p for p in result.placements}
     for name in ("picture", "floating", "low"):
         assert placements[name].became_background and placements[name].displacement_m == 0.0
-        assert "nothing seen under it" in placements[name].reason
+        assert "camera saw empty space under it" in placements[name].reason
     assert [o.name for o in result.scene.objects] == ["near_floor"]
     assert not any(o.asset.is_fixed for o in result.scene.objects)
     bg = result.scene.room.background

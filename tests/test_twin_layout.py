@@ -43,8 +43,8 @@ def _counter_background() -> Background:
     return Background(TriangleMesh(v, top_f), np.ones(len(v), dtype=bool))
 
 
-def _perception_with(background: Background) -> Perception:
-    p = empty_perception()
+def _perception_with(background: Background, depth_m: float = 20.0) -> Perception:
+    p = empty_perception(depth_m=depth_m)
     return dataclasses.replace(p, room=Room(p.room.walls, background))
 
 
@@ -86,6 +86,34 @@ def test_object_rests_on_the_background_seen_under_it(tmp_path):
     assert verdict.max_penetration_m < 1e-3 and verdict.max_penetration_settled_m < 1e-3
     assert verdict.stable and verdict.movable_count == 1 and verdict.fixed_count == 0
     assert verdict.settle_max_drift_m < 2e-3
+
+
+def test_hidden_support_is_a_static_column_and_seen_through_space_hangs(tmp_path):
+    """A box seen 75 cm above the counter with nothing within reach under it. Where the camera
+    could not see under it (no depth there: hidden behind itself or something nearer), whatever
+    holds it was hidden: it stays a movable object where it was seen, resting on a static column
+    from the counter top up to its bottom, and stays put in MuJoCo. Where the camera saw through
+    the space under it, it hangs: it becomes background."""
+    high = pose(np.eye(3), [1.5, 0.0, 1.5])
+    gen = (GeneratedAsset(box_asset("high", (0.2, 0.2, 0.2)), high, np.zeros((0, 3))),)
+    result, _ = solve_layout_with_stats(_perception_with(_counter_background(), depth_m=0.0), gen, CFG)
+    placement = {p.name: p for p in result.placements}["high"]
+    assert not placement.became_background and placement.support == "background"
+    assert placement.displacement_m == 0.0 and "column" in placement.reason
+    np.testing.assert_allclose(result.scene.object("high").world_from_asset[:3, 3], [1.5, 0.0, 1.5], atol=1e-9)
+    bg = result.scene.room.background
+    lo, hi = bg.box_centers_m - bg.box_half_extents_m, bg.box_centers_m + bg.box_half_extents_m
+    column = (np.abs(bg.box_centers_m[:, 0] - 1.5) < 1e-9) & (np.abs(bg.box_centers_m[:, 1]) < 1e-9)
+    assert column.sum() == 1
+    assert hi[column][0, 2] == pytest.approx(1.5) and lo[column][0, 2] == pytest.approx(0.75)
+    path = write_mjcf(result.scene, tmp_path)
+    verdict, _ = verify_scene(path, result.scene, CFG)
+    assert verdict.stable and verdict.movable_count == 1 and verdict.max_penetration_m < 1e-3
+    assert verdict.settle_max_drift_m < 2e-3
+    # Seen through: it hangs, as background.
+    result, _ = solve_layout_with_stats(_perception_with(_counter_background(), depth_m=20.0), gen, CFG)
+    placement = {p.name: p for p in result.placements}["high"]
+    assert placement.became_background and "camera saw empty space under it" in placement.reason
 
 
 def test_column_boxes_follow_observed_heights_and_carving_cuts_under_objects():
