@@ -520,6 +520,12 @@ class _Solver:
             if on_object:
                 self.leave_where_seen(on_object[0], "no room on its support clear of its neighbours")
                 moved = True
+            elif ordered:
+                # Jammed against static geometry (an object left where seen) with no free spot
+                # near: it cannot stand clear where it was seen either.
+                other = self.bodies[j if ordered[0] == i else i].name
+                self.leave_where_seen(ordered[0], f"no room clear of {other} near where it was seen")
+                moved = True
         for k in self.wall_violators():
             if not len(self.wall_violators([k])):
                 continue
@@ -789,7 +795,8 @@ def solve_layout_with_stats(
     for _ in range(RELOCATE_ROUNDS):
         # Pushes that stall (a table jammed between a shelf and a wall) leave overlaps: the
         # movable side goes to its nearest free spot, then the pushes tidy the clearances.
-        if converged or not solver.relocate_remaining():
+        # (Converged pushes can still leave an overlap with a fixed body they cannot move.)
+        if (converged and not solver.penetrating_pairs()) or not solver.relocate_remaining():
             break
         more, converged = solver.run(int(config.max_iterations) // 2)
         iterations += more

@@ -6,7 +6,7 @@ An object rests on the highest support found in a band around where it was seen:
 :data:`MAX_DROP_M` below its observed bottom to :data:`SUPPORT_TOL_M` above. Nothing falls
 further than that: an object with nothing under it in the band is not dropped to whatever lies
 metres below. If the camera could not see under it (hidden behind itself or a nearer object),
-it keeps its height and stands on collision legs on the highest support below; if the camera saw
+it keeps its height and stands on the highest support up to 1 m below; if the camera saw
 through the space under it, it hangs, is left where it was seen, unsupported, and the layout
 makes it part of the static background (built-in furniture against a wall hangs on the wall
 instead)."""
@@ -45,6 +45,9 @@ MAX_DROP_M = 0.15
 # A hidden gap under an object up to this share of its own height is its own hidden lower part
 # (legs); a larger one is something else's (a static column stands in for it).
 HIDDEN_OWN_SHARE = 0.5
+# A hidden support is looked for at most this far under an object (a monitor seen at eye level
+# with nothing under it is on the wall, not on a hidden 1.7 m column).
+HIDDEN_MAX_DROP_M = 1.0
 
 
 def _footprint_world(b: Body) -> np.ndarray:
@@ -123,7 +126,7 @@ def build_support(
     support keeps its height (``legs_m`` is set: it will stand on collision legs).
     ``hidden(footprint_world (K, 2), bottom_m)``: whether the space under the body was hidden from
     the camera (``layout.background.HiddenBelow``); a rigid, free body with no candidate in the
-    band whose underside was hidden takes the highest candidate at any depth below, on legs
+    band whose underside was hidden takes the highest candidate up to HIDDEN_MAX_DROP_M below, on legs
     (``hidden_support`` is set), or, more than MAX_DROP_M above the floor or the background,
     rests on the background on a pad column from there (``pad_bottom_m`` is set).
 
@@ -193,7 +196,7 @@ def build_support(
             # Nothing seen within reach under it, and the camera could not see under it either:
             # whatever holds it up is hidden (a nightstand behind the bed, a bed's own frame).
             # It keeps its height and stands on legs down to the highest support below.
-            options = search(np.inf)
+            options = search(HIDDEN_MAX_DROP_M)
             hidden_under = bool(options)
         if options:
             _, _, h, j, k = min(options)

@@ -58,4 +58,4 @@ def test_real_sample_builds_a_valid_stable_scene(sample: Path, tmp_path: Path):
         if not obj["became_background"]:
             assert obj["mass_kg"] > 0 and min(obj["size_m"]) > 0
         else:
-            assert obj["reason"], obj
+            assert obj["moved_because"], obj
