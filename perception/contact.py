@@ -1,0 +1,163 @@
+"""Detected objects stand at the depth of their floor contact (plain photos).
+
+Estimated single-photo depth can miss an object a detector sees: a coarse geometric estimate
+puts its pixels on the floor or a wall (the room's planes then claim them), or gives them no
+depth. Such an object stands where its outline meets the floor: each bottom pixel of its mask
+(the lowest mask pixel of each column, or the detector box's bottom edge when lower) is cast
+onto the floor plane, and the object becomes a vertical face, turned to the camera, through the
+median contact point (generation completes
+the unseen depth from the category's proportions). What does not stand on the floor (a tv on a
+cabinet, a book on a table) takes the depth found just under its outline: the object already
+lifted there, else the estimated depth. An object the estimate does see (half its pixels off the
+room planes) keeps its estimated depth.
+
+Sensor depth is never changed (``perceive`` calls this only for estimated depth).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from scene_builder.model import CameraIntrinsics
+from scene_builder.vocabulary import category
+
+__all__ = ["SEES_SHARE", "stand_on_contacts"]
+
+#: An object whose mask has this share of off-room depth is seen by the estimate: left as it is.
+SEES_SHARE = 0.5
+
+
+def _rays(k: CameraIntrinsics, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(N, 3) camera-frame rays with z = 1 through pixel centres (u, v)."""
+    return np.stack([(u - k.cx_px) / k.fx_px, (v - k.cy_px) / k.fy_px, np.ones_like(u, dtype=np.float64)], axis=1)
+
+
+def _face_depth(mask: np.ndarray, contact_cam: np.ndarray, up_cam: np.ndarray, k: CameraIntrinsics) -> np.ndarray:
+    """Planar depth of the mask's pixels on the vertical plane through ``contact_cam`` (3,) that
+    faces the camera (its normal is the horizontal direction from the camera to the contact)."""
+    n = contact_cam - (contact_cam @ up_cam) * up_cam
+    n /= max(np.linalg.norm(n), 1e-9)
+    rr, cc = np.nonzero(mask)
+    rays = _rays(k, cc.astype(np.float64), rr.astype(np.float64))
+    denom = rays @ n
+    z = np.where(denom > 1e-3, float(n @ contact_cam) / np.maximum(denom, 1e-3), 0.0)
+    return z
+
+
+def _floor_distance(rays: np.ndarray, rot: np.ndarray, cam: np.ndarray, max_depth_m: float) -> np.ndarray:
+    """Planar depth at which each (N, 3) z = 1 camera ray meets the floor (inf where it does not)."""
+    dz = rays @ rot[2]  # world z per unit of planar depth
+    s = np.full(len(rays), np.inf)
+    down = dz < -1e-6
+    s[down] = -cam[2] / dz[down]
+    s[(s < 0.2) | (s > max_depth_m)] = np.inf
+    return s
+
+
+def _height_distance(ray: np.ndarray, rot: np.ndarray, cam: np.ndarray, height_m: float) -> float:
+    """Planar depth at which the z = 1 camera ``ray`` reaches ``height_m`` above the floor (inf
+    when it runs nearly level: the top of the object is near the camera's height)."""
+    dz = float(ray @ rot[2])
+    if abs(dz) < 0.05:
+        return np.inf
+    s = (height_m - cam[2]) / dz
+    return s if s > 0.3 else np.inf
+
+
+def _in_front_of_walls(ray: np.ndarray, s: float, rot: np.ndarray, cam: np.ndarray, walls, margin_m: float = 0.15) -> float:
+    """``s`` shortened so that the point at planar depth ``s`` on ``ray`` stays ``margin_m`` in
+    front of every wall it would pass (a coarse room box may stand its walls too near)."""
+    d = rot @ ray
+    for wall in walls:
+        n = np.asarray(wall.normal, dtype=np.float64)
+        rate = float(n @ d)
+        if rate < -1e-6:
+            s_wall = (margin_m - float(n @ cam) - float(wall.offset_m)) / rate
+            if s_wall > 0.3:
+                s = min(s, s_wall)
+    return s
+
+
+def stand_on_contacts(
+    depth_m: np.ndarray,
+    valid: np.ndarray,
+    background: np.ndarray,
+    labels: np.ndarray,
+    names: tuple[str, ...],
+    world_from_camera: np.ndarray,
+    k: CameraIntrinsics,
+    max_depth_m: float = 10.0,
+    boxes_xyxy_px: np.ndarray | None = None,
+    walls=(),
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """Object depth for the named instances the estimated depth does not see.
+
+    depth_m: (H, W) estimated depth; valid, background: (H, W) bool; labels: (H, W) instance ids
+    (1-based); names: vocabulary label of each instance (``""`` = not detected, left alone);
+    world_from_camera: (4, 4) with the floor at z = 0; boxes_xyxy_px: None or (K, 4) detector
+    boxes (NaN rows for none): a box's bottom edge is the floor contact when it is below the
+    mask's (thin legs, a foot the cut lost); walls: the room's walls (world planes), which the
+    objects stay in front of. A floor contact that gives the object a height far from its
+    category's typical one (an occluded foot seems farther than it is) gives way to the distance
+    at which the object's top is at the typical height.
+
+    Returns the object depth (H, W) float32, valid and background updated for the lifted
+    instances, and how many were lifted.
+    """
+    depth = np.asarray(depth_m, dtype=np.float64).copy()
+    valid = valid.copy()
+    background = background.copy()
+    rot, cam = world_from_camera[:3, :3], world_from_camera[:3, 3]
+    up_cam = rot.T @ np.array([0.0, 0.0, 1.0])
+    h, w = depth.shape
+    ids = [i + 1 for i, n in enumerate(names) if n]
+    # Floor-standing things first: what stands on them looks for its support under its outline.
+    ids.sort(key=lambda i: (not category(names[i - 1]).on_floor, i))
+    lifted = 0
+    for inst in ids:
+        mask = labels == inst
+        area = int(mask.sum())
+        if area == 0 or (mask & valid & ~background).sum() >= SEES_SHARE * area:
+            continue
+        label = names[inst - 1]
+        cols = np.flatnonzero(mask.any(axis=0))
+        bottom = (h - 1 - np.argmax(mask[::-1, cols], axis=0)).astype(np.float64)
+        top = np.argmax(mask[:, cols], axis=0).astype(np.float64)
+        box = None if boxes_xyxy_px is None else np.asarray(boxes_xyxy_px[inst - 1], dtype=np.float64)
+        if box is not None and np.all(np.isfinite(box)):
+            bottom = np.maximum(bottom, min(box[3], h) - 1.0)
+        contact = None
+        if category(label).on_floor:
+            rays = _rays(k, cols.astype(np.float64), bottom + 0.5)
+            s = _floor_distance(rays, rot, cam, max_depth_m)
+            hit = np.isfinite(s)
+            if hit.mean() >= 0.5:
+                s_floor = float(np.median(s[hit]))
+                mid = _rays(k, np.array([float(np.median(cols))]), np.array([float(np.percentile(top, 10))]))[0]
+                typical_h = category(label).typical_size_m[2]
+                seen_h = float(cam[2] + s_floor * (mid @ rot[2]))
+                if not 0.6 <= seen_h / typical_h <= 1.7:
+                    s_top = _height_distance(mid, rot, cam, typical_h)
+                    if np.isfinite(s_top):
+                        s_floor = s_top
+                ray = _rays(k, np.array([float(np.median(cols[hit]))]), np.array([float(np.median(bottom[hit])) + 0.5]))[0]
+                contact = ray * _in_front_of_walls(ray, s_floor, rot, cam, walls)
+        if contact is None:
+            below_r = np.clip(bottom.astype(np.int64) + 3, 0, h - 1)
+            zs = depth[below_r, cols]
+            ok = (zs > 0) & (zs < max_depth_m) & (labels[below_r, cols] != inst)
+            if ok.mean() < 0.3:
+                continue
+            z = float(np.median(zs[ok]))
+            ray = _rays(k, np.array([float(np.median(cols[ok]))]), np.array([float(np.median(bottom[ok]))]))[0]
+            contact = ray * _in_front_of_walls(ray, z, rot, cam, walls)
+        z_face = _face_depth(mask, contact, up_cam, k)
+        good = (z_face > 0.2) & (z_face < max_depth_m)
+        if good.mean() < 0.5:
+            continue
+        rr, cc = np.nonzero(mask)
+        depth[rr[good], cc[good]] = z_face[good]
+        valid[rr[good], cc[good]] = True
+        background[rr, cc] = False
+        lifted += 1
+    return depth.astype(np.float32), valid, background, lifted
