@@ -60,11 +60,20 @@ _UNEXPLAINED = 0.3
 _PROPOSAL_SCORE = 0.12
 #: ... between these shares of the image's area ...
 _PROPOSAL_MIN_AREA = 0.004
-_PROPOSAL_MAX_AREA = 0.5
+_PROPOSAL_MAX_AREA = 0.9
 #: ... at most this many, best first ...
 _MAX_PROPOSALS = 40
 #: ... and one becomes an object when the classifier gives a vocabulary label this probability.
 _CLASSIFIER_SURE = 0.5
+#: A detection under this score takes the classifier's label when the classifier gives that
+#: label this probability and the detection's family at most this much.
+_RENAME_BELOW = 0.9
+_RENAME_SURE = 0.6
+_RENAME_FAMILY_MAX = 0.1
+#: A cluster of this share of the image with this share of its surroundings unknown or far
+#: behind is alone in the view (a close-up): clear whatever its shape.
+_ISOLATED_AREA = 0.05
+_ISOLATED_SHARE = 0.9
 #: An extra object's points spread at least this much (standard deviation, metres) off their
 #: best-fit plane.
 _MIN_THICKNESS_M = 0.015
@@ -86,7 +95,7 @@ class _Candidate:
     box: np.ndarray  # (4,) xyxy px
     score: float
     label: str
-    witness: str  # "score", "depth", "semantic", "depth+semantic", "extra-depth", "extra-semantic"
+    witness: str  # "score", "depth", "semantic", "depth+semantic", "classifier", "extra-depth", "extra-semantic", "extra-classifier"
     cluster: int = 0  # the depth cluster that confirms it (0 = none)
     mask: np.ndarray | None = None
     depth_sees: bool = False
@@ -128,6 +137,22 @@ def _same_object(box: np.ndarray, others: np.ndarray) -> bool:
     small, large = np.minimum(area, areas), np.maximum(area, areas)
     iou = inter / np.maximum(area + areas - inter, 1e-9)
     return bool(np.any((iou >= 0.5) | ((inter >= 0.6 * small) & (small >= 0.5 * large))))
+
+
+def _separated_share(mask: np.ndarray, depth_m: np.ndarray, valid: np.ndarray, ring_px: int = 4) -> float:
+    """Share of the ring of pixels around ``mask`` whose depth is unknown or at least 0.2 m (and
+    5 %) behind the nearest pixel of the mask: 1 for a thing with nothing next to it."""
+    import cv2
+    from scipy.ndimage import distance_transform_edt
+
+    ring = (cv2.dilate(mask.astype(np.uint8), np.ones((2 * ring_px + 1, 2 * ring_px + 1), np.uint8)) > 0) & ~mask
+    if not ring.any():
+        return 1.0
+    _, (ri, ci) = distance_transform_edt(~mask, return_indices=True)
+    near = depth_m[ri[ring], ci[ring]]
+    d = depth_m[ring]
+    apart = ~valid[ring] | (d > near + np.maximum(0.2, 0.05 * near))
+    return float(apart.mean())
 
 
 def _solidity(mask: np.ndarray) -> float:
@@ -227,9 +252,9 @@ class DetectionSegmenter:
             for c in cands:
                 claimed |= c.mask
         labels, kept = self._paint(cands, depth_m, valid, h, w)
-        n_boxes = len(dets)
+        self._check_names(rgb, kept, labels)
         n_det = len(kept)
-        extras = self._extras(clusters, cluster_sizes, labels, kept, sem_labels, points, valid, background, up_cam, h, w)
+        extras = self._extras(rgb, clusters, cluster_sizes, labels, kept, sem_labels, points, depth_m, valid, background, up_cam, h, w)
         for c in extras:
             free = c.mask & (labels == 0)
             if free.sum() >= self.min_points:
@@ -237,7 +262,7 @@ class DetectionSegmenter:
                 labels[free] = len(kept)
         names = tuple(c.label for c in kept)
         scores = np.asarray([c.score for c in kept], dtype=np.float32)
-        boxes = np.asarray([c.box if c.witness not in ("extra-depth", "extra-semantic") else np.full(4, np.nan) for c in kept], dtype=np.float64).reshape(-1, 4)
+        boxes = np.asarray([np.full(4, np.nan) if c.witness.startswith("extra") else c.box for c in kept], dtype=np.float64).reshape(-1, 4)
         self._record(dets, kept, n_det)
         return InstanceMasks(labels.astype(np.int32), scores, names, boxes)
 
@@ -463,11 +488,55 @@ class DetectionSegmenter:
             return a.box[3] > b.box[3]
         return area_a < area_b
 
-    def _extras(self, clusters, cluster_sizes, labels, kept, sem_labels, points, valid, background, up_cam, h: int, w: int) -> list[_Candidate]:
+    def _check_names(self, rgb, kept: list[_Candidate], labels: np.ndarray) -> None:
+        """A detector's class gives way to the classifier's label when the detection is not sure
+        (score under :data:`_RENAME_BELOW`), the classifier is (:data:`_RENAME_SURE`) and it gives
+        the detector's family almost nothing (:data:`_RENAME_FAMILY_MAX`): the Open Images SSD
+        calls a sideboard a table, EfficientNet a chiffonier."""
+        if self.classifier is None:
+            return
+        idx = [i for i, c in enumerate(kept) if c.witness != "classifier" and c.score < _RENAME_BELOW]
+        if not idx:
+            return
+        crops, crop_masks = [], []
+        for i in idx:
+            m = labels == i + 1
+            rows, cols = np.flatnonzero(m.any(axis=1)), np.flatnonzero(m.any(axis=0))
+            crops.append(np.ascontiguousarray(rgb[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1]))
+            crop_masks.append(m[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1])
+        for i, lp in zip(idx, self.classifier.backend.label_scores_many(crops, crop_masks, [None] * len(crops))):
+            c = kept[i]
+            best = max(sorted(lp), key=lambda k: lp[k]) if lp else ""
+            if not best or best in family(c.label) or lp[best] < _RENAME_SURE:
+                continue
+            if sum(lp.get(lab, 0.0) for lab in family(c.label)) > _RENAME_FAMILY_MAX:
+                continue
+            c.meta["detector_label"] = c.label
+            c.label = best
+            c.witness = c.witness + ", renamed"
+
+    def _classify_masks(self, rgb, masks: list[np.ndarray]) -> list[tuple[str, float]]:
+        """(label, probability) the classifier gives each (H, W) mask's crop when it reaches
+        :data:`_CLASSIFIER_SURE`, else ("", 0)."""
+        if self.classifier is None or not masks:
+            return [("", 0.0)] * len(masks)
+        crops, crop_masks = [], []
+        for m in masks:
+            rows, cols = np.flatnonzero(m.any(axis=1)), np.flatnonzero(m.any(axis=0))
+            crops.append(np.ascontiguousarray(rgb[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1]))
+            crop_masks.append(m[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1])
+        out = []
+        for lp in self.classifier.backend.label_scores_many(crops, crop_masks, [None] * len(crops)):
+            best = max(sorted(lp), key=lambda k: lp[k]) if lp else ""
+            out.append((best, float(lp[best])) if best and lp[best] >= _CLASSIFIER_SURE else ("", 0.0))
+        return out
+
+    def _extras(self, rgb, clusters, cluster_sizes, labels, kept, sem_labels, points, depth_m, valid, background, up_cam, h: int, w: int) -> list[_Candidate]:
         """Depth clusters and semantic regions no detection explains, when they are clear objects."""
         import cv2
 
         out = []
+        unclear: list[tuple[int, np.ndarray]] = []
         claimed = labels > 0
         up = None if up_cam is None else np.asarray(up_cam, dtype=np.float64)
         for c in np.flatnonzero(cluster_sizes >= 2 * self.min_points):
@@ -477,7 +546,8 @@ class DetectionSegmenter:
             if (m & claimed).sum() >= _UNEXPLAINED * cluster_sizes[c]:
                 continue
             m = m & ~claimed
-            if not self._clear(m, points, valid & ~background, up):
+            if not self._clear(m, points, valid & ~background, up, depth_m, valid):
+                unclear.append((int(c), m))
                 continue
             name = ""
             if sem_labels is not None:
@@ -486,6 +556,11 @@ class DetectionSegmenter:
                 if vals[best] != "" and counts[best] >= 0.5 * m.sum():
                     name = str(vals[best])
             out.append(_Candidate(np.zeros(4), 0.3, name, "extra-depth", int(c), mask=m))
+        # A cluster that is not clear by its shape (a close-up's flat cabinet front) is still an
+        # object when the classifier is sure what it is.
+        for (c, m), (label, p) in zip(unclear, self._classify_masks(rgb, [m for _, m in unclear])):
+            if label:
+                out.append(_Candidate(np.zeros(4), p, label, "extra-classifier", c, mask=m))
         if sem_labels is not None:
             for label in sorted({str(v) for v in np.unique(sem_labels)} - {""}):
                 region = (sem_labels == label) & ~claimed
@@ -508,8 +583,9 @@ class DetectionSegmenter:
                     out.append(_Candidate(np.zeros(4), 0.3, label, "extra-semantic", mask=keep_main_regions(m)))
         return out
 
-    def _clear(self, mask: np.ndarray, points, off_room, up) -> bool:
-        """A clear object: solid in the image, filling its box, plausible height and footprint."""
+    def _clear(self, mask: np.ndarray, points, off_room, up, depth_m, valid) -> bool:
+        """A clear object: solid in the image, filling its box, plausible height and footprint,
+        and either alone in the view or of 3D shape with a visible top."""
         rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
         if len(rows) == 0:
             return False
@@ -530,8 +606,12 @@ class DetectionSegmenter:
             ext = np.percentile(xy, 98, axis=0) - np.percentile(xy, 2, axis=0)
             if float(ext.max()) > 2.5:
                 return False
-        # A thing has 3D shape: a flat patch (a picture, a door, a patch of wall that a coarse
-        # depth estimate stood up as a billboard) is no object to build.
+        # Alone in the view (nothing but unknown or far depth around it: a close-up's face) it
+        # is clear whatever its shape.
+        if mask.sum() >= _ISOLATED_AREA * mask.size and _separated_share(mask, depth_m, valid) >= _ISOLATED_SHARE:
+            return True
+        # Else a thing has 3D shape: a flat patch (a picture, a door, a patch of wall that a
+        # coarse depth estimate stood up as a billboard) is no object to build.
         sub = p[:: max(1, len(p) // 4000)]
         thickness = float(np.linalg.svd(sub - sub.mean(axis=0), compute_uv=False)[-1]) / np.sqrt(len(sub))
         if thickness < _MIN_THICKNESS_M:
