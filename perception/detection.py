@@ -107,6 +107,7 @@ FAMILIES: tuple[frozenset[str], ...] = (
     frozenset({"mug", "bowl", "vase"}),
     frozenset({"sofa", "bench", "bed"}),
     frozenset({"bag", "suitcase"}),
+    frozenset({"cabinet", "drawer_unit", "wardrobe"}),
 )
 
 #: A detection at its detector's ``accept_score`` gets this confidence after

@@ -66,7 +66,8 @@ _MAX_PROPOSALS = 40
 #: ... and one becomes an object when the classifier gives a vocabulary label this probability.
 _CLASSIFIER_SURE = 0.5
 #: A detection under this score takes the classifier's label when the classifier gives that
-#: label this probability and the detection's family at most this much.
+#: label's family this probability (:data:`_CLASSIFIER_SURE` for a detection under CONFIDENT,
+#: whose class is a guess) and the detection's family at most this much.
 _RENAME_BELOW = 0.9
 _RENAME_SURE = 0.6
 _RENAME_FAMILY_MAX = 0.1
@@ -106,6 +107,21 @@ def _box_slices(box: np.ndarray, h: int, w: int) -> tuple[slice, slice]:
     x0, y0 = int(np.clip(np.floor(box[0]), 0, w)), int(np.clip(np.floor(box[1]), 0, h))
     x1, y1 = int(np.clip(np.ceil(box[2]), 0, w)), int(np.clip(np.ceil(box[3]), 0, h))
     return slice(y0, max(y1, y0 + 1)), slice(x0, max(x1, x0 + 1))
+
+
+def _best_family(label_probs: dict[str, float]) -> tuple[str, float]:
+    """The classifier's answer: the family (:data:`perception.detection.FAMILIES`) of highest
+    summed probability, named by its most probable label, and that sum ("", 0 when empty).
+    ImageNet splits one kind of thing over neighbouring classes (a sideboard is part chiffonier,
+    part wardrobe, part china cabinet)."""
+    if not label_probs:
+        return "", 0.0
+    sums: dict[frozenset[str], float] = {}
+    for lab, p in label_probs.items():
+        sums[family(lab)] = sums.get(family(lab), 0.0) + float(p)
+    fam = max(sorted(sums, key=lambda f: sorted(f)), key=lambda f: sums[f])
+    best = max(sorted(fam), key=lambda lab: label_probs.get(lab, 0.0))
+    return best, sums[fam]
 
 
 def _semantic_cover(inside: np.ndarray) -> float:
@@ -332,9 +348,9 @@ class DetectionSegmenter:
         scores = self.classifier.backend.label_scores_many(crops, crop_masks, [None] * len(crops))
         out = []
         for (box, score), lp in zip(props, scores):
-            best = max(sorted(lp), key=lambda k: lp[k]) if lp else ""
-            if best and lp[best] >= _CLASSIFIER_SURE:
-                out.append(_Candidate(box, float(lp[best]), best, "classifier"))
+            best, p = _best_family(lp)
+            if best and p >= _CLASSIFIER_SURE:
+                out.append(_Candidate(box, p, best, "classifier"))
         return out
 
     def _outline(self, rgb, cands, depth_m, valid, background, clusters, sem_labels, points, focal, claimed) -> None:
@@ -506,8 +522,9 @@ class DetectionSegmenter:
             crop_masks.append(m[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1])
         for i, lp in zip(idx, self.classifier.backend.label_scores_many(crops, crop_masks, [None] * len(crops))):
             c = kept[i]
-            best = max(sorted(lp), key=lambda k: lp[k]) if lp else ""
-            if not best or best in family(c.label) or lp[best] < _RENAME_SURE:
+            best, p = _best_family(lp)
+            sure = _RENAME_SURE if c.score >= CONFIDENT else _CLASSIFIER_SURE
+            if not best or best in family(c.label) or p < sure:
                 continue
             if sum(lp.get(lab, 0.0) for lab in family(c.label)) > _RENAME_FAMILY_MAX:
                 continue
@@ -527,8 +544,8 @@ class DetectionSegmenter:
             crop_masks.append(m[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1])
         out = []
         for lp in self.classifier.backend.label_scores_many(crops, crop_masks, [None] * len(crops)):
-            best = max(sorted(lp), key=lambda k: lp[k]) if lp else ""
-            out.append((best, float(lp[best])) if best and lp[best] >= _CLASSIFIER_SURE else ("", 0.0))
+            best, p = _best_family(lp)
+            out.append((best, p) if best and p >= _CLASSIFIER_SURE else ("", 0.0))
         return out
 
     def _extras(self, rgb, clusters, cluster_sizes, labels, kept, sem_labels, points, depth_m, valid, background, up_cam, h: int, w: int) -> list[_Candidate]:
