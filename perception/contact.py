@@ -5,7 +5,9 @@ puts its pixels on the floor or a wall (the room's planes then claim them), or g
 depth. Such an object stands where its outline meets the floor: each bottom pixel of its mask
 (the lowest mask pixel of each column, or the detector box's bottom edge when lower) is cast
 onto the floor plane, and the object becomes a vertical face, turned to the camera, through the
-median contact point (generation completes
+median contact point. Where another object hides the contact, it lies between that object's back
+and the floor under the visible bottom, at the distance that gives the object its category's
+typical height; where the frame cuts the object, it stands at the floor under the frame's edge (generation completes
 the unseen depth from the category's proportions). What does not stand on the floor (a tv on a
 cabinet, a book on a table) takes the depth found just under its outline: the object already
 lifted there, else the estimated depth. An object the estimate does see (half its pixels off the
@@ -21,10 +23,12 @@ import numpy as np
 from scene_builder.model import CameraIntrinsics
 from scene_builder.vocabulary import category
 
-__all__ = ["SEES_SHARE", "stand_on_contacts"]
+__all__ = ["LEGGED", "SEES_SHARE", "stand_on_contacts"]
 
 #: An object whose mask has this share of off-room depth is seen by the estimate: left as it is.
 SEES_SHARE = 0.5
+#: Categories that stand on legs: what lies under their top is mostly floor.
+LEGGED = frozenset({"table", "desk", "chair", "stool", "bench"})
 
 
 def _rays(k: CameraIntrinsics, u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -89,7 +93,7 @@ def stand_on_contacts(
     max_depth_m: float = 10.0,
     boxes_xyxy_px: np.ndarray | None = None,
     walls=(),
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
     """Object depth for the named instances the estimated depth does not see.
 
     depth_m: (H, W) estimated depth; valid, background: (H, W) bool; labels: (H, W) instance ids
@@ -97,22 +101,31 @@ def stand_on_contacts(
     world_from_camera: (4, 4) with the floor at z = 0; boxes_xyxy_px: None or (K, 4) detector
     boxes (NaN rows for none): a box's bottom edge is the floor contact when it is below the
     mask's (thin legs, a foot the cut lost); walls: the room's walls (world planes), which the
-    objects stay in front of. A floor contact that gives the object a height far from its
-    category's typical one (an occluded foot seems farther than it is) gives way to the distance
-    at which the object's top is at the typical height.
+    objects stay in front of. Where another instance hides the contact, or the frame cuts the
+    object, the distance at which the object's top is at its category's typical height decides
+    within the bounds the view leaves (see the module doc); a visible contact that gives the
+    object a height no thing of its kind has (under 0.4 or over 2.5 times typical) gives way to
+    that distance too.
 
-    Returns the object depth (H, W) float32, valid and background updated for the lifted
-    instances, and how many were lifted.
+    A solid floor-standing object's mask (not :data:`LEGGED`) grows down to its box's bottom
+    edge through pixels no other instance holds (what the cut left of it between its outline and
+    its contact).
+
+    Returns the object depth (H, W) float32, valid, background and labels updated for the
+    lifted instances, and how many were lifted.
     """
     depth = np.asarray(depth_m, dtype=np.float64).copy()
     valid = valid.copy()
     background = background.copy()
+    labels = np.asarray(labels).copy()
     rot, cam = world_from_camera[:3, :3], world_from_camera[:3, 3]
     up_cam = rot.T @ np.array([0.0, 0.0, 1.0])
     h, w = depth.shape
     ids = [i + 1 for i, n in enumerate(names) if n]
-    # Floor-standing things first: what stands on them looks for its support under its outline.
-    ids.sort(key=lambda i: (not category(names[i - 1]).on_floor, i))
+    lowest = {i: int(np.flatnonzero((labels == i).any(axis=1)).max(initial=-1)) for i in ids}
+    # Floor-standing things first, nearest (lowest in the image) first: an occluder is placed
+    # before what it hides, and what stands on things looks for its support under its outline.
+    ids.sort(key=lambda i: (not category(names[i - 1]).on_floor, -lowest[i], i))
     lifted = 0
     for inst in ids:
         mask = labels == inst
@@ -123,6 +136,9 @@ def stand_on_contacts(
         cols = np.flatnonzero(mask.any(axis=0))
         bottom = (h - 1 - np.argmax(mask[::-1, cols], axis=0)).astype(np.float64)
         top = np.argmax(mask[:, cols], axis=0).astype(np.float64)
+        # What is right under the outline: another object there hides the floor contact.
+        under_r = np.clip(bottom.astype(np.int64) + 3, 0, h - 1)
+        under = labels[under_r, cols]
         box = None if boxes_xyxy_px is None else np.asarray(boxes_xyxy_px[inst - 1], dtype=np.float64)
         if box is not None and np.all(np.isfinite(box)):
             bottom = np.maximum(bottom, min(box[3], h) - 1.0)
@@ -134,14 +150,50 @@ def stand_on_contacts(
             if hit.mean() >= 0.5:
                 s_floor = float(np.median(s[hit]))
                 mid = _rays(k, np.array([float(np.median(cols))]), np.array([float(np.percentile(top, 10))]))[0]
-                typical_h = category(label).typical_size_m[2]
-                seen_h = float(cam[2] + s_floor * (mid @ rot[2]))
-                if not 0.6 <= seen_h / typical_h <= 1.7:
-                    s_top = _height_distance(mid, rot, cam, typical_h)
-                    if np.isfinite(s_top):
+                typical = category(label).typical_size_m
+                s_top = _height_distance(mid, rot, cam, typical[2])
+                if typical[2] < min(typical[:2]):
+                    # A low, deep thing (a bed, a table) shows its far edge at the top of its
+                    # outline: its front is about its depth nearer.
+                    s_top -= min(typical[:2])
+                occluders = under[(under > 0) & (under != inst)]
+                if len(occluders) >= 0.5 * len(cols):
+                    # Hidden behind another object: the contact lies between that object's back
+                    # (its depth plus its category's typical depth) and the floor under the
+                    # visible bottom; the typical height picks the distance in between.
+                    occ = int(np.bincount(occluders).argmax())
+                    occ_z = depth[labels == occ]
+                    occ_z = occ_z[occ_z > 0]
+                    back = float(np.median(occ_z)) if len(occ_z) else 0.0
+                    if 0 < occ <= len(names) and names[occ - 1]:
+                        back += min(category(names[occ - 1]).typical_size_m[:2])
+                    if np.isfinite(s_top) and back < s_floor:
+                        s_floor = float(np.clip(s_top, back, s_floor))
+                elif float(bottom.max()) >= h - 2:
+                    # Cut by the frame: the contact is below the photo, no farther than the floor
+                    # at its edge (the nearest the view allows).
+                    pass
+                else:
+                    # The contact is in view: trusted, unless it gives the object a height no
+                    # thing of its kind has (a foot the cut lost and the box missed).
+                    seen_h = float(cam[2] + s_floor * (mid @ rot[2]))
+                    if not 0.4 <= seen_h / category(label).typical_size_m[2] <= 2.5 and np.isfinite(s_top):
                         s_floor = s_top
                 ray = _rays(k, np.array([float(np.median(cols[hit]))]), np.array([float(np.median(bottom[hit])) + 0.5]))[0]
                 contact = ray * _in_front_of_walls(ray, s_floor, rot, cam, walls)
+                # A solid thing reaches down to its contact: the free pixels of its columns
+                # between its outline and its box's bottom edge (a bed's white frame the cut
+                # left out) are its own, or it would float. Under a table top or a seat is
+                # mostly floor: legged things keep their outline (generation adds the legs).
+                if box is not None and np.all(np.isfinite(box)) and label not in LEGGED:
+                    low = h - 1 - np.argmax(mask[::-1, cols], axis=0)
+                    rows = np.arange(h)[:, None]
+                    reach = (rows > low[None, :]) & (rows <= min(box[3], h) - 1) & (labels[:, cols] == 0)
+                    if reach.any():
+                        grown = np.zeros_like(mask)
+                        grown[:, cols] = reach
+                        labels[grown] = inst
+                        mask |= grown
         if contact is None:
             below_r = np.clip(bottom.astype(np.int64) + 3, 0, h - 1)
             zs = depth[below_r, cols]
@@ -160,4 +212,4 @@ def stand_on_contacts(
         valid[rr[good], cc[good]] = True
         background[rr, cc] = False
         lifted += 1
-    return depth.astype(np.float32), valid, background, lifted
+    return depth.astype(np.float32), valid, background, labels, lifted

@@ -233,7 +233,7 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
         # Estimated depth may put a detected object on the room's planes: it stands at its floor contact.
         from perception.contact import stand_on_contacts
 
-        obj_depth, valid, background, lifted = stand_on_contacts(
+        obj_depth, valid, background, labels, lifted = stand_on_contacts(
             depth_m, valid, frame.background, labels, given_names, frame.world_from_camera, k, config.max_depth_m,
             getattr(masks, "boxes_xyxy_px", None), frame.room.walls,
         )

@@ -62,7 +62,7 @@ _PROPOSAL_SCORE = 0.12
 _PROPOSAL_MIN_AREA = 0.004
 _PROPOSAL_MAX_AREA = 0.9
 #: ... at most this many, best first ...
-_MAX_PROPOSALS = 40
+_MAX_PROPOSALS = 24
 #: ... and one becomes an object when the classifier gives a vocabulary label this probability.
 _CLASSIFIER_SURE = 0.5
 #: A detection under this score takes the classifier's label when the classifier gives that
@@ -71,6 +71,10 @@ _CLASSIFIER_SURE = 0.5
 _RENAME_BELOW = 0.9
 _RENAME_SURE = 0.6
 _RENAME_FAMILY_MAX = 0.1
+#: Unclear depth clusters of at least this share of the image go to the classifier, the largest
+#: this many.
+_UNCLEAR_MIN_AREA = 0.01
+_MAX_UNCLEAR = 8
 #: A cluster of this share of the image with this share of its surroundings unknown or far
 #: behind is alone in the view (a close-up): clear whatever its shape.
 _ISOLATED_AREA = 0.05
@@ -215,6 +219,7 @@ class DetectionSegmenter:
         self.max_depth_m = float(max_depth_m)
         #: What answered the last ``segment`` call, for ``Perception.backends``.
         self.uses: list[BackendUse] = []
+        self._normal_cache: tuple[np.ndarray, np.ndarray] | None = None
 
     # -- the stages ---------------------------------------------------------------------------
 
@@ -574,7 +579,8 @@ class DetectionSegmenter:
                     name = str(vals[best])
             out.append(_Candidate(np.zeros(4), 0.3, name, "extra-depth", int(c), mask=m))
         # A cluster that is not clear by its shape (a close-up's flat cabinet front) is still an
-        # object when the classifier is sure what it is.
+        # object when the classifier is sure what it is (the largest few: each costs a forward pass).
+        unclear = sorted((u for u in unclear if u[1].sum() >= _UNCLEAR_MIN_AREA * h * w), key=lambda u: (-int(u[1].sum()), u[0]))[:_MAX_UNCLEAR]
         for (c, m), (label, p) in zip(unclear, self._classify_masks(rgb, [m for _, m in unclear])):
             if label:
                 out.append(_Candidate(np.zeros(4), p, label, "extra-classifier", c, mask=m))
@@ -637,8 +643,9 @@ class DetectionSegmenter:
         # cabinet top): a cluster of only vertical faces is a wall piece or a coarse estimate's
         # billboard.
         if up is not None:
-            normals = self._normals(points)
-            n = normals[mask & off_room]
+            if self._normal_cache is None or self._normal_cache[0] is not points:
+                self._normal_cache = (points, self._normals(points))
+            n = self._normal_cache[1][mask & off_room]
             if float(np.mean(np.abs(n @ up) > _TOP_COS)) < _MIN_TOP_SHARE:
                 return False
         return True
