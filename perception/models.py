@@ -155,8 +155,8 @@ MODELS: tuple[ModelSpec, ...] = (
         "MIT",
         "detection",
         ("centernet_mbv3_coco.onnx",),
-        "CenterNet MobileNetV3 detector, 80 COCO classes, ONNX (onnxruntime)",
-        default=True,
+        "CenterNet MobileNetV3 detector, 80 COCO classes, ONNX (onnxruntime); MIT as packaged, its training "
+        "repository states no licence (so not the task's default; the detections backend runs every detector found)",
     ),
     ModelSpec(
         "ssd-mobilenet-oid",
@@ -167,6 +167,7 @@ MODELS: tuple[ModelSpec, ...] = (
         "detection",
         ("object_detection_ssd_mobilenetv2_oidv4_fp16.tflite", "object_detection_oidv4_labelmap.txt"),
         "SSD MobileNetV2 detector, 23 Open Images indoor classes, TFLite (ai-edge-litert)",
+        default=True,
     ),
     ModelSpec(
         "deeplabv3-mnv2-pascal",

@@ -2,8 +2,8 @@
 photo, category recall and precision against a hand-made inventory of what a person sees, the
 detector's classes against the SUN RGB-D ground-truth boxes, and ``perceive`` time per photo.
 
-    .venv/bin/python -m scene_builder.bench_detect --models-dir ../shared/models
-    .venv/bin/python -m scene_builder.bench_detect --models-dir ../shared/models --segmentation depth-clusters
+    .venv/bin/python -m scene_builder.bench_detect                              # ../shared/models
+    .venv/bin/python -m scene_builder.bench_detect --segmentation depth-clusters  # the geometric chain
 
 Photos: every folder of ``../shared/data/photos`` and ``../shared/data/real`` (their depth maps
 are not given to ``perceive``). The inventory (``tests/data/photo_inventory.json``) lists, per
@@ -32,6 +32,7 @@ __all__ = ["InventoryScore", "SUN_TO_LABELS", "canonical", "load_inventory", "po
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_INVENTORY = REPO / "tests" / "data" / "photo_inventory.json"
 DEFAULT_DATA = REPO.parent / "shared" / "data"
+DEFAULT_MODELS = REPO.parent / "shared" / "models"
 
 #: SUN RGB-D box labels -> the vocabulary labels that name the same thing.
 SUN_TO_LABELS: dict[str, tuple[str, ...]] = {
@@ -185,7 +186,12 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="folder holding photos/ and real/ (default ../shared/data)")
     ap.add_argument("--inventory", type=Path, default=DEFAULT_INVENTORY)
-    ap.add_argument("--models-dir", type=Path, default=None)
+    ap.add_argument(
+        "--models-dir",
+        type=Path,
+        default=DEFAULT_MODELS if DEFAULT_MODELS.is_dir() else None,
+        help="model files (default ../shared/models when it exists, else $SCENE_BUILDER_MODELS)",
+    )
     ap.add_argument("--segmentation", default="auto", help="segmentation backend (auto, detections, depth-clusters, ...)")
     ap.add_argument("--json", type=Path, default=None, help="write the rows and scores here")
     args = ap.parse_args(argv)

@@ -54,4 +54,4 @@ def test_stage_benchmarks_run_in_their_own_process_and_are_pasted_with_their_com
     assert md[0].startswith("## Fake table") and "\n| 10 | 0.2 |\n" in md[0] and "```" not in md[0]
     assert "- command: `python -c print('N = 10 took 0.2 s')`" in md[1] and "```\nN = 10 took 0.2 s\n```" in md[1]
     assert "**Failed (exit status 1)**" in md[2] and "```" in md[2]
-    assert {e.argv[-1] for e in bench_report.EXTRAS} == {"layout.bench_solver", "generation.bench", "generation.physx.bench_tokens", "perception.bench_depth", "scene_builder.bench_perception"}
+    assert {e.argv[-1] for e in bench_report.EXTRAS} == {"layout.bench_solver", "generation.bench", "generation.physx.bench_tokens", "perception.bench_depth", "scene_builder.bench_perception", "scene_builder.bench_detect"}
