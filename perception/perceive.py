@@ -277,7 +277,9 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
         for i in todo:
             names[i] = namer.name(crops[i][0], crops[i][1], sizes[i])
     if len(todo) < len(kept):
-        backends.append(BackendUse("naming", "detector", f"{len(kept) - len(todo)} of {len(kept)} objects named by their detector class"))
+        backends.append(
+            BackendUse("naming", seg_use.backend, f"{len(kept) - len(todo)} of {len(kept)} objects named by the segmenter (a detector's class, or the classifier's where the detector was unsure)")
+        )
     # A namer that weighs no size evidence (a plug-in classifier) may leave objects as "object":
     # the size prior names those (an honest, low-confidence label is more use to generation than
     # "object"), recorded as a second naming entry. The learned namers here already combine

@@ -1,31 +1,40 @@
 """Detection-driven instances: the ``"detections"`` segmentation backend (Grounded-SAM style, with
-geometry as a second witness).
+geometry and a classifier as second witnesses).
 
-1. **Detect**: every available detector (COCO CenterNet, Open Images SSD) gives named boxes down
-   to a low score; :func:`perception.detection.merge_detections` puts them on one scale (a
-   detector's own trust score becomes :data:`~perception.detection.CONFIDENT`) and fuses boxes
-   that several detectors agree on.
-2. **Confirm**: a detection at :data:`~perception.detection.CONFIDENT` or more stands alone. A
-   weaker one (down to :data:`FLOOR_SCORE`) is kept only when geometry or the semantic map
-   confirms it: a depth cluster (:class:`perception.segment_depth.DepthClusterSegmenter`) lies
-   mostly inside its box and fills a fair part of it, or the semantic map (PASCAL DeepLab) gives
-   its family in a fair part of the box. (At its usual 0.3 the COCO detector finds a few of the
-   chairs of a classroom; at 0.12 it finds nearly all of them, with false boxes that neither
-   witness confirms.)
-3. **Masks**: each kept box prompts a box segmenter (SAM 2 when its weights are present, else
+1. **Detect**: every available detector (COCO CenterNet, Open Images SSD) gives boxes down to a
+   low score; :func:`perception.detection.merge_detections` puts them on one scale (a detector's
+   own trust score becomes :data:`~perception.detection.CONFIDENT`) and fuses boxes that several
+   detectors agree on.
+2. **Confirm** (two passes): a detection at :data:`~perception.detection.CONFIDENT` or more
+   stands alone. A weaker one (down to :data:`FLOOR_SCORE`) is kept only when geometry or the
+   semantic map confirms it among the pixels the confident ones left: a depth cluster
+   (:class:`perception.segment_depth.DepthClusterSegmenter`) lies mostly inside its box and fills
+   a fair part of it, or the semantic map (PASCAL DeepLab) gives its family in a region that fills
+   the box. (At its usual 0.3 the COCO detector finds a few of the chairs of a classroom; at 0.12
+   it finds nearly all of them, with false boxes that neither witness confirms.)
+3. **Classify** (third pass): a box of any class, even one outside the vocabulary (a night stand
+   boxed as "oven"), that nothing explains yet becomes an object when the EfficientNet classifier
+   of the naming backend is sure what it shows (:data:`_CLASSIFIER_SURE`, summed over a label
+   family); the classifier also renames an unsure detection it plainly disagrees with (the SSD
+   calls sideboards tables).
+4. **Masks**: each kept box prompts a box segmenter (SAM 2 when its weights are present, else
    GrabCut, :mod:`perception.box_segment`) with hints from depth (floor and wall pixels, pixels of
-   other depth clusters, far behind the object) and from the semantic map (its class, other
-   classes). Masks are trimmed to their main 3D clusters where depth sees the object; overlaps go
-   to the nearer object (the smaller one at equal depth); a weaker duplicate of one object in the
-   same family is dropped.
-4. **Extras**: depth clusters no detection explains become objects only when they are clear:
-   compact in the image (solid, filling their box), of a plausible height and footprint, and not
-   lying on the room. Unexplained semantic-map regions of an object class become objects the same
-   way. Everything else stays in the static background (the room), which is safe: a missed object
-   is still seen in the background's texture, an invented one is a box that is not there.
+   other depth clusters, far behind the object), from the semantic map (its class, other
+   classes) and from the better boxes already cut. Masks are trimmed to their main 3D clusters
+   where depth sees the object; overlaps go to the object in front (what lies inside another's
+   box, else the nearer, else the lower in the image); a weaker duplicate in the same family is
+   dropped.
+5. **Extras**: depth clusters no detection explains become objects only when they are clear:
+   compact in the image (solid, filling their box), of a plausible height and footprint, and of
+   3D shape with a visible top, or alone in the view (a close-up); an unclear cluster only when the
+   classifier is sure what it is. Unexplained semantic-map regions of an object class become
+   objects when they are solid and not part of a detected object. Everything else stays in the
+   static background (the room), which is safe: a missed object is still seen in the
+   background's texture, an invented one is a box that is not there.
 
-Names: each detected instance carries its detector's label (``InstanceMasks.names``); extras
-carry the semantic map's label when it has one, else ``""`` (the naming backend names them).
+Names: each instance carries its label (``InstanceMasks.names``: the detector's class, or the
+classifier's); depth extras carry the semantic map's label when it has one, else ``""`` (the
+naming backend names them). Deterministic: no random sampling (GrabCut's RNG is seeded).
 """
 
 from __future__ import annotations
@@ -36,7 +45,7 @@ import numpy as np
 
 from perception.box_segment import HINT_BACKGROUND, HINT_FOREGROUND, HINT_PROBABLY_BACKGROUND, HINT_PROBABLY_FOREGROUND, keep_main_regions
 from perception.detection import CONFIDENT, box_iou, family, merge_detections
-from perception.protocols import BoxPromptSegmenter, Detections, InstanceMasks, ObjectDetector, SemanticMap, SemanticSegmenter
+from perception.protocols import BoxPromptSegmenter, Detections, InstanceMasks, ObjectDetector, SemanticMap
 from scene_builder.model import BackendUse, CameraIntrinsics
 
 __all__ = ["DetectionSegmenter", "FLOOR_SCORE", "NamedBackend"]

@@ -22,6 +22,7 @@ from perception.protocols import Detections
 from scene_builder.config import PerceptionConfig
 from scene_builder.vocabulary import LABELS
 from tests.conftest import MODELS, PHOTOS, require
+from tests.test_learned_sam2 import tiny_sam  # noqa: F401  (fixture)
 
 
 def _rgb(name: str) -> np.ndarray:
@@ -243,3 +244,21 @@ def test_registries_offer_detections_only_with_a_detector(tmp_path):
     assert use.backend == "detections" and seg.accepts_gravity
     assert [d.name for d in seg.detectors] == ["centernet-mbv3-coco", "ssd-mobilenet-oid"]
     assert seg.semantic is not None and seg.semantic.name == "deeplabv3-mnv2-pascal"
+
+
+@pytest.mark.slow
+def test_sam2_answers_box_prompts_when_its_weights_are_there(tiny_sam, tmp_path):
+    """Grounded-SAM: with SAM 2 weights in the models dir, detector boxes prompt SAM 2 (a
+    randomly initialised tiny model exercises the loading and prompting code)."""
+    import shutil
+
+    from perception.backends import build_registries
+
+    shutil.copytree(tiny_sam, tmp_path / "sam2-hiera-tiny")
+    reg = build_registries(PerceptionConfig(models_dir=tmp_path))
+    seg, use = reg.box_prompt.resolve()
+    assert use.backend == "sam2"
+    rgb = np.random.default_rng(0).integers(0, 255, (61, 87, 3), dtype=np.uint8)
+    masks = seg.segment_boxes(rgb, np.array([[5.0, 5.0, 40.0, 30.0], [0.0, 0.0, 86.0, 60.0]]))
+    assert masks.shape == (2, 61, 87) and masks.dtype == bool
+    assert seg.segment_boxes(rgb, np.zeros((0, 4))).shape == (0, 61, 87)
