@@ -93,7 +93,7 @@ def stand_on_contacts(
     max_depth_m: float = 10.0,
     boxes_xyxy_px: np.ndarray | None = None,
     walls=(),
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[int, ...]]:
     """Object depth for the named instances the estimated depth does not see.
 
     depth_m: (H, W) estimated depth; valid, background: (H, W) bool; labels: (H, W) instance ids
@@ -112,7 +112,7 @@ def stand_on_contacts(
     its contact).
 
     Returns the object depth (H, W) float32, valid, background and labels updated for the
-    lifted instances, and how many were lifted.
+    lifted instances, and the ids of the lifted instances.
     """
     depth = np.asarray(depth_m, dtype=np.float64).copy()
     valid = valid.copy()
@@ -126,7 +126,7 @@ def stand_on_contacts(
     # Floor-standing things first, nearest (lowest in the image) first: an occluder is placed
     # before what it hides, and what stands on things looks for its support under its outline.
     ids.sort(key=lambda i: (not category(names[i - 1]).on_floor, -lowest[i], i))
-    lifted = 0
+    lifted: list[int] = []
     for inst in ids:
         mask = labels == inst
         area = int(mask.sum())
@@ -211,5 +211,5 @@ def stand_on_contacts(
         depth[rr[good], cc[good]] = z_face[good]
         valid[rr[good], cc[good]] = True
         background[rr, cc] = False
-        lifted += 1
-    return depth.astype(np.float32), valid, background, labels, lifted
+        lifted.append(inst)
+    return depth.astype(np.float32), valid, background, labels, tuple(sorted(lifted))

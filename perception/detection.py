@@ -28,6 +28,7 @@ __all__ = [
     "empty_detections",
     "family",
     "merge_detections",
+    "refine_in_family",
     "suppress",
 ]
 
@@ -175,7 +176,8 @@ def merge_detections(parts: list[tuple[Detections, float]], iou_threshold: float
     detector's ``accept_score`` becomes :data:`CONFIDENT` (clipped to [0, 1]). Boxes of one label
     family from different detectors that overlap by ``iou_threshold`` are one object seen twice:
     the best box stays, with the label of the best score and the noisy-or of the scores
-    (agreement of independent detectors is evidence). The result is sorted by score.
+    (agreement of independent detectors is evidence). Boxes of different families that overlap by
+    IoU 0.8 are one object named twice: the better-scored stays. The result is sorted by score.
     """
     boxes, scores, labels, classes, source = [], [], [], [], []
     for k, (d, accept) in enumerate(parts):
@@ -210,4 +212,30 @@ def merge_detections(parts: list[tuple[Detections, float]], iou_threshold: float
         fused.append(1.0 - p_not)
     merged = Detections(b[keep], np.asarray(fused, dtype=np.float32), tuple(labels[i] for i in keep), tuple(classes[i] for i in keep))
     order2 = sorted(range(len(keep)), key=lambda i: (-float(merged.scores[i]), i))
-    return _take(merged, np.asarray(order2, dtype=np.int64))
+    # Nearly the same box named differently by two detectors (a bed as "couch" and "Table"):
+    # one object, the better-scored name.
+    return suppress(_take(merged, np.asarray(order2, dtype=np.int64)), iou_threshold=1.01, across_families=0.8)
+
+
+#: Within a detector's family, another member replaces its label when the size-aware namer's
+#: posterior for it is this many times the label's.
+REFINE_RATIO = 2.0
+
+
+def refine_in_family(namer, names: list[tuple[str, float]], crops: list[tuple[np.ndarray, np.ndarray]], sizes: list[tuple[float, float, float]]) -> list[tuple[str, float]]:
+    """Detector names refined within their family by a namer that weighs size and appearance
+    (``label_scores_many``: EfficientNet-Lite0 with the size prior): a member of the family whose
+    posterior is :data:`REFINE_RATIO` times the detector label's replaces it. names: (label,
+    score) per object; crops: (crop_rgb, crop_mask) per object; sizes: gravity-aligned extents.
+    Names of single-member families, and all names when the namer has no posterior, stay."""
+    idx = [i for i, (lab, _) in enumerate(names) if len(family(lab)) > 1]
+    if not idx or not hasattr(namer, "label_scores_many"):
+        return list(names)
+    post = namer.label_scores_many([crops[i][0] for i in idx], [crops[i][1] for i in idx], [sizes[i] for i in idx])
+    out = list(names)
+    for i, p in zip(idx, post):
+        lab, score = names[i]
+        best = max(sorted(family(lab)), key=lambda m: p.get(m, 0.0))
+        if best != lab and p.get(best, 0.0) >= REFINE_RATIO * max(p.get(lab, 0.0), 1e-9):
+            out[i] = (best, score)
+    return out

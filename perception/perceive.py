@@ -188,15 +188,19 @@ def _fill_silhouettes(kept: list[tuple[np.ndarray, np.ndarray]], labels: np.ndar
     return out
 
 
+def _instance_id(mask: np.ndarray, labels: np.ndarray) -> int:
+    """The instance of ``labels`` under ``mask`` ((H, W) bool; silhouettes add unlabelled pixels),
+    0 if none."""
+    ids = labels[mask]
+    ids = ids[ids > 0]
+    return int(np.bincount(ids).argmax()) if len(ids) else 0
+
+
 def _given_name(mask: np.ndarray, labels: np.ndarray, masks: InstanceMasks) -> tuple[str, float] | None:
     """(label, score) the segmenter gave the instance under ``mask`` ((H, W) bool), or None."""
     given = getattr(masks, "names", None)
-    ids = labels[mask]
-    ids = ids[ids > 0]
-    if given is None or len(ids) == 0:
-        return None
-    inst = int(np.bincount(ids).argmax())
-    if inst > len(given) or not given[inst - 1]:
+    inst = _instance_id(mask, labels)
+    if given is None or inst == 0 or inst > len(given) or not given[inst - 1]:
         return None
     return given[inst - 1], float(masks.scores[inst - 1])
 
@@ -229,6 +233,7 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
         raise InputError(f"segmentation backend '{seg_use.backend}' returned masks of shape {labels.shape} for a {depth_m.shape} image; choose another --segmentation-backend")
     backends.extend(getattr(segmenter, "uses", ()))
     given_names = getattr(masks, "names", None)
+    lifted: tuple[int, ...] = ()
     if given_names is not None and depth_source != "sensor" and frame.floor_found:
         # Estimated depth may put a detected object on the room's planes: it stands at its floor contact.
         from perception.contact import stand_on_contacts
@@ -240,7 +245,7 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
         if lifted:
             points_cam = k.unproject(obj_depth)
             frame = dataclasses.replace(frame, background=background)
-            backends.append(BackendUse("placement", "floor-contact", f"{lifted} detected objects the estimated depth missed stand at their floor contact"))
+            backends.append(BackendUse("placement", "floor-contact", f"{len(lifted)} detected objects the estimated depth missed stand at their floor contact"))
 
     kept, behind_walls = _select_instances(labels, points_cam, valid, frame, k, config, geometric)
     kept = _fill_silhouettes(kept, labels, frame.background | ~valid)
@@ -277,6 +282,15 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
         for i in todo:
             names[i] = namer.name(crops[i][0], crops[i][1], sizes[i])
     if len(todo) < len(kept):
+        # A detector's class names a kind of thing (a seat or bed, a table or desk); the size and
+        # the classifier pick the member of its family (a sleigh bed the detector calls a couch).
+        from perception.detection import refine_in_family
+
+        # (Not for objects stood on their floor contact: their depth, so their size, is a guess.)
+        given = [i for i in range(len(kept)) if i not in todo and _instance_id(kept[i][0], labels) not in lifted]
+        refined = refine_in_family(namer, [names[i] for i in given], [crops[i] for i in given], [sizes[i] for i in given])
+        for i, n in zip(given, refined):
+            names[i] = n
         backends.append(
             BackendUse("naming", seg_use.backend, f"{len(kept) - len(todo)} of {len(kept)} objects named by the segmenter (a detector's class, or the classifier's where the detector was unsure)")
         )

@@ -58,8 +58,8 @@ _CLUSTER_INSIDE = 0.6
 _CLUSTER_COVER = 0.12
 #: The semantic map confirms a box when its family covers this share of the box.
 _SEMANTIC_COVER = 0.15
-#: A box's depth hints are used only when depth leaves this share of it off the room planes
-#: (estimated depth that does not see the object at all says nothing about its outline).
+#: A box's depth hints are used only when depth leaves this share of its pixels with depth off
+#: the room planes (estimated depth that does not see the object says nothing about its outline).
 _DEPTH_SEES = 0.25
 #: Pixels this far (metres) behind an object's median depth are probably background.
 _BEHIND_M = 0.6
@@ -277,7 +277,7 @@ class DetectionSegmenter:
                 batch = self._confirm(dets, stage == "strong", clusters, sem_labels, claimed, h, w)
             self._outline(rgb, batch, depth_m, valid, background, clusters, sem_labels, points, focal, claimed)
             batch = [c for c in batch if c.mask is not None and c.mask.sum() >= max(30, self.min_points // 3)]
-            cands = self._drop_duplicates(cands + batch)
+            cands = self._drop_duplicates(self._merge_parts(cands + batch, points, valid & ~background, focal))
             claimed = np.zeros((h, w), dtype=bool)
             for c in cands:
                 claimed |= c.mask
@@ -379,7 +379,9 @@ class DetectionSegmenter:
         off_room = valid & ~background
         for c in cands:
             rs, cs = _box_slices(c.box, *depth_m.shape)
-            c.depth_sees = bool(off_room[rs, cs].mean() >= _DEPTH_SEES)
+            # Share of the box's pixels with depth (sparse sensor depth has few) off the room.
+            seen = int(valid[rs, cs].sum())
+            c.depth_sees = bool(seen >= 0.05 * off_room[rs, cs].size and off_room[rs, cs].sum() >= _DEPTH_SEES * seen)
         if getattr(seg, "accepts_hints", False):
             taken = claimed.copy()
             order = sorted(range(len(cands)), key=lambda i: (-cands[i].score, i))
@@ -397,7 +399,7 @@ class DetectionSegmenter:
                 masks[i] = masks[i] & ~(self._hint(c, depth_m, valid, background, clusters, sem_labels) == HINT_BACKGROUND)
         for c, m in zip(cands, masks):
             m = np.asarray(m, dtype=bool)
-            if c.depth_sees:
+            if c.depth_sees and m.any() and valid[m].mean() >= 0.5:  # sparse depth: no 3D trim
                 m = self._trim_3d(m, points, off_room, focal)
             c.mask = m
 
@@ -414,9 +416,9 @@ class DetectionSegmenter:
             box_off = valid[rs, cs] & ~background[rs, cs]
             sub[valid[rs, cs] & background[rs, cs]] = HINT_PROBABLY_BACKGROUND
             d = depth_m[rs, cs]
-            if c.cluster > 0:
-                own = clusters[rs, cs] == c.cluster
-                ref = float(np.median(d[own]))
+            own = (clusters[rs, cs] == c.cluster) if c.cluster > 0 else np.zeros_like(box_off)
+            if (own & box_off).any():
+                ref = float(np.median(d[own & box_off]))
                 sub[own] = HINT_PROBABLY_FOREGROUND
             else:
                 ref = float(np.percentile(d[box_off], 30)) if box_off.any() else np.inf
@@ -449,6 +451,41 @@ class DetectionSegmenter:
         out = mask.copy().ravel()
         out[drop] = False
         return keep_main_regions(out.reshape(mask.shape), share=0.1)
+
+    def _merge_parts(self, cands: list[_Candidate], points, off_room, focal: float) -> list[_Candidate]:
+        """Two boxes of one family, one inside the other, whose masks depth joins into one
+        connected 3D piece are one object cut in two (a bed boxed whole and by its headboard,
+        each box cut with the other's pixels taken): one candidate, the stronger's, with both
+        masks. Without depth that sees both, nothing is merged."""
+        from perception.segment_depth import cluster_points
+
+        order = sorted(range(len(cands)), key=lambda i: (-cands[i].score, i))
+        gone: set[int] = set()
+        for a in order:
+            if a in gone or not cands[a].depth_sees:
+                continue
+            for b in order:
+                ca, cb = cands[a], cands[b]
+                if b == a or b in gone or not cb.depth_sees or cb.label not in family(ca.label):
+                    continue
+                lt, rb = np.maximum(ca.box[:2], cb.box[:2]), np.minimum(ca.box[2:], cb.box[2:])
+                inter = float(np.prod(np.clip(rb - lt, 0.0, None)))
+                if inter < 0.7 * min(float(np.prod(ca.box[2:] - ca.box[:2])), float(np.prod(cb.box[2:] - cb.box[:2]))):
+                    continue
+                pa, pb = ca.mask & off_room, cb.mask & off_room
+                if pa.sum() < self.min_points or pb.sum() < self.min_points:
+                    continue
+                union = pa | pb
+                lab = cluster_points(points[union], focal)
+                main = int(np.bincount(lab).argmax())
+                in_main = np.zeros(union.shape, dtype=bool)
+                in_main[union] = lab == main
+                if in_main.sum() < 0.8 * union.sum() or (in_main & pa).sum() < 0.5 * pa.sum() or (in_main & pb).sum() < 0.5 * pb.sum():
+                    continue
+                ca.mask = ca.mask | cb.mask
+                ca.box = np.concatenate([np.minimum(ca.box[:2], cb.box[:2]), np.maximum(ca.box[2:], cb.box[2:])])
+                gone.add(b)
+        return [c for i, c in enumerate(cands) if i not in gone]
 
     def _drop_duplicates(self, cands: list[_Candidate]) -> list[_Candidate]:
         """Of two masks of one family where one lies mostly inside the other, the weaker goes."""

@@ -71,3 +71,17 @@ def test_photos_match_the_inventory(perceived):
     scores = pooled([score_inventory(perceived[n], seen[n], groups) for n in sorted(perceived)])
     assert scores["category_recall"] >= 0.5 and scores["category_precision"] >= 0.5, scores
     assert scores["instance_recall"] >= 0.5 and scores["instance_precision"] >= 0.5, scores
+
+
+@pytest.mark.slow
+def test_detection_driven_perception_is_deterministic():
+    import numpy as np
+
+    from perception import perceive
+
+    require(MODELS)
+    spec, cfg = InputSpec(require(PHOTOS / "sunrgbd_total3d_demo_3") / "rgb.jpg"), PerceptionConfig(models_dir=MODELS)
+    a, b = perceive(spec, cfg), perceive(spec, cfg)
+    assert [o.name for o in a.objects] == [o.name for o in b.objects] and len(a.objects) >= 3
+    for x, y in zip(a.objects, b.objects):
+        assert np.array_equal(x.mask, y.mask) and np.array_equal(x.points_world_m, y.points_world_m)

@@ -201,16 +201,16 @@ def test_detected_object_stands_at_its_floor_contact():
     labels = np.zeros((h, w), dtype=np.int32)
     labels[150:200, 140:180] = 1  # bottom row 199: the ray v = 199.5 meets the floor at z = 1.5 f / (199.5 - 120)
     out, valid, bg, _, lifted = stand_on_contacts(depth, np.ones((h, w), bool), background, labels, ("chair",), world_from_camera, k)
-    assert lifted == 1
+    assert lifted == (1,)
     expect = 1.5 * f / (199.5 - 120)
     assert np.allclose(out[labels == 1], expect, rtol=1e-3)
     assert not bg[labels == 1].any() and bg[labels == 0].all()
     assert np.array_equal(out[labels == 0], depth[labels == 0])
     # An undetected instance ("") and one the estimate sees are left alone.
     out2, _, _, _, lifted2 = stand_on_contacts(depth, np.ones((h, w), bool), background, labels, ("",), world_from_camera, k)
-    assert lifted2 == 0 and np.array_equal(out2, depth)
+    assert lifted2 == () and np.array_equal(out2, depth)
     out3, _, _, _, lifted3 = stand_on_contacts(depth, np.ones((h, w), bool), np.zeros((h, w), bool), labels, ("chair",), world_from_camera, k)
-    assert lifted3 == 0
+    assert lifted3 == ()
     # The cut kept only the top of a cabinet (rows 150..179); the detector's box reaches the floor
     # at row 199: the cabinet stands there and its mask grows down to it through free pixels.
     seat = np.where(labels == 1, 1, 0)
@@ -218,7 +218,7 @@ def test_detected_object_stands_at_its_floor_contact():
     seat[185:200, 100:140] = 2  # another object beside, not under it
     box = np.array([[140.0, 150.0, 180.0, 200.0], [np.nan] * 4])
     out4, _, _, grown, lifted4 = stand_on_contacts(depth, np.ones((h, w), bool), background, seat, ("cabinet", ""), world_from_camera, k, boxes_xyxy_px=box)
-    assert lifted4 == 1
+    assert lifted4 == (1,)
     assert (grown == 1).sum() == (labels == 1).sum() and (grown == 2).sum() == 15 * 40
     assert np.allclose(out4[grown == 1], expect, rtol=1e-3)
 
