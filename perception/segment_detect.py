@@ -184,6 +184,12 @@ def _separated_share(mask: np.ndarray, depth_m: np.ndarray, valid: np.ndarray, r
     return float(apart.mean())
 
 
+def _inside(box: np.ndarray, other: np.ndarray, share: float = 0.7) -> bool:
+    """Whether ``share`` of ``box`` (4,) lies inside ``other`` (4,)."""
+    ix = max(0.0, min(box[2], other[2]) - max(box[0], other[0])) * max(0.0, min(box[3], other[3]) - max(box[1], other[1]))
+    return ix >= share * max((box[2] - box[0]) * (box[3] - box[1]), 1e-9)
+
+
 def _solidity(mask: np.ndarray) -> float:
     """Area of ``mask`` over the area of its convex hull (1 for a convex blob)."""
     import cv2
@@ -383,15 +389,20 @@ class DetectionSegmenter:
             seen = int(valid[rs, cs].sum())
             c.depth_sees = bool(seen >= 0.05 * off_room[rs, cs].size and off_room[rs, cs].sum() >= _DEPTH_SEES * seen)
         if getattr(seg, "accepts_hints", False):
-            taken = claimed.copy()
             order = sorted(range(len(cands)), key=lambda i: (-cands[i].score, i))
-            masks = [None] * len(cands)
-            for i in order:
+            masks: list[np.ndarray | None] = [None] * len(cands)
+            for n, i in enumerate(order):
                 c = cands[i]
                 hint = self._hint(c, depth_m, valid, background, clusters, sem_labels)
+                # What a better box took is probably not this one's, unless this box lies (half)
+                # inside that one's and names another kind of thing (a coffee table in front of
+                # a sofa, a book on a bed): then it may be in front of it or on it.
+                taken = claimed.copy()
+                for j in order[:n]:
+                    if not (_inside(c.box, cands[j].box, 0.5) and cands[j].label not in family(c.label)):
+                        taken |= masks[j]
                 hint[taken & (hint >= 0)] = HINT_PROBABLY_BACKGROUND
                 masks[i] = seg.segment_boxes(rgb, c.box[None], hints=hint[None])[0]
-                taken |= masks[i]
         else:
             masks = list(np.asarray(seg.segment_boxes(rgb, np.stack([c.box for c in cands])), dtype=bool))
             for i, c in enumerate(cands):
@@ -416,10 +427,23 @@ class DetectionSegmenter:
             box_off = valid[rs, cs] & ~background[rs, cs]
             sub[valid[rs, cs] & background[rs, cs]] = HINT_PROBABLY_BACKGROUND
             d = depth_m[rs, cs]
-            own = (clusters[rs, cs] == c.cluster) if c.cluster > 0 else np.zeros_like(box_off)
+            cl = clusters[rs, cs]
+            mine = c.cluster
+            if mine == 0 and (cl > 0).any():
+                # No witness cluster (a confident box): the cluster that fills most of the box
+                # among those lying mostly inside it (not the desk a chair's box cuts into).
+                inside = np.bincount(cl.ravel(), minlength=int(clusters.max()) + 1)
+                total = np.bincount(clusters.ravel(), minlength=len(inside))
+                inside[0] = 0
+                inside[inside < 0.5 * np.maximum(total, 1)] = 0
+                mine = int(inside.argmax()) if inside.max() > 0 else 0
+            own = (cl == mine) if mine > 0 else np.zeros_like(box_off)
             if (own & box_off).any():
                 ref = float(np.median(d[own & box_off]))
                 sub[own] = HINT_PROBABLY_FOREGROUND
+                # Other depth clusters in the box are other things (a coffee table in front of
+                # the sofa): probably background.
+                sub[(cl > 0) & ~own] = HINT_PROBABLY_BACKGROUND
             else:
                 ref = float(np.percentile(d[box_off], 30)) if box_off.any() else np.inf
             sub[valid[rs, cs] & (d > ref + _BEHIND_M)] = HINT_PROBABLY_BACKGROUND
@@ -543,12 +567,9 @@ class DetectionSegmenter:
         sees both (0.3 m apart), else the lower box bottom in the image (for things on one floor,
         the nearer one reaches lower), else the smaller mask."""
 
-        def inside(x: np.ndarray, y: np.ndarray) -> bool:
-            ix = max(0.0, min(x[2], y[2]) - max(x[0], y[0])) * max(0.0, min(x[3], y[3]) - max(x[1], y[1]))
-            return ix >= 0.8 * max((x[2] - x[0]) * (x[3] - x[1]), 1e-9)
-
-        if inside(a.box, b.box) != inside(b.box, a.box):
-            return inside(a.box, b.box)
+        a_in, b_in = _inside(a.box, b.box, 0.8), _inside(b.box, a.box, 0.8)
+        if a_in != b_in:
+            return a_in
         if np.isfinite(med_a) and np.isfinite(med_b) and abs(med_a - med_b) > 0.3:
             return med_a < med_b
         if abs(a.box[3] - b.box[3]) > 4:

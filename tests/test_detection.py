@@ -78,6 +78,29 @@ def test_box_iou_suppress_and_merge():
     fused = m.labels.index("table")
     assert m.scores[fused] == pytest.approx(1 - (1 - CONFIDENT) * (1 - 0.25), abs=1e-6)
     assert m.scores[m.labels.index("chair")] == pytest.approx(CONFIDENT)
+    # One bed boxed as a couch by one detector and as a table by the other: kept once.
+    couch = _det([[180, 149, 636, 518]], [0.26], ["sofa"])
+    table = _det([[180, 160, 637, 510]], [0.3], ["table"])
+    m = merge_detections([(couch, 0.3), (table, 0.5)])
+    assert m.labels == ("sofa",)
+
+
+def test_family_refinement_follows_a_size_aware_posterior():
+    from perception.detection import refine_in_family
+
+    class Posterior:
+        """The size-aware namer's answer for two objects (a bed and a real sofa)."""
+
+        def label_scores_many(self, crops, masks, sizes):
+            return [{"bed": 0.6, "sofa": 0.2, "chair": 0.2}, {"bed": 0.3, "sofa": 0.4, "chair": 0.3}][: len(crops)]
+
+    crop = (np.zeros((4, 4, 3), np.uint8), np.ones((4, 4), bool))
+    names = [("sofa", 0.4), ("sofa", 0.7), ("chair", 0.9)]
+    out = refine_in_family(Posterior(), names, [crop] * 3, [(2.0, 1.5, 0.6)] * 3)
+    # The first is a bed (three times the posterior), the second stays a sofa (not twice as
+    # likely a bed), the chair's family has one member: it is not asked about.
+    assert out == [("bed", 0.4), ("sofa", 0.7), ("chair", 0.9)]
+    assert refine_in_family(object(), names, [crop] * 3, [(1.0, 1.0, 1.0)] * 3) == names
 
 
 def test_ssd_anchors_follow_the_object_detection_api_layout():
