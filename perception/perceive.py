@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+import dataclasses
 
 import numpy as np
 
@@ -188,6 +189,23 @@ def _fill_silhouettes(kept: list[tuple[np.ndarray, np.ndarray]], labels: np.ndar
     return out
 
 
+def _instance_id(mask: np.ndarray, labels: np.ndarray) -> int:
+    """The instance of ``labels`` under ``mask`` ((H, W) bool; silhouettes add unlabelled pixels),
+    0 if none."""
+    ids = labels[mask]
+    ids = ids[ids > 0]
+    return int(np.bincount(ids).argmax()) if len(ids) else 0
+
+
+def _given_name(mask: np.ndarray, labels: np.ndarray, masks: InstanceMasks) -> tuple[str, float] | None:
+    """(label, score) the segmenter gave the instance under ``mask`` ((H, W) bool), or None."""
+    given = getattr(masks, "names", None)
+    inst = _instance_id(mask, labels)
+    if given is None or inst == 0 or inst > len(given) or not given[inst - 1]:
+        return None
+    return given[inst - 1], float(masks.scores[inst - 1])
+
+
 def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step: Callable[[str], None] | None = None) -> Perception:
     """Load and check the input, find gravity, floor, walls and the objects.
 
@@ -221,6 +239,21 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     labels = np.asarray(masks.labels)
     if labels.shape != depth_m.shape:
         raise InputError(f"segmentation backend '{seg_use.backend}' returned masks of shape {labels.shape} for a {depth_m.shape} image; choose another --segmentation-backend")
+    backends.extend(getattr(segmenter, "uses", ()))
+    given_names = getattr(masks, "names", None)
+    lifted: tuple[int, ...] = ()
+    if given_names is not None and depth_source != "sensor" and frame.floor_found:
+        # Estimated depth may put a detected object on the room's planes: it stands at its floor contact.
+        from perception.contact import stand_on_contacts
+
+        obj_depth, valid, background, labels, lifted = stand_on_contacts(
+            depth_m, valid, frame.background, labels, given_names, frame.world_from_camera, k, config.max_depth_m,
+            getattr(masks, "boxes_xyxy_px", None), frame.room.walls,
+        )
+        if lifted:
+            points_cam = k.unproject(obj_depth)
+            frame = dataclasses.replace(frame, background=background)
+            backends.append(BackendUse("placement", "floor-contact", f"{len(lifted)} detected objects the estimated depth missed stand at their floor contact"))
 
     kept, behind_walls = _select_instances(labels, points_cam, valid, frame, k, config, geometric)
     kept = _fill_silhouettes(kept, labels, frame.background | ~valid)
@@ -248,10 +281,28 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     points_world = [transform_points(frame.world_from_camera, points_cam[pix]) for _, pix in kept]
     sizes = [gravity_aligned_size(p) for p in points_world]
     crops = [_crop(loaded.rgb, mask) for mask, _ in kept]
-    if hasattr(namer, "name_many"):  # a learned namer runs all crops in one batch
-        names = namer.name_many([c for c, _ in crops], [m for _, m in crops], sizes)
+    # Names the segmenter knows (a detector's class) come first; the naming backend names the rest.
+    names: list[tuple[str, float] | None] = [_given_name(mask, labels, masks) for mask, _ in kept]
+    todo = [i for i, n in enumerate(names) if n is None]
+    if todo and hasattr(namer, "name_many"):  # a learned namer runs all crops in one batch
+        for i, n in zip(todo, namer.name_many([crops[i][0] for i in todo], [crops[i][1] for i in todo], [sizes[i] for i in todo])):
+            names[i] = n
     else:
-        names = [namer.name(c, m, s) for (c, m), s in zip(crops, sizes)]
+        for i in todo:
+            names[i] = namer.name(crops[i][0], crops[i][1], sizes[i])
+    if len(todo) < len(kept):
+        # A detector's class names a kind of thing (a seat or bed, a table or desk); the size and
+        # the classifier pick the member of its family (a sleigh bed the detector calls a couch).
+        from perception.detection import refine_in_family
+
+        # (Not for objects stood on their floor contact: their depth, so their size, is a guess.)
+        given = [i for i in range(len(kept)) if i not in todo and _instance_id(kept[i][0], labels) not in lifted]
+        refined = refine_in_family(namer, [names[i] for i in given], [crops[i] for i in given], [sizes[i] for i in given])
+        for i, n in zip(given, refined):
+            names[i] = n
+        backends.append(
+            BackendUse("naming", seg_use.backend, f"{len(kept) - len(todo)} of {len(kept)} objects named by the segmenter (a detector's class, or the classifier's where the detector was unsure)")
+        )
     # A namer that weighs no size evidence (a plug-in classifier) may leave objects as "object":
     # the size prior names those (an honest, low-confidence label is more use to generation than
     # "object"), recorded as a second naming entry. The learned namers here already combine
@@ -259,7 +310,8 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     named_by_prior = 0
     if name_use.backend != "geometric-prior":
         prior = GeometricPriorNamer()
-        for i, ((c, m), s) in enumerate(zip(crops, sizes)):
+        for i in todo:
+            (c, m), s = crops[i], sizes[i]
             if names[i][0] == "object" and (guess := prior.name(c, m, s))[0] != "object":
                 names[i] = guess
                 named_by_prior += 1

@@ -61,7 +61,7 @@ from typing import Protocol
 
 import numpy as np
 
-from perception.protocols import DepthEstimate
+from perception.protocols import DepthEstimate, Detections
 from scene_builder.errors import InputError
 from scene_builder.model import CameraIntrinsics
 
@@ -444,16 +444,6 @@ HEIGHT_CATEGORIES = frozenset({"chair", "sofa", "toilet", "refrigerator"})
 BACK_HEIGHT_M = {"bed": 1.1, "sofa": 0.85}
 
 
-@dataclass(frozen=True, eq=False)
-class Detections:
-    """A box detector's answer for one image. boxes_xyxy_px: (K, 4) float (x0, y0, x1, y1) in the
-    pixels of the image it was given; labels: K class names; scores: (K,) float in [0, 1]."""
-
-    boxes_xyxy_px: np.ndarray
-    labels: tuple[str, ...]
-    scores: np.ndarray
-
-
 class BoxDetector(Protocol):
     """Named boxes in a photo (a learned detector; optional for single-view depth)."""
 
@@ -777,7 +767,9 @@ class SingleViewDepth:
         out: list[PlacedBox] = []
         if boxes is None:
             return out
-        for (x0, y0, x1, y1), lab, score in zip(np.asarray(boxes.boxes_xyxy_px, dtype=np.float64), boxes.labels, boxes.scores):
+        # The detector's own class names (COCO's "couch", "potted plant"), vocabulary labels otherwise.
+        names = getattr(boxes, "classes", None) or boxes.labels
+        for (x0, y0, x1, y1), lab, score in zip(np.asarray(boxes.boxes_xyxy_px, dtype=np.float64), names, boxes.scores):
             name = BOX_CATEGORIES.get(str(lab))
             if name is None or score < self.min_box_score:
                 continue

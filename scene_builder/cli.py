@@ -61,7 +61,12 @@ def _add_build_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--models-dir", type=Path, help="folder with learned model weights (also $SCENE_BUILDER_MODELS)")
     p.add_argument("--depth-backend", default="auto", help="depth backend when no depth map is given (default auto; see `models list`)")
-    p.add_argument("--segmentation-backend", default="auto", help="instance segmentation backend (default auto)")
+    p.add_argument(
+        "--segmentation-backend",
+        default="auto",
+        help="instance segmentation backend: detections (offline detectors in the models dir), sam2, depth-clusters "
+        "(default auto: the first available)",
+    )
     p.add_argument("--settle-s", type=_positive, default=3.0, help="seconds of simulation in the stability check (default 3)")
     p.add_argument("--adopt-settled", action="store_true", help="write the poses after the settle simulation instead of the solved ones")
     p.add_argument("--no-usd", action="store_true", help="skip scene.usda")

@@ -56,5 +56,5 @@ def test_stage_benchmarks_run_in_their_own_process_and_are_pasted_with_their_com
     assert "**Failed (exit status 1)**" in md[2] and "```" in md[2]
     assert {e.argv[e.argv.index("-m") + 1] for e in report.EXTRAS} == {
         "scene_builder.bench.solver", "scene_builder.bench.assets", "scene_builder.bench.tokens", "scene_builder.bench.depth",
-        "scene_builder.bench.perception", "scene_builder.bench.single_photo",
+        "scene_builder.bench.perception", "scene_builder.bench.single_photo", "scene_builder.bench.detect",
     }

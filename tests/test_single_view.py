@@ -162,10 +162,10 @@ def test_detected_beds_stand_on_the_floor():
     0.289 -> 0.052 and 0.328 -> 0.132)."""
     pytest.importorskip("onnxruntime")
     from scene_builder.bench.depth import score_depth
-    from perception.learned.centernet import CenterNetDetector
+    from perception.learned.detectors import CenterNetCocoDetector
     from tests.conftest import MODELS
 
-    det = CenterNetDetector(require(MODELS / "centernet_mbv3_coco.onnx"))
+    det = CenterNetCocoDetector(require(MODELS / "centernet_mbv3_coco.onnx"))
     for name in ("sunrgbd_imvotenet_000003", "sunrgbd_imvotenet_000004"):
         rgb, gt, k, _ = _load(name)
         plain = score_depth(SingleViewDepth().estimate(rgb, k).depth_m, gt).absrel

@@ -51,9 +51,9 @@ def register_backends(depth: Registry, segmentation: Registry, naming: Registry,
         det_path = models.resolve_weights("centernet-mbv3-coco", models_dir)
         if det_path is None:
             return SingleViewDepth()
-        from perception.learned.centernet import CenterNetDetector
+        from perception.learned.detectors import CenterNetCocoDetector
 
-        return SingleViewDepth(detector=CenterNetDetector(det_path))
+        return SingleViewDepth(detector=CenterNetCocoDetector(det_path))
 
     def make_sam2():
         from perception.learned.sam2 import Sam2Segmenter
@@ -95,3 +95,87 @@ def register_backends(depth: Registry, segmentation: Registry, naming: Registry,
         available=_eff_ok,
         description="EfficientNet-Lite0 ImageNet classifier mapped to the project vocabulary",
     )
+
+
+def register_detection_backends(detection: Registry, semantic: Registry, box_prompt: Registry, config: PerceptionConfig) -> None:
+    """Register the offline detectors, the semantic segmenter and SAM 2 box prompts (lazy
+    factories; availability says why not, in one line).
+
+    detection: ``"centernet-mbv3-coco"`` (priority 100) and ``"ssd-mobilenet-oid"`` (priority 50),
+    each when its file resolves through the model registry (the ``"detections"`` segmenter runs
+    every available one). semantic: ``"deeplabv3-mnv2-pascal"`` (priority 50).
+    box_prompt: ``"sam2"`` (priority 100, when its weights resolve locally; GrabCut is the
+    always-available fallback registered by ``perception.backends``).
+    """
+    from perception import models
+
+    models_dir = config.models_dir
+
+    def weights(name: str) -> Path:
+        path = models.resolve_weights(name, models_dir)
+        if path is None:
+            from scene_builder.errors import ModelUnavailableError
+
+            raise ModelUnavailableError(models.unavailable_reason(name, models_dir) or f"{name} is not available")
+        return path
+
+    def make_centernet():
+        from perception.learned.detectors import CenterNetCocoDetector
+
+        return CenterNetCocoDetector(weights("centernet-mbv3-coco"))
+
+    def make_ssd():
+        from perception.learned.detectors import SsdOidDetector
+
+        return SsdOidDetector(weights("ssd-mobilenet-oid"))
+
+    def make_deeplab():
+        from perception.learned.detectors import DeepLabPascalSegmenter
+
+        return DeepLabPascalSegmenter(weights("deeplabv3-mnv2-pascal"))
+
+    sam_name = models.default_model("segmentation").name
+
+    def make_sam2_boxes():
+        from perception.learned.sam2 import Sam2Segmenter
+
+        sam = Sam2Segmenter(weights(sam_name))
+        if hasattr(sam, "segment_boxes"):
+            return sam
+        return _Sam2BoxPrompts(sam)
+
+    for name, factory, priority, what in (
+        ("centernet-mbv3-coco", make_centernet, 100, "CenterNet MobileNetV3, 80 COCO classes (onnxruntime)"),
+        ("ssd-mobilenet-oid", make_ssd, 50, "SSD MobileNetV2, Open Images indoor classes incl. desk and table (TFLite)"),
+    ):
+        detection.register(name, factory, priority=priority, available=lambda n=name: models.unavailable_reason(n, models_dir), description=what)
+    semantic.register(
+        "deeplabv3-mnv2-pascal",
+        make_deeplab,
+        priority=50,
+        available=lambda: models.unavailable_reason("deeplabv3-mnv2-pascal", models_dir),
+        description="DeepLab v3 MobileNetV2, PASCAL VOC classes (TFLite)",
+    )
+    box_prompt.register(
+        "sam2",
+        make_sam2_boxes,
+        priority=100,
+        available=lambda: models.unavailable_reason(sam_name, models_dir),
+        description=f"SAM 2 prompted with each detector box ({sam_name}, transformers), as Grounded-SAM",
+    )
+
+
+class _Sam2BoxPrompts:
+    """:class:`perception.protocols.BoxPromptSegmenter` over ``Sam2Segmenter.segment_with_prompts``
+    (one image embedding, one decoder pass for all boxes)."""
+
+    def __init__(self, sam) -> None:
+        self.sam = sam
+
+    def segment_boxes(self, rgb, boxes_xyxy_px):
+        import numpy as np
+
+        boxes = np.asarray(boxes_xyxy_px, dtype=np.float64).reshape(-1, 4)
+        if len(boxes) == 0:
+            return np.zeros((0,) + np.asarray(rgb).shape[:2], dtype=bool)
+        return np.asarray(self.sam.segment_with_prompts(rgb, boxes_xyxy=boxes).masks, dtype=bool)

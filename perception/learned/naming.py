@@ -91,6 +91,14 @@ IMAGENET_TO_LABEL: tuple[tuple[int, str, str], ...] = (
     (533, "dishrag", "towel"),
     (750, "quilt", "blanket"),
     (850, "teddy bear", "soft_toy"),
+    (703, "park bench", "bench"),
+    (414, "backpack", "bag"),
+    (748, "purse", "bag"),
+    (883, "vase", "vase"),
+    (892, "wall clock", "clock"),
+    (409, "analog clock", "clock"),
+    (530, "digital clock", "clock"),
+    (508, "computer keyboard", "keyboard"),
 )
 
 _MEAN, _SCALE = 127.0, 128.0  # EfficientNet-Lite input normalisation: (x - 127) / 128

@@ -78,6 +78,14 @@ EXTRAS: tuple[Extra, ...] = (
         "Here only `depth-clusters` segmentation is available: SAM2 needs its weights.",
         ("-m", "scene_builder.bench.perception"),
     ),
+    Extra(
+        "Detection-driven instances on real photos used as plain photos",
+        "Every photo of `../shared/data/photos` and `../shared/data/real` without its depth map, with the offline "
+        "detectors of `../shared/models` (`scene_builder.bench.detect`): objects and movable objects per photo, category "
+        "recall and precision against the hand-made inventory `tests/data/photo_inventory.json`, the SUN RGB-D "
+        "ground-truth boxes' labels, seconds of `perceive` per photo (the slowest named).",
+        ("-m", "scene_builder.bench.detect"),
+    ),
 )
 
 

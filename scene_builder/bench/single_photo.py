@@ -37,9 +37,9 @@ def depth_rows(data: Path, models_dir: Path | None) -> list[dict]:
     methods: list[tuple[str, object]] = [("constant-2.5m", None), ("single-view-geometry", SingleViewDepth())]
     det_path = models.resolve_weights("centernet-mbv3-coco", models_dir)
     if det_path is not None:
-        from perception.learned.centernet import CenterNetDetector
+        from perception.learned.detectors import CenterNetCocoDetector
 
-        methods.append(("single-view-geometry+coco-boxes", SingleViewDepth(detector=CenterNetDetector(det_path))))
+        methods.append(("single-view-geometry+coco-boxes", SingleViewDepth(detector=CenterNetCocoDetector(det_path))))
     rows = []
     samples = _samples(data / "real")
     for name, est in methods:
