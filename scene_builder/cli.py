@@ -67,10 +67,16 @@ def _add_build_options(p: argparse.ArgumentParser) -> None:
         "and SAM 2 (about 255 MB) when the network allows, else says which fallback it uses",
     )
     p.add_argument("--depth-backend", default="auto", help="depth backend when no depth map is given (default auto; see `models list`)")
-    p.add_argument("--segmentation-backend", default="auto", help="instance segmentation backend (default auto)")
+    p.add_argument(
+        "--segmentation-backend",
+        default="auto",
+        help="instance segmentation backend: detections (offline detectors in the models dir), sam2, depth-clusters "
+        "(default auto: the first available)",
+    )
     p.add_argument("--settle-s", type=_positive, default=3.0, help="seconds of simulation in the stability check (default 3)")
     p.add_argument("--adopt-settled", action="store_true", help="write the poses after the settle simulation instead of the solved ones")
     p.add_argument("--no-usd", action="store_true", help="skip scene.usda")
+    p.add_argument("--usdz", action="store_true", help="also package the USD stage and its textures as one scene.usdz file for hand-off")
     p.add_argument("--no-urdf", action="store_true", help="skip scene.urdf")
     p.add_argument("--no-gltf", action="store_true", help="skip scene.glb")
     p.add_argument("-q", "--quiet", action="store_true", help="no per-stage lines")
@@ -120,8 +126,10 @@ def make_parser() -> argparse.ArgumentParser:
     c = sub.add_parser("check", help="re-validate an output folder (MJCF compiles and is stable, USD validates, files resolve)")
     c.add_argument("out", type=Path, help="an output folder written by `scene-builder build`")
 
-    v = sub.add_parser("view", help="open the rerun viewer on OUT/scene.rrd")
+    v = sub.add_parser("view", help="open the rerun viewer on OUT/scene.rrd (or write its view to a PNG without a display)")
     v.add_argument("out", type=Path, help="an output folder (or a .rrd file)")
+    v.add_argument("--screenshot", type=Path, metavar="PNG",
+                   help="write the default view (photo beside the twin rendered from the photo's camera, 3D view, report) to PNG headless, instead of opening the viewer")
 
     m = sub.add_parser("models", help="list or fetch learned model weights")
     msub = m.add_subparsers(dest="models_command", metavar="ACTION", required=True)
@@ -162,7 +170,7 @@ def _cmd_build(args: argparse.Namespace) -> int:
             segmentation_backend=args.segmentation_backend,
         ),
         layout=replace(LayoutConfig(), settle_s=args.settle_s, adopt_settled=args.adopt_settled),
-        export=ExportConfig(usd=not args.no_usd, urdf=not args.no_urdf, gltf=not args.no_gltf, viz=args.viz),
+        export=ExportConfig(usd=not args.no_usd, usdz=args.usdz and not args.no_usd, urdf=not args.no_urdf, gltf=not args.no_gltf, viz=args.viz),
     )
     out = args.out or default_out_dir(args.image)
     if args.image.is_file():  # no download before a missing photo is reported (by build, below)
@@ -201,7 +209,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
     from scene_builder.config import BuildConfig, ExportConfig, InputSpec
     from scene_builder.pipeline import build
-    from scene_builder.procedural import compare_to_ground_truth, write_demo_input
+    from scene_builder.bench.render import write_demo_input
+    from scene_builder.bench.truth import compare_to_ground_truth
 
     with tempfile.TemporaryDirectory(prefix="scene-builder-demo-") as tmp:
         sample = write_demo_input(Path(tmp) / "room", seed=args.seed, n_objects=args.objects)
@@ -221,7 +230,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
-    from scene_builder.bench import run_bench
+    from scene_builder.bench.suites import run_bench
 
     run_bench(args.suite, args.rooms, args.data, args.json, seed=args.seed)
     return 0
@@ -252,6 +261,11 @@ def _cmd_view(args: argparse.Namespace) -> int:
     rrd = args.out if args.out.suffix == ".rrd" else args.out / "scene.rrd"
     if not rrd.is_file():
         raise InputError(f"no recording at {rrd}; build with --viz save (the default) first")
+    if args.screenshot is not None:
+        from exporters.rerun_viz import screenshot
+
+        print(screenshot(rrd, args.screenshot))
+        return 0
     return subprocess.call([sys.executable, "-m", "rerun", str(rrd)])
 
 

@@ -68,6 +68,7 @@ class PerceptionConfig:
     min_object_points: clusters with fewer observed points are dropped. depth_backend,
     segmentation_backend, naming_backend: registry names or "auto". models_dir: where learned
     model weights are looked up first (also $SCENE_BUILDER_MODELS). sam2: SAM 2 settings.
+    background: build the static textured background from every pixel no movable object explains.
     """
 
     default_fov_deg: float = 60.0
@@ -79,6 +80,7 @@ class PerceptionConfig:
     naming_backend: str = "auto"
     models_dir: Path | None = None
     sam2: Sam2Settings = field(default_factory=Sam2Settings)
+    background: bool = True
 
 
 @dataclass(frozen=True)
@@ -87,6 +89,8 @@ class GenerationConfig:
 
     voxel_resolution: voxels along the longest side of an object's grid (PhysX-Omni uses 64).
     coacd_threshold: CoACD concavity threshold. max_collision_pieces: bound on convex pieces per part.
+    max_voxel_pieces: the same bound for parts completed from observed voxels (irregular scanned
+    shapes: with fewer, hulls bridge concavities where neighbours stand).
     cache_dir: where convex decompositions are cached (keyed by mesh hash); None disables it.
     backend: registry name or "auto".
     vlm_max_new_tokens: answer budget of the PhysX vision-language model, tokens per answer; 0
@@ -94,12 +98,14 @@ class GenerationConfig:
     vlm_retries: a truncated answer is asked again with twice the budget this many times; still
     cut, the object falls back to the shape prior. vlm_crop_px, vlm_crop_fill: the single-object
     image given to the model (side in pixels; the object's longer side over the image side),
-    upstream's 512 and the 0.58 median of its demo images.
+    upstream's 512 and the 0.58 median of its demo images. photo_textures: texture every asset with the photo,
+    projected from the input camera.
     """
 
     voxel_resolution: int = 48
     coacd_threshold: float = 0.08
     max_collision_pieces: int = 12
+    max_voxel_pieces: int = 32
     max_visual_faces: int = 4000
     cache_dir: Path | None = None
     backend: str = "auto"
@@ -107,6 +113,7 @@ class GenerationConfig:
     vlm_retries: int = 1
     vlm_crop_px: int = 512
     vlm_crop_fill: float = 0.58
+    photo_textures: bool = True
 
 
 @dataclass(frozen=True)
@@ -114,12 +121,20 @@ class LayoutConfig:
     """Layout solver and physics-check settings.
 
     settle_s: simulated seconds of the stability check. adopt_settled: replace solved poses with
-    the settled ones. clearance_m: gap kept between neighbouring objects by the solver.
+    the settled ones. max_wall_push_m: a movable object reaching further than this into a wall is
+    wall (a door, a radiator, an off wall plane): it stays where seen as static background;
+    shallower, it is pushed out. max_lower_m: an object seen at most this far above its support
+    is set down on it; higher, it keeps its height and stands on collision legs. max_push_m: an
+    overlap that a sideways push of more than this would clear leaves the lighter object where
+    it was seen, as static background. clearance_m: gap kept between neighbouring objects by the solver.
     stable_drift_m, stable_rotation_deg: the per-object bounds for ``stable``.
     """
 
     settle_s: float = 3.0
     adopt_settled: bool = False
+    max_wall_push_m: float = 0.05
+    max_lower_m: float = 0.02
+    max_push_m: float = 0.25
     clearance_m: float = 0.002
     max_iterations: int = 200
     stable_drift_m: float = 0.01
@@ -128,10 +143,12 @@ class LayoutConfig:
 
 @dataclass(frozen=True)
 class ExportConfig:
-    """Which outputs to write. viz: "save" (OUT/scene.rrd), "spawn" (open the viewer too) or "off"."""
+    """Which outputs to write. usdz: also package the USD stage and its textures as one
+    scene.usdz. viz: "save" (OUT/scene.rrd), "spawn" (open the viewer too) or "off"."""
 
     mjcf: bool = True
     usd: bool = True
+    usdz: bool = False
     urdf: bool = True
     gltf: bool = True
     viz: str = "save"

@@ -6,7 +6,10 @@ Any dataclass of :mod:`scene_builder.model` serialises to plain JSON and back to
 * numpy arrays become ``{"dtype", "shape", "data"}`` with ``data`` a flat list for small arrays
   (readable) or base64 of the little-endian bytes for large ones (compact and exact);
 * enums become their value; tuples become lists; nested dataclasses become objects with a
-  ``"__type__"`` key naming the class.
+  ``"__type__"`` key naming the class;
+* a :class:`~scene_builder.model.Texture` is stored once per name as a PNG (lossless, so the
+  round trip is exact; deterministic bytes for the same image), and later uses of the same
+  texture refer to it by name (``{"__texture__": name}``).
 """
 
 from __future__ import annotations
@@ -29,12 +32,43 @@ _TYPES: dict[str, type] = {
 FORMAT_VERSION = 1
 
 
-def to_jsonable(value):
+def _png_base64(image_rgb: np.ndarray) -> str:
+    import io
+
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(image_rgb)).save(buf, format="PNG", compress_level=6)
+    return base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def _image_from_png_base64(data: str) -> np.ndarray:
+    import io
+
+    from PIL import Image
+
+    try:
+        with Image.open(io.BytesIO(base64.b64decode(data, validate=True))) as im:
+            return np.array(im.convert("RGB"))
+    except Exception as err:  # PIL raises several types for corrupt data; report one
+        raise ValueError(f"scene.json: a texture is not a readable PNG ({type(err).__name__})") from err
+
+
+def to_jsonable(value, _textures: dict[str, int] | None = None):
     """Convert a model value (dataclass, array, enum, tuple, scalar) to JSON-compatible data."""
+    if _textures is None:
+        _textures = {}
+    if isinstance(value, model.Texture):
+        if value.name in _textures:
+            if _textures[value.name] != id(value):
+                raise ValueError(f"two different textures are named {value.name!r}; texture names must be unique")
+            return {"__texture__": value.name}
+        _textures[value.name] = id(value)
+        return {"__type__": "Texture", "name": value.name, "png_base64": _png_base64(value.image_rgb)}
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         out = {"__type__": type(value).__name__}
         for f in dataclasses.fields(value):
-            out[f.name] = to_jsonable(getattr(value, f.name))
+            out[f.name] = to_jsonable(getattr(value, f.name), _textures)
         return out
     if isinstance(value, np.ndarray):
         arr = np.ascontiguousarray(value)
@@ -46,7 +80,7 @@ def to_jsonable(value):
     if isinstance(value, enum.Enum):
         return value.value
     if isinstance(value, (tuple, list)):
-        return [to_jsonable(v) for v in value]
+        return [to_jsonable(v, _textures) for v in value]
     if isinstance(value, Path):
         return str(value)
     if isinstance(value, (np.floating, np.integer, np.bool_)):
@@ -67,23 +101,28 @@ def _decode_array(obj: dict) -> np.ndarray:
     return arr.astype(np.dtype(obj["dtype"]), copy=True)
 
 
-def _from(value, hint):
+def _from(value, hint, textures: dict[str, "model.Texture"]):
     origin = typing.get_origin(hint)
     args = typing.get_args(hint)
     if value is None:
         return None
     if isinstance(value, dict) and value.get("__ndarray__"):
         return _decode_array(value)
+    if isinstance(value, dict) and "__texture__" in value:
+        name = value["__texture__"]
+        if name not in textures:
+            raise ValueError(f"scene.json: texture {name!r} is used before it is defined")
+        return textures[name]
     if isinstance(value, dict) and "__type__" in value:
-        return from_jsonable(value)
+        return from_jsonable(value, textures)
     if origin in (typing.Union, getattr(__import__("types"), "UnionType", None)):
         non_none = [a for a in args if a is not type(None)]
-        return _from(value, non_none[0]) if len(non_none) == 1 else value
+        return _from(value, non_none[0], textures) if len(non_none) == 1 else value
     if origin is tuple:
         if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_from(v, args[0]) for v in value)
+            return tuple(_from(v, args[0], textures) for v in value)
         if args:
-            return tuple(_from(v, a) for v, a in zip(value, args))
+            return tuple(_from(v, a, textures) for v, a in zip(value, args))
         return tuple(value)
     if isinstance(hint, type) and issubclass(hint, enum.Enum):
         return hint(value)
@@ -94,13 +133,18 @@ def _from(value, hint):
     return value
 
 
-def from_jsonable(obj: dict):
+def from_jsonable(obj: dict, _textures: dict[str, "model.Texture"] | None = None):
     """Inverse of :func:`to_jsonable` for a dataclass object."""
+    textures = {} if _textures is None else _textures
     cls = _TYPES.get(obj.get("__type__", ""))
     if cls is None:
         raise ValueError(f"scene.json: unknown type {obj.get('__type__')!r}")
+    if cls is model.Texture:
+        texture = model.Texture(str(obj["name"]), _image_from_png_base64(obj["png_base64"]))
+        textures[texture.name] = texture
+        return texture
     hints = typing.get_type_hints(cls)
-    kwargs = {f.name: _from(obj[f.name], hints[f.name]) for f in dataclasses.fields(cls) if f.name in obj}
+    kwargs = {f.name: _from(obj[f.name], hints[f.name], textures) for f in dataclasses.fields(cls) if f.name in obj}
     return cls(**kwargs)
 
 

@@ -1,5 +1,5 @@
 """CPU time and memory of the learned perception backends at their published size:
-``python -m perception.bench_learned``.
+``python -m scene_builder.bench.learned``.
 
 No weights reach this project's machines, but compute does not depend on the weights' values:
 each model is built from the published architecture (Depth Anything V2 Small: DINOv2-S/14 + DPT,
@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 PHOTO = REPO.parent / "shared" / "data" / "real" / "nyuv2_metric3d_00000" / "rgb.jpg"
 
 
