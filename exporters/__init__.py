@@ -57,9 +57,14 @@ def export_scene(scene: Scene, out_dir: Path, config: ExportConfig) -> ExportedF
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    usd = write_usd(scene, out_dir) if config.usd else None
+    if usd is not None and config.usdz:
+        from exporters.usd import write_usdz
+
+        write_usdz(usd)
     return ExportedFiles(
         mjcf=write_mjcf(scene, out_dir) if config.mjcf else None,
-        usd=write_usd(scene, out_dir) if config.usd else None,
+        usd=usd,
         urdf=write_urdf(scene, out_dir) if config.urdf else None,
         gltf=write_gltf(scene, out_dir) if config.gltf else None,
     )

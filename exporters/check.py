@@ -63,11 +63,15 @@ def _check_mjcf(path: Path, problems: list[str]) -> list[str] | None:
 
     root = ET.parse(path).getroot()
     compiler = root.find("compiler")
-    meshdir = compiler.get("meshdir", "") if compiler is not None else ""
+    # MuJoCo looks for meshes, height fields and skins in meshdir, textures in texturedir; assetdir sets both.
+    assetdir = compiler.get("assetdir", "") if compiler is not None else ""
+    meshdir = compiler.get("meshdir", assetdir) if compiler is not None else ""
+    texturedir = compiler.get("texturedir", assetdir) if compiler is not None else ""
     for tag in ("mesh", "texture", "hfield", "skin"):
+        folder = texturedir if tag == "texture" else meshdir
         for el in root.iter(tag):
             if el.get("file"):
-                _inside(path.parent, path.parent / meshdir / el.get("file"), path.name, problems)
+                _inside(path.parent, path.parent / folder / el.get("file"), path.name, problems)
     if problems:
         return None
     try:
@@ -182,6 +186,7 @@ def _check_report(path: Path, names: list[str] | None, problems: list[str]) -> N
         problems.append(f"{path.name}: timings_s has negative or non-numeric entries")
     objects = report.get("objects")
     if isinstance(objects, list) and names is not None:
-        rnames = sorted(str(o.get("name")) for o in objects if isinstance(o, dict))
+        # Objects that became static background are reported with a reason but are no scene bodies.
+        rnames = sorted(str(o.get("name")) for o in objects if isinstance(o, dict) and not o.get("became_background"))
         if rnames != names:
             problems.append(f"{path.name} objects {rnames} differ from the scene's {names}")

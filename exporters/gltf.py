@@ -1,8 +1,10 @@
 """glTF binary export of the visual scene (``scene.glb``) with trimesh.
 
 One node per part, named ``NAME`` (root part) or ``NAME/PART`` like the MJCF bodies, carrying
-the part's world transform (parts at rest pose); geometry in the asset frame with per-vertex
-colours (the material colour when the mesh has none). glTF is +Y up, so every node transform is
+the part's world transform (parts at rest pose); geometry in the asset frame with its photo
+texture (embedded PNG, unlit-looking base colour), else per-vertex colours (the material colour
+when the mesh has none). The static background is one node ``background`` (world frame) plus
+``background/object/NAME`` for objects that became background. glTF is +Y up, so every node transform is
 premultiplied by ``GLTF_FROM_WORLD`` (a -90 degree rotation about X taking our Z-up world to
 Y-up): viewers show the room upright. Collision pieces are not written (glTF is for looking).
 """
@@ -15,7 +17,7 @@ import numpy as np
 
 from exporters import names
 from scene_builder.errors import ExportError
-from scene_builder.model import Scene
+from scene_builder.model import Scene, TriangleMesh
 
 # Z-up world -> glTF Y-up: (x, y, z) -> (x, z, -y).
 GLTF_FROM_WORLD = np.array(
@@ -23,22 +25,45 @@ GLTF_FROM_WORLD = np.array(
 )
 
 
+def _trimesh(v: TriangleMesh, rgba, images: dict):
+    """A ``trimesh.Trimesh`` of ``v``: textured (one PIL image per texture name, shared) or with
+    vertex colours (``rgba`` (4,) in [0, 1] when the mesh has none)."""
+    import trimesh
+    from PIL import Image
+
+    if v.texture is not None:
+        if v.texture.name not in images:
+            images[v.texture.name] = Image.fromarray(np.ascontiguousarray(v.texture.image_rgb))
+        material = trimesh.visual.material.PBRMaterial(baseColorTexture=images[v.texture.name], metallicFactor=0.0,
+                                                       roughnessFactor=1.0, name=f"photo_{v.texture.name}")
+        # trimesh's uv runs up from the bottom of the image (OpenGL); it flips v when writing glTF.
+        uv = np.stack([v.uv[:, 0], 1.0 - v.uv[:, 1]], axis=1)
+        visual = trimesh.visual.TextureVisuals(uv=uv, material=material)
+        return trimesh.Trimesh(vertices=np.array(v.vertices_m), faces=np.array(v.faces), visual=visual, process=False)
+    colors = v.vertex_colors_rgba
+    if colors is None:
+        colors = np.tile(np.round(np.clip(rgba, 0.0, 1.0) * 255).astype(np.uint8), (len(v.vertices_m), 1))
+    return trimesh.Trimesh(vertices=np.array(v.vertices_m), faces=np.array(v.faces), vertex_colors=np.array(colors), process=False)
+
+
 def build_trimesh_scene(scene: Scene):
     """A ``trimesh.Scene`` with one geometry node per part (transforms already in glTF Y-up)."""
     import trimesh
 
     out = trimesh.Scene(base_frame="world")
+    images: dict = {}
+    bg = scene.room.background
+    if bg is not None:
+        grey = (0.7, 0.7, 0.7, 1.0)
+        if len(bg.surface.faces):
+            out.add_geometry(_trimesh(bg.surface, grey, images), node_name="background", geom_name="background", transform=GLTF_FROM_WORLD)
+        for label, mesh in zip(bg.static_names, bg.static_meshes):
+            name = f"background/object/{label}"
+            out.add_geometry(_trimesh(mesh, grey, images), node_name=name, geom_name=name, transform=GLTF_FROM_WORLD)
     for placed in scene.objects:
         for part in placed.asset.parts:
-            v = part.visual
-            colors = v.vertex_colors_rgba
-            if colors is None:
-                rgba = np.round(np.clip(part.material.rgba, 0.0, 1.0) * 255).astype(np.uint8)
-                colors = np.tile(rgba, (len(v.vertices_m), 1))
-            mesh = trimesh.Trimesh(vertices=np.array(v.vertices_m), faces=np.array(v.faces),
-                                   vertex_colors=np.array(colors), process=False)
             name = names.body_name(placed.asset, part)
-            out.add_geometry(mesh, node_name=name, geom_name=name,
+            out.add_geometry(_trimesh(part.visual, part.material.rgba, images), node_name=name, geom_name=name,
                              transform=GLTF_FROM_WORLD @ placed.world_from_asset)
     return out
 

@@ -8,16 +8,22 @@ Entity tree (world is Z up, ``RIGHT_HAND_Z_UP``)::
     world/points/<name>                     observed points of each object (perception)
     world/objects/<name>                    Transform3D world_from_asset, on the ``sim_time``
                                             timeline (the settle simulation when a verdict is given)
-    world/objects/<name>/visual/<part>      Mesh3D with vertex colours, asset frame
+    world/background/surface               the static background: the observed room, photo-textured
+    world/background/objects/<name>         objects that became background (textured)
+    world/background/collision              its collision boxes and pieces (hidden by the blueprint)
+    world/objects/<name>/visual/<part>      Mesh3D with the photo texture (else vertex colours), asset frame
     world/objects/<name>/collision/<part>/piece_<k>   convex pieces (hidden by the blueprint: tick the
                                             eye of an object's ``collision`` subtree to show them)
     world/objects/<name>/label              the object's name at its centre
     world/support                           LineStrips3D child centre -> supporter centre, labelled
     world/contacts                          contact / penetration points of the physics check
+    render/input_camera                     the scene rendered by MuJoCo from the input camera (t = 0)
+    render/settled                          the same after the settle simulation
     report                                  TextDocument: physics verdict and fidelity
 
-A blueprint lays out the 3D view, seen from the input camera, beside the photo with masks and the
-depth image. The recording is deterministic for a given build: fixed recording id, no recording
+A blueprint puts the photo and the ``input_camera`` render side by side (how faithful the twin
+is, at a glance), with the 3D view seen from the input camera, the masks, the depth image and
+the report. The recording is deterministic for a given build: fixed recording id, no recording
 properties, and nothing on a wall-clock timeline (poses are sent as ``sim_time`` columns).
 """
 
@@ -38,12 +44,19 @@ def _xyzw(rotation: np.ndarray) -> np.ndarray:
     return np.array([q[1], q[2], q[3], q[0]])
 
 
-def _colors(part) -> np.ndarray:
-    v = part.visual
-    if v.vertex_colors_rgba is not None:
-        return np.asarray(v.vertex_colors_rgba)
-    rgba = np.round(np.clip(part.material.rgba, 0.0, 1.0) * 255).astype(np.uint8)
-    return np.tile(rgba, (len(v.vertices_m), 1))
+def _mesh3d(mesh, rgba=(0.7, 0.7, 0.7, 1.0)):
+    """``rr.Mesh3D`` of a TriangleMesh: photo-textured when it has a texture (rerun's texture
+    coordinates follow the image, v down, as the model's), else vertex colours (``rgba`` in
+    [0, 1] when it has none)."""
+    import rerun as rr
+
+    if mesh.texture is not None:
+        return rr.Mesh3D(vertex_positions=mesh.vertices_m, triangle_indices=mesh.faces, vertex_texcoords=mesh.uv,
+                         albedo_texture=np.ascontiguousarray(mesh.texture.image_rgb))
+    colors = mesh.vertex_colors_rgba
+    if colors is None:
+        colors = np.tile(np.round(np.clip(rgba, 0.0, 1.0) * 255).astype(np.uint8), (len(mesh.vertices_m), 1))
+    return rr.Mesh3D(vertex_positions=mesh.vertices_m, triangle_indices=mesh.faces, vertex_colors=np.asarray(colors))
 
 
 def _centre_world(placed: PlacedObject) -> np.ndarray:
@@ -76,7 +89,7 @@ def record_scene(
     out_path.parent.mkdir(parents=True, exist_ok=True)
     # A fixed recording id keeps the output deterministic for a given build.
     rec = rr.RecordingStream(APP_ID, recording_id=f"{APP_ID}-{out_path.stem}", send_properties=False)
-    blueprint = _blueprint(scene, perception is not None)
+    blueprint = _blueprint(scene, perception is not None, fidelity is not None and fidelity.render_rgb is not None)
     if spawn:
         # The viewer listens on 127.0.0.1 only; the file gets everything the viewer gets.
         rr.spawn(connect=False, recording=rec)
@@ -88,8 +101,13 @@ def record_scene(
     _log_camera(rec, scene, perception)
     if perception is not None:
         _log_perception(rec, perception)
+    _log_background(rec, scene)
     _log_objects(rec, scene, verdict)
     _log_support(rec, scene, layout)
+    if fidelity is not None and fidelity.render_rgb is not None:
+        rec.log("render/input_camera", rr.Image(fidelity.render_rgb), static=True)
+        if fidelity.render_settled_rgb is not None:
+            rec.log("render/settled", rr.Image(fidelity.render_settled_rgb), static=True)
     if verdict is not None and verdict.contact_points_m:
         rec.log("world/contacts", rr.Points3D(np.asarray(verdict.contact_points_m), colors=[255, 40, 40], radii=0.01), static=True)
     _log_report(rec, scene, layout, verdict, fidelity)
@@ -98,8 +116,55 @@ def record_scene(
     return out_path
 
 
-def _blueprint(scene: Scene, with_images: bool):
-    """3D view seen from the input camera beside the photo + masks, the depth and the report.
+def viewer_binary() -> str:
+    """Path of the rerun viewer executable installed with rerun-sdk (beside the interpreter)."""
+    import shutil
+    import sys
+
+    beside = Path(sys.executable).parent / "rerun"
+    found = str(beside) if beside.exists() else shutil.which("rerun")
+    if not found:
+        from scene_builder.errors import ExportError
+
+        raise ExportError("the rerun viewer is not installed (pip install rerun-sdk); it ships with the project's dependencies")
+    return found
+
+
+def screenshot(rrd_path: Path, png_path: Path, size_px: tuple[int, int] = (1600, 1000), timeout_s: float = 180.0) -> Path:
+    """Render the recording's default view (photo beside the input-camera render, 3D view,
+    masks, depth, report) to ``png_path`` with the viewer in headless mode (no display needed;
+    Mesa's Vulkan driver renders on the CPU). Raises ExportError with the viewer's last line
+    when no picture comes out."""
+    import os
+    import signal
+    import subprocess
+    import tempfile
+
+    from scene_builder.errors import ExportError
+
+    png_path = Path(png_path)
+    png_path.parent.mkdir(parents=True, exist_ok=True)
+    cmd = [viewer_binary(), str(rrd_path), "--headless", "--screenshot-to", str(png_path), "--window-size", f"{size_px[0]}x{size_px[1]}", "--port", "0"]
+    with tempfile.TemporaryFile("w+") as log:
+        # --port 0: never stream into a viewer someone else runs; its own process group so that a
+        # timeout kills the real binary, not only a wrapper.
+        proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+        try:
+            proc.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+        log.seek(0)
+        text = log.read().strip()
+    if not png_path.is_file():
+        last = text.splitlines()[-1] if text else "no output"
+        raise ExportError(f"the rerun viewer wrote no screenshot ({last}); it needs Mesa's Vulkan driver (apt install mesa-vulkan-drivers)")
+    return png_path
+
+
+def _blueprint(scene: Scene, with_images: bool, with_render: bool = False):
+    """The photo beside the ``input_camera`` render (when there is one), the 3D view seen from
+    the input camera, the masks, the depth and the report.
 
     Collision pieces are hidden by a blueprint override on each object's ``collision`` subtree
     (an ``EntityBehavior`` logged into the recording itself is ignored by the 0.41 viewer):
@@ -108,6 +173,7 @@ def _blueprint(scene: Scene, with_images: bool):
     import rerun.blueprint as rrb
 
     hidden = {f"{object_entity(o.name)}/collision": rrb.EntityBehavior(visible=False) for o in scene.objects}
+    hidden["world/background/collision"] = rrb.EntityBehavior(visible=False)
     # The photo, depth and masks would be drawn on the camera's image plane, right in front of
     # the eye: keep them in the 2D views only.
     view3d = rrb.Spatial3DView(
@@ -121,16 +187,19 @@ def _blueprint(scene: Scene, with_images: bool):
     if not with_images:
         root = rrb.Horizontal(view3d, rrb.TextDocumentView(origin="report", name="report"), column_shares=[3, 1])
         return rrb.Blueprint(_with_fixed_ids(root), *panels)
-    root = rrb.Horizontal(
-        view3d,
-        rrb.Vertical(
-            rrb.Spatial2DView(name="photo + masks", origin="world/camera", contents=["world/camera/rgb", "world/camera/masks"]),
-            rrb.Spatial2DView(name="depth", origin="world/camera", contents=["world/camera/depth"]),
-            rrb.TextDocumentView(origin="report", name="report"),
-            row_shares=[2, 2, 1],
-        ),
-        column_shares=[3, 2],
+    side = rrb.Vertical(
+        rrb.Spatial2DView(name="photo + masks", origin="world/camera", contents=["world/camera/rgb", "world/camera/masks"]),
+        rrb.Spatial2DView(name="depth", origin="world/camera", contents=["world/camera/depth"]),
+        rrb.TextDocumentView(origin="report", name="report"),
+        row_shares=[2, 2, 1],
     )
+    root = rrb.Horizontal(view3d, side, column_shares=[3, 2])
+    if with_render:
+        compare = rrb.Horizontal(
+            rrb.Spatial2DView(name="photo", origin="world/camera", contents=["world/camera/rgb"]),
+            rrb.Spatial2DView(name="twin (input camera)", origin="render", contents=["render/input_camera"]),
+        )
+        root = rrb.Vertical(compare, root, row_shares=[1, 1])
     return rrb.Blueprint(_with_fixed_ids(root), *panels)
 
 
@@ -230,11 +299,7 @@ def _log_objects(rec, scene: Scene, verdict: PhysicsVerdict | None) -> None:
         ent = object_entity(placed.name)
         for part in placed.asset.parts:
             pe = rr.escape_entity_path_part(part.name)
-            rec.log(
-                f"{ent}/visual/{pe}",
-                rr.Mesh3D(vertex_positions=part.visual.vertices_m, triangle_indices=part.visual.faces, vertex_colors=_colors(part)),
-                static=True,
-            )
+            rec.log(f"{ent}/visual/{pe}", _mesh3d(part.visual, part.material.rgba), static=True)
             for k, piece in enumerate(part.collision):
                 rec.log(
                     f"{ent}/collision/{pe}/piece_{k}",
@@ -266,6 +331,25 @@ def _log_objects(rec, scene: Scene, verdict: PhysicsVerdict | None) -> None:
         )
 
 
+def _log_background(rec, scene: Scene) -> None:
+    import rerun as rr
+
+    bg = scene.room.background
+    if bg is None:
+        return
+    if len(bg.surface.faces):
+        rec.log("world/background/surface", _mesh3d(bg.surface), static=True)
+    for label, mesh in zip(bg.static_names, bg.static_meshes):
+        rec.log("world/background/objects/" + rr.escape_entity_path_part(label), _mesh3d(mesh), static=True)
+    if bg.box_count:
+        quats = np.stack([np.zeros(bg.box_count), np.zeros(bg.box_count), np.sin(bg.box_yaws_rad / 2), np.cos(bg.box_yaws_rad / 2)], axis=1)
+        rec.log("world/background/collision/boxes", rr.Boxes3D(centers=bg.box_centers_m, half_sizes=bg.box_half_extents_m,
+                                                                 quaternions=quats, colors=[80, 130, 230, 90]), static=True)
+    for k, piece in enumerate(bg.static_pieces):
+        rec.log(f"world/background/collision/piece_{k}", rr.Mesh3D(vertex_positions=piece.vertices_m, triangle_indices=piece.faces,
+                                                                   albedo_factor=[80, 130, 230, 110]), static=True)
+
+
 def _log_support(rec, scene: Scene, layout: LayoutResult | None) -> None:
     import rerun as rr
 
@@ -278,8 +362,10 @@ def _log_support(rec, scene: Scene, layout: LayoutResult | None) -> None:
         c = _centre_world(scene.object(child))
         if parent in names:
             p = _centre_world(scene.object(parent))
-        elif parent == "floor":
-            p = np.array([c[0], c[1], 0.0])
+        elif parent in ("floor", "background"):
+            o = scene.object(child)
+            bottom = float(np.min([transform_points(o.world_from_asset, p.visual.vertices_m)[:, 2].min() for p in o.asset.parts]))
+            p = np.array([c[0], c[1], bottom if parent == "background" else 0.0])
         else:
             continue
         strips.append([c, p])
@@ -302,5 +388,10 @@ def _log_report(rec, scene: Scene, layout: LayoutResult | None, verdict: Physics
                   f"max penetration {verdict.max_penetration_m * 1000:.1f} mm, max drift {verdict.settle_max_drift_m * 1000:.1f} mm, "
                   f"max rotation {verdict.settle_max_rotation_deg:.2f} deg"]
     if fidelity is not None:
-        lines += ["", f"fidelity: depth AbsRel {fidelity.depth_absrel:.3f}, mask IoU {fidelity.mask_iou_mean:.3f}"]
+        lines += ["", f"fidelity (input camera vs photo): PSNR {fidelity.psnr_db:.1f} dB, SSIM {fidelity.ssim:.3f}, "
+                  f"depth AbsRel {fidelity.depth_absrel:.3f} (after settling {fidelity.depth_absrel_settled:.3f}), "
+                  f"silhouette IoU {fidelity.mask_iou_mean:.3f}"]
+    bg = scene.room.background
+    if bg is not None and bg.static_names:
+        lines += ["", "became background (could not stand where seen): " + ", ".join(sorted({n.split('/')[0] for n in bg.static_names}))]
     rec.log("report", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN), static=True)

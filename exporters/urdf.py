@@ -10,8 +10,13 @@
   a revolute joint plus a prismatic joint through a massless intermediate link, as URDF users do.
   URDF has no ball joint: ball (and free) joints inside an object are refused with ExportError.
 * Inertials: mass, origin at the centre of mass, full inertia tensor in link axes.
-* Meshes: the same .obj files as the MJCF (``meshes/``, relative paths). A ``<mujoco>`` extension
-  element tells MuJoCo's URDF importer to keep the relative paths and the visual geoms.
+* Meshes: the same .obj files as the MJCF (``meshes/``, relative paths; textured ones name their
+  photo texture in a .mtl beside them). A ``<mujoco>`` extension element tells MuJoCo's URDF
+  importer to keep the relative paths and the visual geoms.
+* The static background is a link ``background`` welded to ``world`` (joint ``background/fixed``):
+  its textured surface and the objects that became background as visuals, their convex pieces
+  and the background's collision boxes as collisions. It has a nominal 1 kg inertial (URDF
+  consumers reject a link without mass); it cannot move.
 
 Validated by parsing with MuJoCo's URDF importer and with yourdfpy (tests).
 """
@@ -24,9 +29,10 @@ from pathlib import Path
 import numpy as np
 
 from exporters import names
-from exporters.mjcf import MESH_DIR, mesh_files, part_rgba, write_part_meshes
+from exporters.mjcf import MESH_DIR, background_meshes, mesh_files, part_rgba, write_part_meshes
+from exporters.textures import TEXTURE_DIR, texture_file
 from scene_builder.errors import ExportError
-from scene_builder.model import JointType, ObjectAsset, Part, PlacedObject, Scene
+from scene_builder.model import Background, JointType, ObjectAsset, Part, PlacedObject, Scene
 
 
 def _fmt(values) -> str:
@@ -48,6 +54,8 @@ def write_urdf(scene: Scene, out_dir: Path) -> Path:
     mj = ET.SubElement(robot, "mujoco")
     ET.SubElement(mj, "compiler", discardvisual="false", strippath="false", fusestatic="false", balanceinertia="false")
     ET.SubElement(robot, "link", name="world")
+    if scene.room.background is not None:
+        _add_background(robot, scene.room.background, out_dir)
     # URDF has no soft bodies: a deformable is exported as its rigid shape (its mass and meshes).
     for placed in scene.objects:
         write_part_meshes(placed.asset, out_dir)
@@ -78,10 +86,42 @@ def _link(robot: ET.Element, asset: ObjectAsset, part: Part, frame_m: np.ndarray
     ET.SubElement(ET.SubElement(visual, "geometry"), "mesh", filename=f"{MESH_DIR}/{vis_file}")
     mat = ET.SubElement(visual, "material", name=f"{asset.name}/{part.name}/{part.material.name}")
     ET.SubElement(mat, "color", rgba=_fmt(part_rgba(part)))
+    if part.visual.texture is not None:
+        ET.SubElement(mat, "texture", filename=f"{TEXTURE_DIR}/{texture_file(part.visual.texture)}")
     for k, fname in enumerate(col_files):
         col = ET.SubElement(link, "collision", name=f"{names.body_name(asset, part)}/collision_{k}")
         _origin(col, -frame_m)
         ET.SubElement(ET.SubElement(col, "geometry"), "mesh", filename=f"{MESH_DIR}/{fname}")
+
+
+def _add_background(robot: ET.Element, bg: Background, out_dir: Path) -> None:
+    visuals, pieces = background_meshes(bg, out_dir)
+    link = ET.SubElement(robot, "link", name="background")
+    inertial = ET.SubElement(link, "inertial")
+    _origin(inertial, (0.0, 0.0, 0.0))
+    ET.SubElement(inertial, "mass", value="1")
+    ET.SubElement(inertial, "inertia", ixx="1", ixy="0", ixz="0", iyy="1", iyz="0", izz="1")
+    for name, fname, mesh in visuals:
+        visual = ET.SubElement(link, "visual", name=name)
+        _origin(visual, (0.0, 0.0, 0.0))
+        ET.SubElement(ET.SubElement(visual, "geometry"), "mesh", filename=f"{MESH_DIR}/{fname}")
+        mat = ET.SubElement(visual, "material", name=f"{name}/material")
+        if mesh.texture is not None:
+            ET.SubElement(mat, "texture", filename=f"{TEXTURE_DIR}/{texture_file(mesh.texture)}")
+        else:
+            ET.SubElement(mat, "color", rgba="0.7 0.7 0.7 1")
+    for k, fname in enumerate(pieces):
+        col = ET.SubElement(link, "collision", name=f"background/piece/{k}")
+        _origin(col, (0.0, 0.0, 0.0))
+        ET.SubElement(ET.SubElement(col, "geometry"), "mesh", filename=f"{MESH_DIR}/{fname}")
+    for k in range(bg.box_count):
+        col = ET.SubElement(link, "collision", name=f"background/box/{k}")
+        _origin(col, bg.box_centers_m[k], (0.0, 0.0, float(bg.box_yaws_rad[k])))
+        ET.SubElement(ET.SubElement(col, "geometry"), "box", size=_fmt(2.0 * bg.box_half_extents_m[k]))
+    j = ET.SubElement(robot, "joint", name="background/fixed", type="fixed")
+    _origin(j, (0.0, 0.0, 0.0))
+    ET.SubElement(j, "parent", link="world")
+    ET.SubElement(j, "child", link="background")
 
 
 def _add_object(robot: ET.Element, placed: PlacedObject) -> None:

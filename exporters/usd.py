@@ -7,6 +7,11 @@ Prim layout::
       Looks/<mat>                   UsdPreviewSurface material per part material (visual)
       PhysicsMaterials/<mat>        UsdPhysics.MaterialAPI (friction, restitution, density)
       Room/Floor, Room/Wall_i       static colliders (UsdGeom.Plane, purpose guide)
+      Background/Surface            the observed room as one textured mesh, a static collider
+                                    with a triangle-mesh approximation ("none")
+      Background/Objects/<obj>      visual meshes of objects that became background
+      Background/Collision/...      their convex pieces (convexHull) and the background's
+                                    collision boxes (UsdGeom.Cube), static colliders
       InputCamera                   UsdGeom.Camera reproducing the photo's pinhole camera
       Objects/<obj>                 Xform at world_from_asset, displayName = original name
         one rigid part:             RigidBodyAPI + MassAPI on <obj>; children Visual, Collision/piece_k
@@ -22,6 +27,10 @@ Choices (the validators and Newton accept these):
   FixedJoint (body0 empty).
 * Collision pieces are convex, so ``convexHull`` approximation is exact. They have purpose
   ``guide`` (not rendered) and bind the physics material with purpose ``physics``.
+* Photo textures: a ``UsdPreviewSurface`` whose diffuseColor reads a ``UsdUVTexture`` of
+  ``./textures/<name>.png`` (relative asset path, so the folder can move) through the mesh's
+  ``st`` primvar (vertex interpolation, ``t = 1 - v``). ``--usdz`` packages the stage and its
+  textures into one ``scene.usdz``.
 * Joint frames: every part frame is the asset frame, so localPos0 = localPos1 = anchor; the
   joint axis token is X and localRot0 = localRot1 rotates X onto ``Joint.axis``. Revolute
   limits are degrees (UsdPhysics), prismatic metres. Joint damping goes to a DriveAPI with zero
@@ -39,9 +48,10 @@ from pathlib import Path
 import numpy as np
 
 from exporters import names
+from exporters.textures import TEXTURE_DIR, scene_textures, texture_file, write_texture
 from scene_builder.errors import ExportError
 from scene_builder.frames import CV_FROM_GL, quat_wxyz_from_matrix
-from scene_builder.model import JointType, ObjectAsset, Part, PlacedObject, Plane, Scene, TriangleMesh
+from scene_builder.model import Background, JointType, ObjectAsset, Part, PlacedObject, Plane, Scene, TriangleMesh
 
 FLOOR_STATIC_FRICTION = 0.6
 FLOOR_DYNAMIC_FRICTION = 0.5  # same floor as the MJCF (exporters.mjcf.FLOOR_DYNAMIC_FRICTION)
@@ -56,12 +66,38 @@ def write_usd(scene: Scene, out_dir: Path) -> Path:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / "scene.usda"
+    for texture in scene_textures(scene):
+        write_texture(texture, out_dir)
     stage = build_stage(scene, path)
     stage.GetRootLayer().Save()
     problems = validate_stage(stage)
     if problems:
         raise ExportError(f"USD validation failed for {path.name}: {problems[0]} ({len(problems)} problem(s))")
     return path
+
+
+def write_usdz(usda_path: Path) -> Path:
+    """Package ``scene.usda`` and every asset it references (the textures) as one
+    ``scene.usdz`` beside it (``UsdUtils.CreateNewUsdzPackage``), open the package and check the
+    stage and its textures are inside."""
+    import zipfile
+
+    from pxr import Sdf, Usd, UsdUtils
+
+    usda_path = Path(usda_path).resolve()
+    out = usda_path.with_suffix(".usdz")
+    if not UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(str(usda_path)), str(out)):
+        raise ExportError(f"USD could not package {usda_path.name} as {out.name}")
+    stage = Usd.Stage.Open(str(out))
+    if stage is None or not stage.GetDefaultPrim():
+        raise ExportError(f"{out.name}: the packaged stage does not open")
+    with zipfile.ZipFile(out) as z:
+        packed = set(z.namelist())
+    missing = sorted(p.relative_to(usda_path.parent).as_posix() for p in (usda_path.parent / TEXTURE_DIR).glob("*.png")
+                     if p.relative_to(usda_path.parent).as_posix() not in packed)
+    if missing:
+        raise ExportError(f"{out.name}: textures missing from the package: {', '.join(missing[:3])}")
+    return out
 
 
 def build_stage(scene: Scene, path: Path | None = None):
@@ -83,6 +119,8 @@ def build_stage(scene: Scene, path: Path | None = None):
     UsdGeom.Scope.Define(stage, "/World/Looks")
     UsdGeom.Scope.Define(stage, "/World/PhysicsMaterials")
     _add_room(ctx, scene)
+    if scene.room.background is not None:
+        _add_background(ctx, scene.room.background)
     _add_camera(stage, scene)
     UsdGeom.Scope.Define(stage, "/World/Objects")
     prim_names = names.UniqueNames()
@@ -120,6 +158,34 @@ class _Context:
             shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*[float(c) for c in rgba[:3]]))
             shader.CreateInput("opacity", Sdf.ValueTypeNames.Float).Set(float(rgba[3]))
             shader.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(0.7)
+            mat.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+            self.looks[key] = path
+        return UsdShade.Material.Get(self.stage, self.looks[key])
+
+    def photo_look(self, texture) -> "object":
+        """A UsdPreviewSurface whose diffuse colour is ``texture`` (file under ./textures/)."""
+        from pxr import Sdf, UsdShade
+
+        key = ("photo", texture.name)
+        if key not in self.looks:
+            path = f"/World/Looks/{self.look_names('photo_' + texture.name)}"
+            mat = UsdShade.Material.Define(self.stage, path)
+            st_reader = UsdShade.Shader.Define(self.stage, f"{path}/st")
+            st_reader.CreateIdAttr("UsdPrimvarReader_float2")
+            st_reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
+            tex = UsdShade.Shader.Define(self.stage, f"{path}/Texture")
+            tex.CreateIdAttr("UsdUVTexture")
+            tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(Sdf.AssetPath(f"./{TEXTURE_DIR}/{texture_file(texture)}"))
+            tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(st_reader.ConnectableAPI(), "result")
+            tex.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set("clamp")
+            tex.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set("clamp")
+            tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("sRGB")
+            tex.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
+            shader = UsdShade.Shader.Define(self.stage, f"{path}/PreviewSurface")
+            shader.CreateIdAttr("UsdPreviewSurface")
+            shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(tex.ConnectableAPI(), "rgb")
+            shader.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(0.9)
+            shader.CreateInput("useSpecularWorkflow", Sdf.ValueTypeNames.Int).Set(0)
             mat.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
             self.looks[key] = path
         return UsdShade.Material.Get(self.stage, self.looks[key])
@@ -179,6 +245,53 @@ def _add_room(ctx: _Context, scene: Scene) -> None:
         _bind(plane.GetPrim(), floor_mat, "physics")
 
 
+def _add_background(ctx: _Context, bg: Background) -> None:
+    """The static background (no RigidBodyAPI: colliders that never move): the textured observed
+    surface, collided as a triangle mesh (approximation "none", allowed for static colliders), the
+    visual meshes and convex pieces of objects that became background, and the collision boxes."""
+    from pxr import Gf, Sdf, UsdGeom, UsdPhysics
+
+    stage = ctx.stage
+    root = Sdf.Path("/World/Background")
+    UsdGeom.Xform.Define(stage, root)
+    phys = ctx.physics_material("background", FLOOR_STATIC_FRICTION, FLOOR_DYNAMIC_FRICTION, 0.2, None)
+    surface = _mesh(stage, root.AppendChild("Surface"), bg.surface, (0.7, 0.7, 0.7, 1.0))
+    if bg.surface.texture is not None:
+        _bind(surface.GetPrim(), ctx.photo_look(bg.surface.texture))
+    if len(bg.surface.faces):
+        UsdPhysics.CollisionAPI.Apply(surface.GetPrim())
+        UsdPhysics.MeshCollisionAPI.Apply(surface.GetPrim()).CreateApproximationAttr(UsdPhysics.Tokens.none)
+        _bind(surface.GetPrim(), phys, "physics")
+    objects = root.AppendChild("Objects")
+    UsdGeom.Scope.Define(stage, objects)
+    unique = names.UniqueNames()
+    for label, mesh in zip(bg.static_names, bg.static_meshes):
+        m = _mesh(stage, objects.AppendChild(unique(label)), mesh, (0.7, 0.7, 0.7, 1.0))
+        m.GetPrim().SetDisplayName(label)
+        if mesh.texture is not None:
+            _bind(m.GetPrim(), ctx.photo_look(mesh.texture))
+    col = root.AppendChild("Collision")
+    UsdGeom.Scope.Define(stage, col)
+    for k, piece in enumerate(bg.static_pieces):
+        c = _mesh(stage, col.AppendChild(f"piece_{k}"), piece)
+        c.CreatePurposeAttr(UsdGeom.Tokens.guide)
+        UsdPhysics.CollisionAPI.Apply(c.GetPrim())
+        UsdPhysics.MeshCollisionAPI.Apply(c.GetPrim()).CreateApproximationAttr(UsdPhysics.Tokens.convexHull)
+        _bind(c.GetPrim(), phys, "physics")
+    for k in range(bg.box_count):
+        cube = UsdGeom.Cube.Define(stage, col.AppendChild(f"box_{k}"))
+        cube.CreateSizeAttr(2.0)
+        cube.CreatePurposeAttr(UsdGeom.Tokens.guide)
+        half = bg.box_half_extents_m[k]
+        cube.CreateExtentAttr([Gf.Vec3f(-1.0, -1.0, -1.0), Gf.Vec3f(1.0, 1.0, 1.0)])
+        yaw = float(bg.box_yaws_rad[k])
+        cube.AddTranslateOp().Set(Gf.Vec3d(*bg.box_centers_m[k].tolist()))
+        cube.AddOrientOp().Set(Gf.Quatf(float(np.cos(yaw / 2)), Gf.Vec3f(0.0, 0.0, float(np.sin(yaw / 2)))))
+        cube.AddScaleOp().Set(Gf.Vec3f(*half.tolist()))
+        UsdPhysics.CollisionAPI.Apply(cube.GetPrim())
+        _bind(cube.GetPrim(), phys, "physics")
+
+
 def _plane_transform(plane: Plane) -> np.ndarray:
     """(4, 4) transform whose Z axis is the plane normal, origin on the plane at floor height."""
     n = plane.normal
@@ -225,7 +338,7 @@ def _add_camera(stage, scene: Scene) -> None:
 
 
 def _mesh(stage, path, mesh: TriangleMesh, rgba=None):
-    from pxr import Gf, UsdGeom, Vt
+    from pxr import Gf, Sdf, UsdGeom, Vt
 
     m = UsdGeom.Mesh.Define(stage, path)
     m.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(mesh.vertices_m.astype(np.float32)))
@@ -235,6 +348,9 @@ def _mesh(stage, path, mesh: TriangleMesh, rgba=None):
     m.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
     lo, hi = mesh.bounds_m
     m.CreateExtentAttr([Gf.Vec3f(*lo.tolist()), Gf.Vec3f(*hi.tolist())])
+    if mesh.uv is not None:
+        st = np.stack([mesh.uv[:, 0], 1.0 - mesh.uv[:, 1]], axis=1).astype(np.float32)
+        UsdGeom.PrimvarsAPI(m).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex).Set(Vt.Vec2fArray.FromNumpy(st))
     if rgba is not None:
         if mesh.vertex_colors_rgba is not None:
             c = mesh.vertex_colors_rgba.astype(np.float32) / 255.0
@@ -250,7 +366,8 @@ def _add_part_geometry(ctx: _Context, parent_path, part: Part, asset: ObjectAsse
 
     stage = ctx.stage
     vis = _mesh(stage, parent_path.AppendChild("Visual"), part.visual, part.material.rgba)
-    _bind(vis.GetPrim(), ctx.look(part.material.name, part.material.rgba))
+    tex = part.visual.texture
+    _bind(vis.GetPrim(), ctx.photo_look(tex) if tex is not None else ctx.look(part.material.name, part.material.rgba))
     UsdGeom.Scope.Define(stage, parent_path.AppendChild("Collision"))
     m = part.material
     phys = ctx.physics_material(m.name, m.static_friction, m.dynamic_friction, m.restitution, m.density_kg_m3)

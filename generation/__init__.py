@@ -10,7 +10,8 @@ Backends (registry task ``"generation"``):
 * ``"shape-prior"`` (priority 0, always available): category shape priors, articulation
   templates and observed-shell completion on the CPU (``generation.shape_prior``);
 * ``"physx-anything-vlm"`` (priority 100, registered by ``generation.physx``): available when
-  its weights are found locally.
+  its weights are found locally. An object it fails on gets the shape prior instead, and the
+  asset's ``fallback_reason`` (report.json: ``generation_failures``) says why.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "AssetGenerator",
+    "ShapePriorFallback",
     "assemble_asset",
     "generate_assets",
     "generator_registry",
@@ -62,35 +64,37 @@ def generator_registry() -> Registry[AssetGenerator]:
     return registry
 
 
-class _PhysxAdapter:
-    """Runs the PhysX VLM backend (which answers an ``ObjectAsset`` from an image crop) as an
-    :class:`AssetGenerator`: crop from the object's mask, pose from the observed points."""
+class ShapePriorFallback:
+    """The preferred (learned) generator, and the shape prior for every object it fails on: a
+    VLM answer that cannot be read, is truncated even after its retries, disagrees with the
+    observed box, or a model that fails to load or run. The asset then records why in
+    ``ObjectAsset.fallback_reason`` (and so in report.json); the other objects are unaffected."""
 
-    name = "physx-anything-vlm"
-
-    def __init__(self, backend) -> None:
-        self.backend = backend
+    def __init__(self, primary: AssetGenerator, fallback: AssetGenerator | None = None) -> None:
+        self.primary = primary
+        self.fallback = fallback if fallback is not None else _shape_prior()
+        self.name = primary.name
 
     def generate(self, obj: PerceivedObject, perception: Perception, config: GenerationConfig, seed: int = 0) -> GeneratedAsset:
-        import numpy as np
+        from dataclasses import replace
 
-        from generation.pose import fit_box
-        from generation.shape_prior import complete_box
+        from scene_builder.errors import SceneBuilderError
 
-        rows, cols = np.nonzero(obj.mask)
-        if len(rows) == 0:
-            raise ValueError(f"object {obj.name}: empty mask, nothing to crop for the PhysX model")
-        crop = perception.observation.rgb[rows.min() : rows.max() + 1, cols.min() : cols.max() + 1]
-        asset, _warnings = self.backend.generate_object(np.ascontiguousarray(crop), obj.name, obj.label, config=config, seed=seed)
-        fit = complete_box(fit_box(obj.points_world_m, perception.camera.position_m), obj.label)
-        return GeneratedAsset(asset, fit.world_from_box, obj.points_world_m)
+        try:
+            return self.primary.generate(obj, perception, config, seed)
+        except (SceneBuilderError, ValueError) as err:  # recorded in the asset, not swallowed
+            reason = str(err).splitlines()[0] if str(err) else type(err).__name__
+            generated = self.fallback.generate(obj, perception, config, seed)
+            note = f"{self.primary.name} failed: {type(err).__name__}: {reason}"
+            return replace(generated, asset=replace(generated.asset, fallback_reason=note))
 
 
 def resolve_generator(config: GenerationConfig) -> tuple[AssetGenerator, BackendUse]:
-    """The generator ``config.backend`` names (or the best available for ``"auto"``) and why."""
+    """The generator ``config.backend`` names (or the best available for ``"auto"``) and why. A
+    learned generator is wrapped so that an object it fails on gets the shape prior instead."""
     backend, use = generator_registry().resolve(config.backend)
-    if not hasattr(backend, "generate") and hasattr(backend, "generate_object"):
-        backend = _PhysxAdapter(backend)
+    if use.backend != "shape-prior":
+        backend = ShapePriorFallback(backend, _shape_prior())
     return backend, use
 
 
@@ -101,11 +105,19 @@ def generate_assets(
     on_object: Callable[[str], None] | None = None,
 ) -> tuple[GeneratedAsset, ...]:
     """One :class:`GeneratedAsset` per ``perception.objects`` (same order, asset name = object
-    name). ``on_object(name)`` is called after each object. Deterministic for a given seed."""
+    name), its visual meshes textured with the photo projected from the input camera
+    (``generation.texture``) when ``config.photo_textures``. ``on_object(name)`` is called after
+    each object. Deterministic for a given seed. An object the learned generator fails on gets a
+    shape-prior asset whose ``fallback_reason`` says why."""
     generator, _use = resolve_generator(config)
     out = []
     for obj in perception.objects:
-        out.append(generator.generate(obj, perception, config, seed))
+        generated = generator.generate(obj, perception, config, seed)
+        if config.photo_textures:
+            from generation.texture import photo_textured
+
+            generated = photo_textured(generated, obj, perception.observation, perception.camera)
+        out.append(generated)
         if on_object is not None:
             on_object(obj.name)
     return tuple(out)

@@ -152,6 +152,17 @@ def _material(spec: PartSpec) -> Material:
     return material(spec.material, spec.rgba)
 
 
+#: Snapping a voxel part's surface onto the observed depth may change its volume by this share.
+SNAP_MAX_VOLUME_CHANGE = 0.25
+
+
+def _inertia_ok(mesh) -> bool:
+    """Whether a closed mesh has positive volume and a positive-definite inertia tensor."""
+    if not float(mesh.volume) > 0.0:
+        return False
+    return bool(np.linalg.eigvalsh(np.asarray(mesh.moment_inertia, dtype=np.float64)).min() > 0.0)
+
+
 def _visual(spec: PartSpec, config: GenerationConfig):
     """(visual trimesh, convex solids as trimeshes or None)."""
     import trimesh
@@ -202,9 +213,13 @@ def assemble_asset_with_offset(
     observed_points_m: np.ndarray | None = None,
     observed_colors_rgb: np.ndarray | None = None,
     recenter: bool = True,
+    surface_snap=None,
 ) -> tuple[ObjectAsset, np.ndarray]:
     """:func:`assemble_asset`, also returning the (3,) translation added to the input geometry
-    (to put the asset-frame origin at the bottom-centre of the parts' bounding box)."""
+    (to put the asset-frame origin at the bottom-centre of the parts' bounding box).
+    surface_snap: optional callable mapping (V, 3) vertices of a voxel part's visual mesh (input
+    frame) to new positions, before mass properties are computed (``generation.visibility``
+    moves the vertices the camera saw onto the observed depth)."""
     from generation.collision import _hull, _merge_smallest, convex_pieces, is_convex_enough, voxel_convex_pieces
     from generation.meshing import to_model_mesh, vertex_colors
     from generation.physics import combine_inertials, joint_resistance, mass_properties, shell_mass_properties
@@ -219,6 +234,16 @@ def assemble_asset_with_offset(
     visuals, solids = [], []
     for spec in parts:
         v, s = _visual(spec, config)
+        if surface_snap is not None and isinstance(spec.geometry, VoxelGeometry):
+            # The marching-cubes surface lies up to a voxel off the observed one: its vertices
+            # seen by the camera go onto the observed depth (positions only: still watertight).
+            # A snap that folds the surface (volume lost, inertia no longer positive definite:
+            # a thin part seen edge-on) is not kept.
+            before = np.array(v.vertices, dtype=np.float64)
+            volume = float(v.volume)
+            v.vertices = np.asarray(surface_snap(before))
+            if not (abs(float(v.volume) - volume) <= SNAP_MAX_VOLUME_CHANGE * abs(volume) and _inertia_ok(v)):
+                v.vertices = before
         visuals.append(v)
         solids.append(s)
     lo = np.min([v.bounds[0] for v in visuals], axis=0)
@@ -250,7 +275,7 @@ def assemble_asset_with_offset(
             # the grid is the shape: split its voxels directly (~0.1 s) instead of CoACD on the
             # marching-cubes surface (3-50 s per completed lamp on open3d_TUM)
             g = spec.geometry
-            pieces = voxel_convex_pieces(g.occupancy, g.voxel_size_m, g.origin_m + shift, max_pieces=config.max_collision_pieces)
+            pieces = voxel_convex_pieces(g.occupancy, g.voxel_size_m, g.origin_m + shift, max_pieces=config.max_voxel_pieces)
         else:
             pieces = convex_pieces(
                 v,

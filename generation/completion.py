@@ -11,7 +11,11 @@ The camera sees one side of an object. The occupancy is completed by
 2. **symmetry**: mirrored about the box's mid-plane y = 0 (left-right) and, for categories that
    are symmetric front-to-back, about x = 0;
 3. **closing**: a one-voxel morphological closing and hole filling (depth noise leaves pinholes);
-4. **support**: every column is filled down to the bottom of the box (nothing floats).
+4. **support**: every column is filled down towards the bottom of the box (nothing floats),
+   stopping at the first blocked voxel;
+5. **blocked space**: voxels that the camera saw through, or that hold another object's observed
+   surface (``blocked``, see ``generation.visibility``), are removed last: neither symmetry nor
+   support may fill space where something else was seen.
 """
 
 from __future__ import annotations
@@ -43,13 +47,16 @@ def complete_occupancy(
     mirror_y: bool = True,
     mirror_x: bool = False,
     fill_down: bool = True,
+    blocked=None,
 ) -> VoxelGeometry:
     """Completed occupancy of an object from its observed surface points.
 
     points_m: (N, 3) observed points in the asset frame. camera_m: (3,) camera centre in the asset
     frame. size_m: (3,) box extents (the box spans x in [-D/2, D/2], y in [-W/2, W/2], z in
-    [0, H]). resolution: voxels along the longest side. Returns a :class:`VoxelGeometry`.
-    Raises ValueError when no observed point lies in the box.
+    [0, H]). resolution: voxels along the longest side. blocked: optional callable mapping (V, 3)
+    asset-frame points to (V,) bool "cannot be this object" (seen free space, another object's
+    surface): voxel centres it marks are never filled. Returns a :class:`VoxelGeometry`. Raises
+    ValueError when no observed point lies in the box.
     """
     from scipy import ndimage
     from scipy.spatial import cKDTree
@@ -91,12 +98,21 @@ def complete_occupancy(
         occ |= occ[::-1, :, :]
     occ = ndimage.binary_closing(np.pad(occ, 1), iterations=1)[1:-1, 1:-1, 1:-1] | occ
     occ = ndimage.binary_fill_holes(occ)
+    stop = np.zeros(dims, dtype=bool) if blocked is None else np.asarray(blocked(centres), dtype=bool).reshape(dims)
     if fill_down:
-        # each occupied column is solid from the bottom of the box to its lowest occupied voxel
+        # each occupied column is solid from its lowest occupied voxel down to the bottom of the
+        # box, or to the first blocked voxel under it (another object's top, seen floor)
         any_col = occ.any(axis=2)
         k_min = np.argmax(occ, axis=2)  # first occupied index per column
-        below = np.arange(dims[2])[None, None, :] < k_min[:, :, None]
-        occ |= below & any_col[:, :, None]
+        z = np.arange(dims[2])[None, None, :]
+        below = z < k_min[:, :, None]
+        # highest blocked voxel below the column's lowest occupied one (-1: none)
+        k_stop = np.where(stop & below, z, -1).max(axis=2)
+        occ |= below & (z > k_stop[:, :, None]) & any_col[:, :, None]
+    if blocked is not None:
+        carved = occ & ~stop
+        if carved.any():
+            occ = carved
     return VoxelGeometry(occ, s, origin)
 
 

@@ -190,6 +190,12 @@ CATEGORY_MATERIAL: dict[str, CategoryMaterial] = {
     "towel": CategoryMaterial("fabric"),
     "blanket": CategoryMaterial("fabric"),
     "soft_toy": CategoryMaterial("fibre_fill"),
+    "bench": CategoryMaterial("wood"),
+    "suitcase": CategoryMaterial("plastic_abs", 0.003),
+    "bag": CategoryMaterial("fabric"),
+    "vase": CategoryMaterial("ceramic", 0.006),
+    "clock": CategoryMaterial("plastic_abs", 0.002),
+    "keyboard": CategoryMaterial("plastic_abs", 0.002),
     "object": CategoryMaterial("plastic_abs", 0.003),
 }
 

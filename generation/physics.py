@@ -161,7 +161,10 @@ def shell_mass_properties(mesh, density_kg_m3: float, thickness_m: float) -> Ine
         d_out, d_in = outer.com_m - com, c_in - com
         steiner = lambda m, d: m * (float(d @ d) * np.eye(3) - np.outer(d, d))  # noqa: E731
         inertia = outer.inertia_kg_m2 + steiner(outer.mass_kg, d_out) - i_in - steiner(m_in, d_in)
-        return _make_inertial(mass, com, inertia)
+        # An offset that folds where the surface is bumpy can pass the volume test yet poke out
+        # of the outer solid: the difference is then no mass distribution (not positive definite).
+        if mass > 0.0 and np.linalg.eigvalsh(0.5 * (inertia + inertia.T)).min() > 0.0:
+            return _make_inertial(mass, com, inertia)
     surface = surface_shell_mass_properties(tm, density_kg_m3, thickness_m)
     return outer if outer.mass_kg < surface.mass_kg else surface
 

@@ -20,6 +20,7 @@ import numpy as np
 
 from scene_builder.config import GenerationConfig
 from scene_builder.frames import pose, transform_points
+from generation.visibility import FreeSpace, surface_samples
 from scene_builder.model import AssetKind, GeneratedAsset, PerceivedObject, Perception
 
 __all__ = ["ShapePriorGenerator", "BACKEND_NAME", "complete_box", "depth_to_walls"]
@@ -28,6 +29,21 @@ BACKEND_NAME = "shape-prior"
 # a face seen head-on spans less than this fraction of the expected depth: complete the depth
 _DEPTH_COMPLETE_FRACTION = 0.6
 _MIRROR_X = {"lamp", "plant", "bottle", "bowl", "mug", "soft_toy"}
+#: A shape prior or template whose surface lies this much in seen free space (a sample of
+#: VIOLATION_SAMPLES points) contradicts the observation: the observed shell is used instead.
+MAX_FREE_SPACE_SHARE = 0.10
+VIOLATION_SAMPLES = 2000
+#: A completed voxel this close to another object's observed surface is that object's.
+OTHERS_CLEARANCE_M = 0.02
+#: Observed surfaces are thinned to this spacing for the ownership distance queries.
+OWNERSHIP_SPACING_M = 0.01
+#: Visual vertices within this many voxels of the observed depth on the object's own pixels are
+#: moved onto it.
+SNAP_VOXELS = 1.5
+#: Completed voxels keep this far in front of the walls.
+WALL_CLEARANCE_M = 0.005
+#: A shape prior or template reaching further than this into a wall is not used.
+MAX_BEHIND_WALL_M = 0.01
 
 
 def depth_to_walls(fit, walls) -> float:
@@ -70,6 +86,27 @@ def complete_box(fit, label: str, walls=()):
     return fit
 
 
+def _column(points_world_m: np.ndarray):
+    """(plan outline as a shapely Polygon, bottom, top) of another object's observed points: the
+    convex hull of their plan positions, shrunk by 2 cm, and their 2nd / 98th height
+    percentiles."""
+    import shapely
+
+    p = np.asarray(points_world_m, dtype=np.float64)
+    lo, hi = np.percentile(p[:, 2], [2, 98])
+    hull = shapely.MultiPoint(_thin(p, 0.02)[:, :2]).convex_hull.buffer(-0.02)
+    return hull, float(lo), float(hi)
+
+
+def _thin(points_m: np.ndarray, spacing_m: float) -> np.ndarray:
+    """One point per occupied ``spacing_m`` grid cell of (N, 3) points (the first, in input
+    order: deterministic)."""
+    k = np.floor(np.asarray(points_m) / spacing_m).astype(np.int64) + (1 << 20)
+    keys = (k[:, 0] << 42) | (k[:, 1] << 21) | k[:, 2]  # 21 bits per axis: +-10 km at 1 cm
+    _, first = np.unique(keys, return_index=True)
+    return np.asarray(points_m)[np.sort(first)]
+
+
 def _median_rgba(colors_rgb: np.ndarray) -> tuple[float, float, float, float]:
     c = np.median(np.asarray(colors_rgb, dtype=np.float64), axis=0) / 255.0
     return (float(c[0]), float(c[1]), float(c[2]), 1.0)
@@ -86,6 +123,8 @@ class ShapePriorGenerator:
         from generation.assembly import ConvexSolids, PartSpec, assemble_asset_with_offset, box_solid
         from generation.completion import complete_occupancy, superellipsoid_occupancy
         from generation.materials import category_material, deformable_settings
+        from scipy.spatial import cKDTree
+
         from generation.pose import fit_box, floor_snap_height_m
         from generation.priors import PRIOR_LABELS, prior_parts
         from scene_builder.vocabulary import category
@@ -134,26 +173,83 @@ class ShapePriorGenerator:
                               description=f"{label}: soft body", shell_thickness_m=shell, rgba=rgba)]
             description += "; deformable"
         else:
-            geometry = complete_occupancy(pts, cam, size, config.voxel_resolution, mirror_y=True, mirror_x=label in _MIRROR_X)
-            specs = [PartSpec("body", None, geometry, cm.material, affordance_rank=3, affordance="pick up or push",
-                              description=f"{label}: observed shell extruded and mirrored", shell_thickness_m=cm.shell_thickness_m,
-                              rgba=rgba)]
-            description += "; completed from the observed shell"
+            specs = None
 
-        asset, shift = assemble_asset_with_offset(
-            obj.name,
-            label,
-            specs,
-            config=cfg,
-            seed=seed,
-            kind=kind,
-            is_fixed=cat.fixed,
-            deformable=soft,
-            description=description,
-            backend=BACKEND_NAME,
-            observed_points_m=pts,
-            observed_colors_rgb=obj.colors_rgb,
-        )
-        # asset coordinates = box coordinates + shift
-        world_from_asset = fit.world_from_box @ pose(np.eye(3), -shift)
-        return GeneratedAsset(asset, world_from_asset, obj.points_world_m)
+        space = FreeSpace(perception.observation, perception.camera, own_mask=obj.mask)
+
+        def assemble(specs, kind, soft, description, cfg, snap=None):
+            asset, shift = assemble_asset_with_offset(
+                obj.name, label, specs, config=cfg, seed=seed, kind=kind, is_fixed=cat.fixed, deformable=soft,
+                description=description, backend=BACKEND_NAME, observed_points_m=pts, observed_colors_rgb=obj.colors_rgb,
+                surface_snap=snap,
+            )
+            # asset coordinates = box coordinates + shift
+            return GeneratedAsset(asset, fit.world_from_box @ pose(np.eye(3), -shift), obj.points_world_m)
+
+        if specs is not None:
+            generated = assemble(specs, kind, soft, description, cfg)
+            samples = transform_points(generated.world_from_asset, surface_samples([q.visual for q in generated.asset.parts], VIOLATION_SAMPLES, seed))
+            share = space.violation(samples)
+            behind = max([0.0] + [float(-np.min(w.signed_distance_m(samples))) for w in perception.room.walls])
+            if share <= MAX_FREE_SPACE_SHARE and behind <= MAX_BEHIND_WALL_M:
+                return generated
+            what = "articulation template" if label in ARTICULATED_LABELS else "shape prior"
+            why = f"filled {share:.0%} seen free space" if share > MAX_FREE_SPACE_SHARE else f"reached {behind * 100:.0f} cm into a wall"
+            description = f"{label}: the {what} {why}; " + description.split("; ")[0]
+            kind, soft = None, None
+            size = fit.size_m.copy()
+
+        voxel_m = float(size.max()) / config.voxel_resolution
+        others_thin = [_thin(o, OWNERSHIP_SPACING_M) for o in others]
+        others_tree = cKDTree(np.concatenate(others_thin)) if others else None
+        # Each thinned point's owner's bottom (2nd height percentile): hidden space below an
+        # object's observed bottom is never that object's (it rests on what is there).
+        others_bottom = np.concatenate([np.full(len(t), np.percentile(o[:, 2], 2)) for t, o in zip(others_thin, others)]) if others else None
+        own_tree = cKDTree(_thin(obj.points_world_m, OWNERSHIP_SPACING_M))
+        walls = perception.room.walls
+        columns = [_column(o) for o in others]
+
+        def blocked(p_box: np.ndarray) -> np.ndarray:
+            """Voxel centres this object may not fill: seen free space, behind a wall, or nearer
+            to another object's observed surface than to its own and not below that object's
+            bottom (hidden space between two objects is shared out by distance, so their
+            completions do not overlap; a supporter keeps its top under what stands on it)."""
+            p_world = transform_points(fit.world_from_box, p_box)
+            out = space.free(p_world, extra_margin_m=0.5 * voxel_m)
+            for wall in walls:
+                out |= wall.signed_distance_m(p_world) < WALL_CLEARANCE_M + 0.5 * voxel_m
+            if others_tree is not None:
+                d_own, _ = own_tree.query(p_world)
+                # Another object's surface matters only where it is nearer than this one's.
+                bound = float(d_own.max()) + voxel_m
+                d_other, idx = others_tree.query(p_world, distance_upper_bound=bound)
+                near = np.isfinite(d_other)
+                above = np.zeros(len(p_world), dtype=bool)
+                above[near] = p_world[near, 2] >= others_bottom[idx[near]] - 0.5 * voxel_m
+                out |= (d_other < OTHERS_CLEARANCE_M + 0.5 * voxel_m) | ((d_other + 0.5 * voxel_m < d_own) & above)
+                # Under something else's top, inside its plan outline: that object's body (a bed
+                # under a mat lying on it, whose top the mat hides), unless this object's own
+                # surface is right there.
+                if columns:
+                    import shapely
+
+                    far_own = d_own > 2.0 * voxel_m
+                    for outline, z_lo, z_hi in columns:
+                        inside = (p_world[:, 2] < z_hi) & (p_world[:, 2] > z_lo) & far_own
+                        if np.any(inside):
+                            idx = np.flatnonzero(inside)
+                            inside[idx] = shapely.contains_xy(outline, p_world[idx, 0], p_world[idx, 1])
+                            out |= inside
+            return out
+
+        geometry = complete_occupancy(pts, cam, size, config.voxel_resolution, mirror_y=True, mirror_x=label in _MIRROR_X, blocked=blocked)
+        specs = [PartSpec("body", None, geometry, cm.material, affordance_rank=3, affordance="pick up or push",
+                          description=f"{label}: observed shell extruded and mirrored", shell_thickness_m=cm.shell_thickness_m,
+                          rgba=rgba)]
+        description += "; completed from the observed shell, carved to the seen free space"
+
+        def snap(v_box: np.ndarray) -> np.ndarray:
+            return transform_points(box_from_world, space.snap(transform_points(fit.world_from_box, v_box), SNAP_VOXELS * voxel_m))
+
+        out = assemble(specs, None, None, description, config, snap)
+        return replace(out, asset=replace(out.asset, observed_shape=True))

@@ -38,12 +38,15 @@ class Body:
     com_rel_m: np.ndarray
     mass_kg: float
     fixed: bool
-    parent: int = -1  # index of the supporting body; -1 floor, -2 wall
+    parent: int = -1  # index of the supporting body; -1 floor, -2 wall, -3 background, -4 none
     support_surface: int = -1  # index into the parent's ``surfaces`` when parent >= 0
     children: list[int] = field(default_factory=list)
-    # Hung on a wall by the support graph (``support.wall_mountable``): exported welded, yet the
-    # solver may still slide it like any movable body.
-    wall_mounted: bool = False
+    # Why it is left where seen as static background (parent -4), one line for the report.
+    unsupported_reason: str = ""
+    # Seen this far above its support: it keeps its height and stands on collision legs.
+    legs_m: float = 0.0
+    hidden_support: bool = False  # legs stand on a support found below a hidden underside
+    pad_bottom_m: float | None = None  # its background pad is a column from here (hidden support)
 
     @property
     def bottom_m(self) -> float:
@@ -62,6 +65,54 @@ class Body:
     def world_vertices(self) -> np.ndarray:
         """(V, 3) all collision vertices in the world."""
         return np.concatenate([p.verts_rel_m for p in self.pieces]) + self.position_m
+
+
+#: Collision legs: side between LEG_MIN_M and LEG_MAX_M (LEG_SHARE of the narrower plan extent),
+#: at the corners of the object's plan rectangle, reaching LEG_INTO_M up into the object.
+LEG_SHARE = 0.15
+LEG_MIN_M = 0.02
+LEG_MAX_M = 0.05
+LEG_INTO_M = 0.02
+
+
+def with_legs(b: Body) -> Body:
+    """``b`` with four collision legs (boxes in its root part's collision pieces, no mass) from
+    its bottom down ``b.legs_m`` to its support, at the corners of its plan rectangle: it stands
+    where it was seen although its feet were not seen. Pose, support and flags are kept."""
+    import dataclasses
+
+    from scene_builder.model import TriangleMesh
+
+    asset = b.asset
+    verts = np.concatenate([p.verts_rel_m for p in b.pieces]) @ b.rotation  # asset axes, relative
+    lo, hi = verts.min(axis=0), verts.max(axis=0)
+    side = float(np.clip(LEG_SHARE * min(hi[0] - lo[0], hi[1] - lo[1]), LEG_MIN_M, LEG_MAX_M))
+    z0, z1 = lo[2] - b.legs_m, lo[2] + min(LEG_INTO_M, hi[2] - lo[2])
+    legs = []
+    for x in (lo[0], hi[0] - side):
+        for y in (lo[1], hi[1] - side):
+            c = np.array([[x + dx, y + dy, z] for dx in (0.0, side) for dy in (0.0, side) for z in (z0, z1)])
+            legs.append(TriangleMesh(c, _BOX_FACES_ASSET))
+    root = asset.root
+    parts = tuple(dataclasses.replace(p, collision=p.collision + tuple(legs)) if p is root else p for p in asset.parts)
+    return rebuilt(b, dataclasses.replace(asset, parts=parts))
+
+
+def rebuilt(b: Body, asset: ObjectAsset) -> Body:
+    """A body for ``asset`` (``b``'s asset with changed collision pieces) at ``b``'s pose, with
+    ``b``'s support, flags and starting position."""
+    new = make_body(asset, b.world_from_asset())
+    new.initial_position_m = b.initial_position_m
+    new.parent, new.support_surface, new.children, new.fixed = b.parent, b.support_surface, b.children, b.fixed
+    new.unsupported_reason, new.legs_m, new.hidden_support, new.pad_bottom_m = b.unsupported_reason, b.legs_m, b.hidden_support, b.pad_bottom_m
+    return new
+
+
+# Corner k of a box has x = hi when k & 4, y = hi when k & 2, z = hi when k & 1; faces outward.
+_BOX_FACES_ASSET = np.array(
+    [[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1], [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]],
+    dtype=np.int64,
+)
 
 
 def make_body(asset: ObjectAsset, world_from_asset: np.ndarray) -> Body:

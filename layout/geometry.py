@@ -277,6 +277,22 @@ def clip_convex_polygons(subject: np.ndarray, clip: np.ndarray) -> np.ndarray:
     return out
 
 
+def clip_half_plane(poly: np.ndarray, normal_xy: np.ndarray, offset: float) -> np.ndarray:
+    """The part of a convex polygon (K, 2) where ``normal_xy . p >= offset`` (Sutherland-Hodgman
+    against one half-plane); a point or a segment (K < 3) is kept or dropped whole."""
+    pts = np.asarray(poly, dtype=np.float64)
+    side = pts @ np.asarray(normal_xy, dtype=np.float64) - offset
+    if len(pts) < 3:
+        return pts[side >= 0]
+    res = []
+    for p, q, sp, sq in zip(pts, np.roll(pts, -1, axis=0), side, np.roll(side, -1)):
+        if sp >= 0:
+            res.append(p)
+        if (sp >= 0) != (sq >= 0):
+            res.append(p + sp / (sp - sq) * (q - p))
+    return np.array(res) if res else np.zeros((0, 2))
+
+
 def inset_polygon(poly: np.ndarray, inset_m: float) -> np.ndarray:
     """(K, 2) the convex CCW polygon ``poly`` (H, 2) with every edge moved inwards by ``inset_m``
     (the points at least ``inset_m`` inside it); (0, 2) when nothing is left."""

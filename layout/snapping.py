@@ -1,5 +1,8 @@
-"""Manhattan yaw snapping: turn an object to the room's wall directions when its observed points
-fit the snapped pose nearly as well as the initial one."""
+"""Manhattan yaw snapping: turn an object to the room's wall directions when the turn is small
+(perception's yaw error, at most :data:`SNAP_MAX_DEG`) and its observed points fit the snapped pose
+nearly as well as the initial one. A larger turn is never made: the asset's geometry and photo
+texture were built at the observed yaw, and turning it by tens of degrees would move what was
+seen (a twin keeps objects where they were seen)."""
 
 from __future__ import annotations
 
@@ -10,13 +13,12 @@ import numpy as np
 from scene_builder.frames import rot_z, yaw_of
 from scene_builder.model import ObjectAsset, Room
 
-# Snap a turn of up to 12 deg when the snapped fit cost is within 10 % (plus 2 mm of sensor
-# noise) of the initial one; a larger turn only when the snapped pose fits at least as well.
+# Snap a turn of up to SNAP_MAX_DEG when the snapped fit cost is within 10 % (plus 2 mm of
+# sensor noise) of the initial one (with too few points to judge a fit, snap it anyway).
 SNAP_COST_RATIO = 1.10
 SNAP_COST_SLACK_M = 0.002
-# With too few observed points to judge a fit, snap only small corrections (up to 12 deg).
 MIN_POINTS_FOR_FIT = 20
-SNAP_MAX_DEG_WITHOUT_EVIDENCE = 12.0
+SNAP_MAX_DEG = 12.0
 MAX_FIT_POINTS = 300
 # The snapped pose's plan position may move this far to re-fit the points.
 MAX_REFIT_M = 0.15
@@ -98,16 +100,19 @@ def snap_yaw(
     """
     rotation = world_from_asset[:3, :3]
     position = world_from_asset[:3, 3]
+    if asset.observed_shape:
+        # Built from the observed surface at the observed pose: turning it moves what was seen.
+        return world_from_asset, YawSnap(False, 0.0, np.nan, np.nan)
     yaw = yaw_of(rotation)
     quarter = np.pi / 2
     delta = float(ref_yaw_rad + np.round((yaw - ref_yaw_rad) / quarter) * quarter - yaw)
     delta = float(np.arctan2(np.sin(delta), np.cos(delta)))
-    if abs(delta) < 1e-9:
+    if abs(delta) < 1e-9 or abs(np.degrees(delta)) > SNAP_MAX_DEG:
         return world_from_asset, YawSnap(False, 0.0, np.nan, np.nan)
     new_rot = rot_z(delta) @ rotation
     pts = np.asarray(observed_points_world_m, dtype=np.float64)
     if len(pts) < MIN_POINTS_FOR_FIT:
-        ok = abs(np.degrees(delta)) <= SNAP_MAX_DEG_WITHOUT_EVIDENCE
+        ok = True
         cost0 = cost1 = float("nan")
         new_pos = position
     else:
@@ -119,10 +124,7 @@ def snap_yaw(
         cost0 = _fit_cost(pts, bounds, rotation, _refit_xy(pts, bounds, rotation, position))
         new_pos = _refit_xy(pts, bounds, new_rot, position)
         cost1 = _fit_cost(pts, bounds, new_rot, new_pos)
-        # A small turn needs the snapped pose to fit nearly as well; a large one (the initial
-        # yaw was wrong by more than a perception error) needs it to fit at least as well.
-        small = abs(np.degrees(delta)) <= SNAP_MAX_DEG_WITHOUT_EVIDENCE
-        ok = cost1 <= SNAP_COST_RATIO * cost0 + SNAP_COST_SLACK_M if small else cost1 <= cost0
+        ok = cost1 <= SNAP_COST_RATIO * cost0 + SNAP_COST_SLACK_M
     if not ok:
         return world_from_asset, YawSnap(False, 0.0, cost0, cost1)
     out = np.eye(4)

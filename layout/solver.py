@@ -34,14 +34,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from layout.bodies import Body, make_body
-from layout.geometry import clip_to_slab_xy, closest_point_in_polygon, horizontal_mtv, placements_inside
+from layout.bodies import Body, make_body, rebuilt, with_legs
+from layout.geometry import clip_half_plane, clip_to_slab_xy, closest_point_in_polygon, horizontal_mtv, placements_inside
 from layout.narrowphase import ConvexWorld
 from layout.snapping import YawSnap, reference_yaw, snap_yaw
-from layout.support import FLOOR, build_support, is_ancestor, subtree
+from layout.background import CARVE_CLEARANCE_M, BackgroundSupport, HiddenBelow, absorb, carve, column_boxes, observed_structure
+from layout.trim import trim_pair
+from layout.support import BACKGROUND, FLOOR, UNSUPPORTED, build_support, is_ancestor, pad_bounds, pad_box, subtree
 from scene_builder.config import LayoutConfig
 from scene_builder.errors import InputError
-from scene_builder.model import AssetKind, GeneratedAsset, LayoutResult, ObjectAsset, Perception, PlacedObject, Plane, Scene, SupportEdge
+from scene_builder.model import AssetKind, Background, GeneratedAsset, LayoutResult, Perception, PlacedObject, Placement, Plane, Scene, SupportEdge, TriangleMesh
 
 # Signed distances above -PENETRATION_TOL_M count as touching (resting contacts are exact up to
 # floating point).
@@ -65,6 +67,8 @@ _FAN = np.stack([np.cos(np.radians(np.arange(0.0, 180.0, 7.5))), np.sin(np.radia
 # SUPPORT_INSET_M, and SUPPORT_INSET_FRACTION of the object's narrowest footprint width (a lamp
 # whose centre of mass is 1 cm inside a sofa's back edge topples at the first nudge).
 SUPPORT_INSET_M = 0.01
+# Rounds of cutting overlapping collision pieces apart (layout.trim) before the pushes.
+TRIM_PASSES = 3
 SUPPORT_INSET_FRACTION = 0.2
 # A soft body sags over an edge until it slides off: its whole footprint is kept on the face
 # (shrunk by SUPPORT_INSET_M); when it does not fit, its footprint is scaled about its centre by
@@ -125,6 +129,7 @@ class _Solver:
         self.rng = np.random.default_rng(seed)
         self.walls = walls
         self.clearance = float(config.clearance_m)
+        self.max_push = float(config.max_push_m)
         self.world = ConvexWorld([b.pieces for b in bodies])
         # Walls are vertical planes: an object's distance to a wall is the minimum over its
         # (fixed-rotation) vertices of n . v, precomputed once, plus n . position.
@@ -141,7 +146,7 @@ class _Solver:
         self.checked: dict[tuple[int, int], tuple[int, int]] = {}
         self.push_count: dict[tuple[int, int], int] = {}
         self._regions: dict[int, tuple[tuple[int, int], np.ndarray]] = {}
-        self.dropped: list[int] = []  # bodies moved from an object's top to the floor
+        self.stuck: list[int] = []  # bodies with no room left where seen: left there as background
 
     # -- state -------------------------------------------------------------------------------
     def boxes(self) -> tuple[np.ndarray, np.ndarray]:
@@ -278,8 +283,8 @@ class _Solver:
         def branch(path: list[int]) -> int:
             out = -1
             for k in path:
-                if k in common:
-                    break
+                if k in common or (self.bodies[k].fixed and out >= 0):
+                    break  # a fixed supporter (left where seen) carries nothing away
                 out = k
             return out
 
@@ -309,6 +314,14 @@ class _Solver:
         if amount <= 0.0:
             self.checked[(i, j)] = (self.version[i], self.version[j])
             return False
+        if amount > self.max_push:
+            # Clearing this overlap sideways would move what was seen too far (a table under a
+            # blanket seen on it): the lighter movable side cannot stand where it was seen.
+            sides = [m for m, sh in ((mover_i, share_i), (mover_j, share_j)) if sh > 0.0]
+            k = min(sides, key=lambda m: (self.tree_mass(m), self.bodies[m].name))
+            other = bodies[j if k == mover_i else i].name
+            self.leave_where_seen(k, f"would have to move {amount * 100:.0f} cm sideways to clear {other}")
+            return True
         self.push_count[(i, j)] = pushes + 1
         if pushes >= ESCALATE_AFTER_PUSHES:
             # Over-relax inside jams: each repeated push leaves a little more room (up to
@@ -337,6 +350,8 @@ class _Solver:
         gaps = self.wall_min_rel + pos @ self.wall_n.T + self.wall_off  # (N, W)
         moved = False
         for i, w in np.argwhere(self.clearance - gaps > CLEARANCE_TOL_M):
+            if self.bodies[int(i)].fixed:
+                continue  # fixed furniture and objects left where seen never move
             n_xy = self.wall_n[w, :2]
             norm = float(np.linalg.norm(n_xy))
             short = self.clearance - float(self.wall_gaps(int(i))[w])  # earlier moves count
@@ -371,13 +386,37 @@ class _Solver:
         self._regions[i] = (key, region)
         return region
 
+    def inside_walls(self, i: int, region: np.ndarray) -> np.ndarray:
+        """The positions (x, y) of ``region`` (K, 2) at which body i (and what rests on it, whose
+        relative offsets stay) keeps the clearance from every wall."""
+        if not len(self.wall_n):
+            return region
+        b = self.bodies[i]
+        for k in subtree(self.bodies, i):
+            off = self.bodies[k].position_m - b.position_m
+            for w in range(len(self.wall_n)):
+                n = self.wall_n[w]
+                # gap = wall_min_rel + n . (pos + off) + wall_off >= clearance
+                rhs = self.clearance - self.wall_min_rel[k, w] - self.wall_off[w] - float(n @ off) - n[2] * b.position_m[2]
+                region = clip_half_plane(region, n[:2], rhs)
+                if len(region) == 0:
+                    return region
+        return region
+
     def keep_on_support(self) -> bool:
         moved = False
         for i, b in enumerate(self.bodies):
-            if b.parent < 0 or b.fixed:
+            if b.parent < 0 or b.fixed or b.support_surface < 0:
                 continue
             s = self.bodies[b.parent]
-            region = self.support_region(i) + s.position_m[:2]
+            region = self.inside_walls(i, self.support_region(i) + s.position_m[:2])
+            if len(region) == 0:
+                # Stable spots all lie in a wall: the wall wins, the settle simulation judges
+                # whether the object still stands (relaxed to its centre of mass over the face).
+                face = self.bodies[b.parent].surfaces[b.support_surface].polygon_rel_m + s.position_m[:2] - b.com_rel_m[:2]
+                region = self.inside_walls(i, face)
+                if len(region) == 0:
+                    continue
             here = b.position_m[:2]
             target = region[0] if len(region) < 3 else closest_point_in_polygon(here, region, 0.0)
             delta = target - here
@@ -445,7 +484,7 @@ class _Solver:
         b = self.bodies[i]
         tree = subtree(self.bodies, i)
         region = None
-        if b.parent >= 0:
+        if b.parent >= 0 and b.support_surface >= 0:
             region = self.support_region(i) + self.bodies[b.parent].position_m[:2]
         start = b.position_m[:2].copy()
         angles = np.radians(np.arange(RELOCATE_ANGLES) * 360.0 / RELOCATE_ANGLES)
@@ -475,11 +514,17 @@ class _Solver:
                 moved = True
                 continue
             # No room left on the support (two cabinets on one cabinet's top): the lighter side
-            # that rests on an object comes down to the floor, to its nearest free spot there.
+            # that rests on an object cannot stand where it was seen; it stays there as static
+            # background (never dropped to the floor metres from its pixels).
             on_object = [m for m in ordered if self.bodies[m].parent >= 0]
             if on_object:
-                self.drop_to_floor(on_object[0])
-                self.relocate(on_object[0])
+                self.leave_where_seen(on_object[0], "no room on its support clear of its neighbours")
+                moved = True
+            elif ordered:
+                # Jammed against static geometry (an object left where seen) with no free spot
+                # near: it cannot stand clear where it was seen either.
+                other = self.bodies[j if ordered[0] == i else i].name
+                self.leave_where_seen(ordered[0], f"no room clear of {other} near where it was seen")
                 moved = True
         for k in self.wall_violators():
             if not len(self.wall_violators([k])):
@@ -492,8 +537,7 @@ class _Solver:
             if any(self.relocate(m) for m in chain if not self.bodies[m].fixed):
                 moved = True
             elif self.bodies[k].parent >= 0 and not self.bodies[k].fixed:
-                self.drop_to_floor(k)
-                self.relocate(k)
+                self.leave_where_seen(k, "its support's stable spots all reach into a wall")
                 moved = True
         return moved
 
@@ -505,18 +549,20 @@ class _Solver:
         which = list(range(len(self.bodies))) if which is None else which
         return [k for k in which if float(np.min(self.wall_gaps(k))) < -PENETRATION_TOL_M]
 
-    def drop_to_floor(self, i: int) -> None:
-        """Re-parent body i (with what rests on it) from its supporting object to the floor."""
+    def leave_where_seen(self, i: int, reason: str) -> None:
+        """Put body i (with what rests on it) back where it was seen and fix it there: it becomes
+        static background after the solve (``stuck``); the others make room around it."""
         b = self.bodies[i]
-        self.bodies[b.parent].children.remove(i)
-        b.parent, b.support_surface = FLOOR, -1
+        if b.parent >= 0:
+            self.bodies[b.parent].children.remove(i)
+        b.parent, b.support_surface, b.fixed, b.unsupported_reason = UNSUPPORTED, -1, True, reason
         self._regions.pop(i, None)
-        dz = -b.bottom_m
+        delta = b.initial_position_m - b.position_m
         for k in subtree(self.bodies, i):
-            self.bodies[k].position_m[2] += dz
+            self.bodies[k].position_m += delta
             self.world.set_position(k, self.bodies[k].position_m)
             self.version[k] += 1
-        self.dropped.append(i)
+        self.stuck.append(i)
 
     def penetrating_pair(self, i: int, j: int) -> bool:
         for a, b in self.piece_pairs(i, j, 0.0):
@@ -528,14 +574,21 @@ class _Solver:
     # -- measurement ---------------------------------------------------------------------------
     def max_penetration(self) -> float:
         """Deepest overlap (m) between pieces of distinct objects, and of objects with the floor
-        and the walls, measured exactly (GJK/EPA)."""
+        and the walls, measured exactly (GJK/EPA). Objects left where seen as static background
+        (``UNSUPPORTED``) join the room's static geometry: their overlaps with each other, the
+        floor and the walls are not overlaps between bodies."""
         worst = 0.0
         lo, hi = self.boxes()
+        static = [b.parent == UNSUPPORTED for b in self.bodies]
         for i, j in candidate_pairs(lo, hi, 0.0):
+            if static[i] and static[j]:
+                continue
             for a, b in self.piece_pairs(int(i), int(j), 0.0):
                 d, _ = self.world.distance(self.world.geom_ids[i][a], self.world.geom_ids[j][b], 0.0)
                 worst = max(worst, -d)
         for b in self.bodies:
+            if b.parent == UNSUPPORTED:
+                continue
             worst = max(worst, -b.bottom_m)
             if self.walls:
                 v = b.world_vertices()
@@ -543,8 +596,137 @@ class _Solver:
         return worst
 
 
-def _welded(asset: ObjectAsset, wall_mounted: bool) -> ObjectAsset:
-    return dataclasses.replace(asset, is_fixed=True) if wall_mounted and not asset.is_fixed else asset
+def _pad_blocked(b: Body, bodies: list[Body]) -> bool:
+    """Whether the pad under ``b`` (resting on the background) would reach into another body."""
+    lo, hi = pad_bounds(*pad_box(b, b.bottom_m))
+    hi[2] -= CARVE_CLEARANCE_M
+    return any(np.any(np.all(lo < o.piece_hi_rel_m + o.position_m, axis=1) & np.all(hi > o.piece_lo_rel_m + o.position_m, axis=1))
+               for o in bodies if o is not b)
+
+
+def _unsupport_blocked_pads(bodies: list[Body]) -> None:
+    """A body resting on the background whose pad would reach into another body (one placed
+    after it in the support graph, e.g. overlapping it from the side) has no clear support seen
+    under it: it is left where it was seen (``UNSUPPORTED``), like any object with nothing under
+    it; what rests on it then rests on the background."""
+    for b in bodies:
+        if b.parent == BACKGROUND and _pad_blocked(b, bodies):
+            b.parent = UNSUPPORTED
+            b.unsupported_reason = "what is under it is another object's, with no face to rest on"
+
+
+def _unsupport_in_walls(solver: _Solver, max_push_m: float) -> None:
+    """A movable body reaching more than ``max_push_m`` into a wall would have to move that far
+    to stand in the room: it is wall (a door, a radiator, a picture seen as an object, or a wall
+    plane fitted a little off), left where it was seen as static background."""
+    for k, b in enumerate(solver.bodies):
+        if not len(solver.wall_n) or b.fixed or b.parent == UNSUPPORTED:
+            continue
+        depth = -float(np.min(solver.wall_gaps(k)))
+        if depth > max_push_m:
+            b.parent = UNSUPPORTED
+            b.unsupported_reason = f"reaches {depth * 100:.0f} cm into a wall"
+
+
+def _trim_overlaps(solver: _Solver) -> bool:
+    """Cut apart the collision pieces of overlapping bodies where the overlap is shallow
+    (``layout.trim``), replacing those bodies in place (pose, support and flags kept). Returns
+    whether anything was cut (the solver's narrow phase must then be rebuilt)."""
+    bodies = solver.bodies
+    changed = False
+    for i, j in solver.penetrating_pairs():
+        bi, bj = bodies[i], bodies[j]
+        if bi.asset.kind is AssetKind.DEFORMABLE or bj.asset.kind is AssetKind.DEFORMABLE:
+            continue  # a flex is simulated as its box: nothing to cut
+        a, b, cut, _ = trim_pair(bi.asset, bi.world_from_asset(), bj.asset, bj.world_from_asset())
+        if cut <= PENETRATION_TOL_M:
+            continue
+        for k, asset in ((i, a), (j, b)):
+            old = bodies[k]
+            if asset is old.asset:
+                continue
+            bodies[k] = rebuilt(old, asset)
+            changed = True
+    if changed:
+        # Cut pieces may have changed a supporter's top faces: each child rests on the face at
+        # its bottom's height again (the nearest one).
+        for b in bodies:
+            if b.parent >= 0:
+                faces = bodies[b.parent].surfaces
+                heights = np.array([bodies[b.parent].position_m[2] + f.height_rel_m for f in faces])
+                b.support_surface = int(np.argmin(np.abs(heights - b.bottom_m))) if len(faces) else -1
+    return changed
+
+
+def _yaw_deg(rotation: np.ndarray) -> float:
+    return float(np.degrees(np.arctan2(rotation[1, 0], rotation[0, 0])))
+
+
+def _static_background(
+    background: Background | None, bodies: list[Body], absorbed: list[int], walls: tuple[Plane, ...], seen: dict[str, np.ndarray]
+) -> Background | None:
+    """The background with the objects in ``absorbed`` (body indices) made part of it, a pad under
+    every body resting on it, and the collision boxes of its observed structure carved clear of
+    the remaining bodies."""
+    if background is None:
+        if not absorbed:
+            return None
+        # No observed surface (perception built none): the background holds just these objects.
+        background = Background(TriangleMesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)), np.zeros(0, dtype=bool))
+    for k in absorbed:
+        b = bodies[k]
+        background = absorb(background, b.name, b.asset, seen[b.name])  # exactly where it was seen
+    lo, hi = column_boxes(observed_structure(background, walls))
+    movers = [b for k, b in enumerate(bodies) if k not in set(absorbed)]
+    if movers:
+        olo = np.concatenate([b.piece_lo_rel_m + b.position_m for b in movers])
+        ohi = np.concatenate([b.piece_hi_rel_m + b.position_m for b in movers])
+        lo, hi = carve(lo, hi, olo, ohi)
+    centers = [(lo + hi) / 2.0]
+    halves = [(hi - lo) / 2.0]
+    yaws = [np.zeros(len(lo))]
+    for b in movers:
+        if b.parent != BACKGROUND:
+            continue
+        # The pad spans the object's whole plan extent (it rests on the surface seen around it,
+        # hidden under all of it); _unsupport_blocked_pads made sure nothing else was there.
+        if _pad_blocked(b, bodies):
+            continue
+        c, h, yaw = pad_box(b, b.bottom_m)
+        centers.append(c[None])
+        halves.append(h[None])
+        yaws.append(np.array([yaw]))
+    return dataclasses.replace(
+        background,
+        box_centers_m=np.concatenate(centers),
+        box_half_extents_m=np.concatenate(halves),
+        box_yaws_rad=np.concatenate(yaws),
+    )
+
+
+def _placement(g: GeneratedAsset, b: Body, support: str, absorbed: bool) -> Placement:
+    """How far ``b`` ended from where ``g`` was seen, and why."""
+    seen = g.world_from_asset[:3, 3]
+    delta = b.position_m - seen
+    dist = float(np.linalg.norm(delta))
+    yaw = abs((_yaw_deg(b.rotation) - _yaw_deg(g.world_from_asset[:3, :3]) + 180.0) % 360.0 - 180.0)
+    reasons = []
+    if absorbed:
+        reasons.append(f"{b.unsupported_reason or 'nothing seen under it to rest on'}: kept where seen as static background")
+    if b.pad_bottom_m is not None and not absorbed:
+        reasons.append(f"rests where seen on a static {(b.bottom_m - b.pad_bottom_m) * 100:.0f} cm column standing in for the support hidden under it")
+    if b.legs_m > 0.0 and not absorbed:
+        why = "the space under it was hidden from the camera" if b.hidden_support else "its feet were not seen"
+        reasons.append(f"stands where seen on {b.legs_m * 100:.0f} cm collision legs down to the {support} ({why})")
+    if dist > 0.01 and not absorbed:
+        if abs(delta[2]) > 0.01:
+            reasons.append(f"{'lowered' if delta[2] < 0 else 'raised'} {abs(delta[2]) * 100:.0f} cm onto the {support if support in ('floor', 'background', 'wall') else support}")
+        if float(np.linalg.norm(delta[:2])) > 0.01:
+            reasons.append(f"pushed {float(np.linalg.norm(delta[:2])) * 100:.0f} cm sideways out of interpenetration")
+    if yaw > 1.0 and not absorbed:
+        reasons.append(f"turned {yaw:.0f} deg to align with the walls")
+    return Placement(g.asset.name, 0.0 if absorbed else dist, 0.0 if absorbed else yaw, support, absorbed, "; ".join(reasons),
+                     0.0 if absorbed else float(-delta[2]))
 
 
 def solve_layout_with_stats(
@@ -583,40 +765,72 @@ def solve_layout_with_stats(
     lap("narrowphase_setup")
     before = solver.max_penetration()
     lap("measure_before")
-    edges, _ = build_support(bodies, walls, solver.vertical_clash)
+    background = perception.room.background
+    ground = BackgroundSupport(background, walls)
+    hidden = HiddenBelow(perception.observation, perception.camera)
+    edges, _ = build_support(bodies, walls, solver.vertical_clash, ground.height_under if background is not None else None, config.max_lower_m, hidden)
+    for i, b in enumerate(bodies):
+        if b.legs_m > 0.0 and b.parent != UNSUPPORTED:
+            bodies[i] = with_legs(b)
+    if any(b.legs_m > 0.0 for b in bodies):
+        solver = _Solver(bodies, walls, config, seed)
+    _unsupport_blocked_pads(bodies)
+    _unsupport_in_walls(solver, config.max_wall_push_m)
+    absorbed = [i for i, b in enumerate(bodies) if b.parent == UNSUPPORTED]
+    for i in absorbed:
+        if bodies[i].asset.kind is AssetKind.DEFORMABLE:
+            # Static now: no flex box, its own collision pieces (which layout.trim can cut).
+            bodies[i] = rebuilt(bodies[i], dataclasses.replace(bodies[i].asset, kind=AssetKind.RIGID, deformable=None))
+            solver = _Solver(bodies, walls, config, seed)
+        bodies[i].fixed = True  # left where seen; the others make room around it
     for i, b in enumerate(bodies):
         solver.world.set_position(i, b.position_m)
     lap("support")
+    for _ in range(TRIM_PASSES):  # a cut changes the pieces: look again
+        if not _trim_overlaps(solver):
+            break
+        solver = _Solver(bodies, walls, config, seed)
+    lap("trim")
     iterations, converged = solver.run(int(config.max_iterations))
     for _ in range(RELOCATE_ROUNDS):
         # Pushes that stall (a table jammed between a shelf and a wall) leave overlaps: the
         # movable side goes to its nearest free spot, then the pushes tidy the clearances.
-        if converged or not solver.relocate_remaining():
+        # (Converged pushes can still leave an overlap with a fixed body they cannot move.)
+        if (converged and not solver.penetrating_pairs()) or not solver.relocate_remaining():
             break
         more, converged = solver.run(int(config.max_iterations) // 2)
         iterations += more
     lap("solve")
     after = solver.max_penetration()
     lap("measure_after")
-    for i in solver.dropped:
-        b = bodies[i]
-        k = next(n for n, e in enumerate(edges) if e.child == b.name)
-        edges[k] = SupportEdge(child=b.name, parent="floor", contact_gap_m=float(b.initial_position_m[2] + b.lo_rel_m[2]))
+    absorbed = sorted(set(absorbed) | set(solver.stuck))
 
     by_name = {b.name: b for b in bodies}
     parent_of = {e.child: e.parent for e in edges}
-    # Bodies that the support graph hung on a wall are welded there (``support.wall_mountable``).
+    absorbed_names = {bodies[i].name for i in absorbed}
+    # What rests on an object that became background rests on the background.
+    parent_of = {c: ("background" if p in absorbed_names else p) for c, p in parent_of.items()}
+    edges = [dataclasses.replace(e, parent=parent_of[e.child]) for e in edges]
     placed = tuple(
-        PlacedObject(asset=_welded(g.asset, by_name[g.asset.name].wall_mounted), world_from_asset=by_name[g.asset.name].world_from_asset(), support=parent_of[g.asset.name])
+        PlacedObject(asset=by_name[g.asset.name].asset, world_from_asset=by_name[g.asset.name].world_from_asset(), support=parent_of[g.asset.name])
+        for g in generated
+        if g.asset.name not in absorbed_names
+    )
+    seen = {g.asset.name: g.world_from_asset for g in generated}
+    room = dataclasses.replace(perception.room, background=_static_background(background, bodies, absorbed, walls, seen))
+    scene = Scene(camera=perception.camera, room=room, objects=placed)
+    edge_order = {n: k for k, n in enumerate(names)}
+    support = tuple(sorted((e for e in edges if e.child not in absorbed_names), key=lambda e: edge_order[e.child]))
+    placements = tuple(
+        _placement(g, by_name[g.asset.name], parent_of[g.asset.name], g.asset.name in absorbed_names)
         for g in generated
     )
-    scene = Scene(camera=perception.camera, room=perception.room, objects=placed)
-    edge_order = {n: k for k, n in enumerate(names)}
-    support = tuple(sorted(edges, key=lambda e: edge_order[e.child]))
+    lap("background")
     shifts = np.array([np.linalg.norm(b.position_m[:2] - b.initial_position_m[:2]) for b in bodies])
     stats = SolveStats(tuple(snaps), float(shifts.mean()), float(shifts.max()), converged, iterations, tuple(phases))
     return (
-        LayoutResult(scene=scene, support=support, iterations=iterations, max_penetration_before_m=before, max_penetration_after_m=after),
+        LayoutResult(scene=scene, support=support, iterations=iterations, max_penetration_before_m=before,
+                     max_penetration_after_m=after, placements=placements),
         stats,
     )
 

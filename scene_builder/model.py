@@ -20,6 +20,10 @@ Frames and units (the one place they are written down)
   expressed in frame ``b`` into frame ``a`` (``p_a = a_from_b @ [p_b, 1]``).
 * **Depth** is planar z-depth (distance along the optical axis), not ray length. Invalid depth
   pixels hold ``0.0``.
+* **Texture coordinates** ``uv`` follow the image: ``u`` runs right and ``v`` runs *down* from the
+  top-left corner of the texture image, both in [0, 1]; the centre of pixel ``(x, y)`` of a
+  ``W`` x ``H`` texture is ``((x + 0.5) / W, (y + 0.5) / H)`` (glTF's convention; USD's ``st``
+  and OBJ's ``vt`` use ``1 - v``, and each exporter converts).
 
 Arrays are stored read-only (``ndarray.flags.writeable`` is False) so that frozen really means
 frozen; copy before modifying. Dataclasses that hold arrays compare by identity (``eq=False``).
@@ -35,6 +39,7 @@ import numpy as np
 
 __all__ = [
     "AssetKind",
+    "Background",
     "BackendUse",
     "Camera",
     "CameraIntrinsics",
@@ -55,43 +60,19 @@ __all__ = [
     "Perception",
     "PhysicsVerdict",
     "PlacedObject",
+    "Placement",
     "Plane",
     "Room",
     "Scene",
     "SupportEdge",
+    "Texture",
     "Trajectory",
     "TriangleMesh",
     "as_array",
 ]
 
 
-def as_array(value, dtype, shape: tuple[int | None, ...], name: str) -> np.ndarray:
-    """Return ``value`` as a read-only array of ``dtype`` and check its shape.
-
-    ``shape`` uses ``None`` for a free dimension, e.g. ``(None, 3)`` for an (N, 3) array.
-    Raises ``ValueError`` naming the field when the shape does not match or values are not finite
-    (for floating dtypes).
-    """
-    arr = np.array(value, dtype=dtype, copy=True)
-    if arr.ndim != len(shape) or any(s is not None and s != a for s, a in zip(shape, arr.shape)):
-        want = "x".join("N" if s is None else str(s) for s in shape)
-        raise ValueError(f"{name}: expected shape ({want}), got {arr.shape}")
-    if np.issubdtype(arr.dtype, np.floating) and not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name}: contains NaN or infinite values")
-    arr.setflags(write=False)
-    return arr
-
-
-def _freeze(obj, name: str, dtype, shape) -> None:
-    object.__setattr__(obj, name, as_array(getattr(obj, name), dtype, shape, f"{type(obj).__name__}.{name}"))
-
-
-def _check_rigid(t: np.ndarray, name: str) -> None:
-    r = t[:3, :3]
-    if not np.allclose(r.T @ r, np.eye(3), atol=1e-6) or not np.isclose(np.linalg.det(r), 1.0, atol=1e-6):
-        raise ValueError(f"{name}: rotation block is not a proper rotation")
-    if not np.allclose(t[3], [0.0, 0.0, 0.0, 1.0]):
-        raise ValueError(f"{name}: last row must be [0, 0, 0, 1]")
+from scene_builder.arrays import _check_rigid, _freeze, as_array  # noqa: E402  (re-exported: as_array is public)
 
 
 # --------------------------------------------------------------------------------------------
@@ -214,9 +195,12 @@ class BackendUse:
 class Observation:
     """What the camera saw, as loaded and checked.
 
-    rgb: (H, W, 3) uint8, EXIF orientation already applied.
+    rgb: (H, W, 3) uint8, EXIF orientation already applied, at the analysis resolution that the
+      depth, the intrinsics and every object mask share (a large photo is downscaled for analysis).
     depth_m: (H, W) float32 planar depth in metres, 0.0 where invalid. Either from a sensor
       (``depth_source == "sensor"``) or estimated (``depth_source`` names the backend).
+    rgb_full: (H', W', 3) uint8, the photo at its stored resolution when it was downscaled for
+      analysis (the same view: intrinsics scale by W' / W), for textures; None when rgb is it.
     """
 
     image_path: str
@@ -224,9 +208,21 @@ class Observation:
     depth_m: np.ndarray
     intrinsics: CameraIntrinsics
     depth_source: str
+    rgb_full: np.ndarray | None = None
+
+    @property
+    def photo_rgb(self) -> np.ndarray:
+        """(H', W', 3) uint8: the photo at full resolution (``rgb_full``, else ``rgb``)."""
+        return self.rgb if self.rgb_full is None else self.rgb_full
 
     def __post_init__(self) -> None:
         _freeze(self, "rgb", np.uint8, (None, None, 3))
+        if self.rgb_full is not None:
+            _freeze(self, "rgb_full", np.uint8, (None, None, 3))
+            fh, fw = self.rgb_full.shape[:2]
+            h, w = self.rgb.shape[:2]
+            if abs(fw / fh - w / h) > 0.02 * (w / h):
+                raise ValueError("Observation.rgb_full: aspect ratio differs from rgb's (not the same view)")
         _freeze(self, "depth_m", np.float32, self.rgb.shape[:2])
         if float(self.depth_m.min(initial=0.0)) < 0.0:
             raise ValueError("Observation.depth_m: negative depth")
@@ -271,13 +267,111 @@ class Plane:
 
 
 @dataclass(frozen=True, eq=False)
+class Texture:
+    """An RGB image that meshes map onto their surface through ``TriangleMesh.uv``.
+
+    name: unique in the scene and safe as a file name (exporters write ``textures/<name>.png``).
+    image_rgb: (H, W, 3) uint8.
+    """
+
+    name: str
+    image_rgb: np.ndarray
+
+    def __post_init__(self) -> None:
+        _freeze(self, "image_rgb", np.uint8, (None, None, 3))
+        if self.image_rgb.shape[0] == 0 or self.image_rgb.shape[1] == 0:
+            raise ValueError(f"Texture {self.name}: empty image")
+        if not self.name or any(c in self.name for c in "/\\\0") or self.name in (".", ".."):
+            raise ValueError(f"Texture name {self.name!r} is not a safe file name")
+
+
+@dataclass(frozen=True, eq=False)
+class TriangleMesh:
+    """A triangle mesh.
+
+    vertices_m: (V, 3) float64.
+    faces: (F, 3) int64 vertex indices, counter-clockwise seen from outside.
+    vertex_colors_rgba: (V, 4) uint8, or None.
+    uv: (V, 2) float64 texture coordinates of each vertex in ``texture`` (see the module
+      docstring for the convention), or None. Given together with ``texture`` or not at all.
+    """
+
+    vertices_m: np.ndarray
+    faces: np.ndarray
+    vertex_colors_rgba: np.ndarray | None = None
+    uv: np.ndarray | None = None
+    texture: Texture | None = None
+
+    def __post_init__(self) -> None:
+        _freeze(self, "vertices_m", np.float64, (None, 3))
+        _freeze(self, "faces", np.int64, (None, 3))
+        if self.faces.size and (self.faces.min() < 0 or self.faces.max() >= len(self.vertices_m)):
+            raise ValueError("TriangleMesh.faces: index out of range")
+        if self.vertex_colors_rgba is not None:
+            _freeze(self, "vertex_colors_rgba", np.uint8, (len(self.vertices_m), 4))
+        if (self.uv is None) != (self.texture is None):
+            raise ValueError("TriangleMesh: uv and texture go together")
+        if self.uv is not None:
+            _freeze(self, "uv", np.float64, (len(self.vertices_m), 2))
+
+    @property
+    def bounds_m(self) -> np.ndarray:
+        """(2, 3) float64: min and max corner."""
+        return np.stack([self.vertices_m.min(axis=0), self.vertices_m.max(axis=0)])
+
+
+@dataclass(frozen=True, eq=False)
+class Background:
+    """What was observed but is not a movable object: one static, textured body in the world frame
+    (floor, walls, ceiling, counters, shelves, built-ins, clutter), never moved by physics.
+
+    surface: the observed depth map as a mesh in the world frame, textured with the photo (the
+      pixels of movable objects are filled in behind them: floor and wall planes extended,
+      depth inpainted elsewhere; their colour inpainted from the surroundings).
+    surface_observed: (V,) bool per ``surface`` vertex, True where its depth was measured or
+      estimated for that pixel (False: filled in behind an object or in a depth hole).
+    static_meshes: visual meshes (world frame) of objects that could not stand physically where
+      they were seen and became part of the background; ``static_names`` are their object names.
+    static_pieces: convex collision pieces (world frame) of those objects.
+    box_centers_m: (B, 3), box_half_extents_m: (B, 3) and box_yaws_rad: (B,) collision boxes
+      (yaw about +Z): the voxelised observed surface and the pads seen under objects.
+    """
+
+    surface: TriangleMesh
+    surface_observed: np.ndarray
+    static_meshes: tuple[TriangleMesh, ...] = ()
+    static_names: tuple[str, ...] = ()
+    static_pieces: tuple[TriangleMesh, ...] = ()
+    box_centers_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    box_half_extents_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    box_yaws_rad: np.ndarray = field(default_factory=lambda: np.zeros((0,)))
+
+    def __post_init__(self) -> None:
+        _freeze(self, "surface_observed", np.bool_, (len(self.surface.vertices_m),))
+        _freeze(self, "box_centers_m", np.float64, (None, 3))
+        n = len(self.box_centers_m)
+        _freeze(self, "box_half_extents_m", np.float64, (n, 3))
+        _freeze(self, "box_yaws_rad", np.float64, (n,))
+        if n and float(self.box_half_extents_m.min()) <= 0.0:
+            raise ValueError("Background: box half extents must be positive")
+        if len(self.static_meshes) != len(self.static_names):
+            raise ValueError("Background: one name per static mesh")
+
+    @property
+    def box_count(self) -> int:
+        return int(len(self.box_centers_m))
+
+
+@dataclass(frozen=True, eq=False)
 class Room:
     """The room's fixed geometry in the world frame: the floor is always ``z = 0``.
 
     walls: vertical planes found in the observation, normals pointing into the room.
+    background: the static, textured observed geometry (None when not built).
     """
 
     walls: tuple[Plane, ...] = ()
+    background: Background | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -342,33 +436,6 @@ class JointType(str, enum.Enum):
     REVOLUTE_PRISMATIC = "revolute_prismatic"
     BALL = "ball"
     FREE = "free"
-
-
-@dataclass(frozen=True, eq=False)
-class TriangleMesh:
-    """A triangle mesh.
-
-    vertices_m: (V, 3) float64.
-    faces: (F, 3) int64 vertex indices, counter-clockwise seen from outside.
-    vertex_colors_rgba: (V, 4) uint8, or None.
-    """
-
-    vertices_m: np.ndarray
-    faces: np.ndarray
-    vertex_colors_rgba: np.ndarray | None = None
-
-    def __post_init__(self) -> None:
-        _freeze(self, "vertices_m", np.float64, (None, 3))
-        _freeze(self, "faces", np.int64, (None, 3))
-        if self.faces.size and (self.faces.min() < 0 or self.faces.max() >= len(self.vertices_m)):
-            raise ValueError("TriangleMesh.faces: index out of range")
-        if self.vertex_colors_rgba is not None:
-            _freeze(self, "vertex_colors_rgba", np.uint8, (len(self.vertices_m), 4))
-
-    @property
-    def bounds_m(self) -> np.ndarray:
-        """(2, 3) float64: min and max corner."""
-        return np.stack([self.vertices_m.min(axis=0), self.vertices_m.max(axis=0)])
 
 
 @dataclass(frozen=True)
@@ -526,6 +593,11 @@ class ObjectAsset:
     size_m: (3,) extents of the axis-aligned bounding box of all parts, asset frame.
     is_fixed: welded to the world (built-in furniture) instead of a free body.
     backend: registry name of the generator that made it.
+    fallback_reason: when the preferred generator failed on this object and ``backend`` answered
+    instead, why (one line); empty otherwise.
+    observed_shape: its geometry was built from the observed surface (extruded, completed and
+      carved at the pose where it was seen), not fitted from a prior: its yaw is the
+      observation's, so the layout never turns it.
     """
 
     name: str
@@ -537,6 +609,8 @@ class ObjectAsset:
     is_fixed: bool = False
     deformable: DeformableSettings | None = None
     backend: str = ""
+    fallback_reason: str = ""
+    observed_shape: bool = False
 
     def __post_init__(self) -> None:
         _freeze(self, "size_m", np.float64, (3,))
@@ -629,7 +703,7 @@ class Scene:
 
 @dataclass(frozen=True)
 class SupportEdge:
-    """``child`` rests on ``parent`` (``"floor"``, ``"wall"`` or an object name)."""
+    """``child`` rests on ``parent`` (``"floor"``, ``"background"``, ``"wall"`` or an object name)."""
 
     child: str
     parent: str
@@ -637,77 +711,38 @@ class SupportEdge:
 
 
 @dataclass(frozen=True)
+class Placement:
+    """How the layout placed one perceived object, against where it was seen.
+
+    displacement_m: distance from the observed asset origin (generation's fit to the observed
+      points) to the placed one. yaw_change_deg: absolute change of yaw (snapping to the walls).
+    support: what it rests on: ``"floor"``, ``"background"`` (static geometry seen under it),
+      ``"wall"`` or the name of another object.
+    became_background: it could not stand physically where it was seen and is now part of the
+      static background (``Room.background.static_names``).
+    reason: one line saying why it moved more than a centimetre or became background ("" when
+      neither). lowered_m: how far it ended below where it was seen (negative: raised).
+    """
+
+    name: str
+    displacement_m: float
+    yaw_change_deg: float
+    support: str
+    became_background: bool = False
+    reason: str = ""
+    lowered_m: float = 0.0
+
+
+@dataclass(frozen=True)
 class LayoutResult:
-    """Output of the layout solver."""
+    """Output of the layout solver. placements: one per generated asset, input order."""
 
     scene: Scene
     support: tuple[SupportEdge, ...]
     iterations: int = 0
     max_penetration_before_m: float = 0.0
     max_penetration_after_m: float = 0.0
-
-
-@dataclass(frozen=True, eq=False)
-class Trajectory:
-    """Simulated motion of one free body.
-
-    times_s: (T,) float64; positions_m: (T, 3) body origin in the world; quats_wxyz: (T, 4).
-    """
-
-    name: str
-    times_s: np.ndarray
-    positions_m: np.ndarray
-    quats_wxyz: np.ndarray
-
-    def __post_init__(self) -> None:
-        _freeze(self, "times_s", np.float64, (None,))
-        n = len(self.times_s)
-        _freeze(self, "positions_m", np.float64, (n, 3))
-        _freeze(self, "quats_wxyz", np.float64, (n, 4))
-
-
-@dataclass(frozen=True)
-class ObjectVerdict:
-    """Physics check of one object after layout."""
-
-    name: str
-    start_penetration_m: float
-    drift_m: float
-    rotation_deg: float
-    toppled: bool
-
-
-@dataclass(frozen=True)
-class PhysicsVerdict:
-    """Physics check of the whole exported scene (measured in MuJoCo from the exported MJCF).
-
-    max_penetration_m: deepest contact between distinct bodies (and body vs floor/walls) at t=0.
-    settle_max_drift_m: largest displacement of any free body over ``simulated_s``.
-    stable: every object stays within 1 cm and 2 degrees.
-    """
-
-    max_penetration_m: float
-    settle_max_drift_m: float
-    settle_max_rotation_deg: float
-    simulated_s: float
-    stable: bool
-    objects: tuple[ObjectVerdict, ...] = ()
-    trajectories: tuple[Trajectory, ...] = ()
-    contact_points_m: tuple[tuple[float, float, float], ...] = ()
-
-
-@dataclass(frozen=True)
-class Fidelity:
-    """Render-and-compare of the final scene against the observation.
-
-    depth_absrel: mean |d_render - d_obs| / d_obs over object pixels with valid depth.
-    mask_iou_mean: mean over objects of IoU(rendered segmentation, perceived mask).
-    mask_iou: per object name.
-    """
-
-    depth_absrel: float
-    mask_iou_mean: float
-    mask_iou: tuple[tuple[str, float], ...] = field(default_factory=tuple)
+    placements: tuple[Placement, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -719,3 +754,8 @@ class ExportedFiles:
     urdf: Path | None = None
     gltf: Path | None = None
     rerun: Path | None = None
+
+
+# The results of the physics check and render-and-compare live in scene_builder.checks (to keep
+# this module readable); they are part of the data model and re-exported here.
+from scene_builder.checks import Fidelity, ObjectVerdict, PhysicsVerdict, Trajectory  # noqa: E402

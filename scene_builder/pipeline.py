@@ -2,9 +2,10 @@
 
     perceive        photo (+ depth) -> observation, gravity-aligned camera, room, objects
     generate_assets each object -> simulation-ready asset and its observed pose
-    solve_layout    assets -> penetration-free, supported placement in the world
+    solve_layout    assets -> penetration-free, supported placement in the world, as seen
     write_mjcf      scene -> OUT/scene.xml (MuJoCo)
-    verify_scene    MuJoCo: penetration at rest, settle drift, render-and-compare
+    verify_scene    MuJoCo: penetration over all pairs, settle drift, render-and-compare
+    make_background objects that do not stay at rest -> static background (then verify again)
     export_scene    scene -> OUT/scene.usda, scene.urdf, scene.glb
     record_scene    everything -> OUT/scene.rrd (rerun)
     write_report    OUT/scene.json, OUT/report.json
@@ -35,6 +36,11 @@ from typing import Callable, Iterator
 from scene_builder.config import BuildConfig, InputSpec
 from scene_builder.errors import InputError
 from scene_builder.model import ExportedFiles, Fidelity, LayoutResult, Perception, PhysicsVerdict, Scene
+
+
+#: Rounds of turning objects that do not stay at rest into static background (what rested on
+#: them may in turn move).
+UNSTABLE_ROUNDS = 2
 
 
 @dataclass(frozen=True)
@@ -82,6 +88,29 @@ class StageLog:
 
             extra = f"  [dim]{escape(detail())}[/dim]" if detail else ""
             self._console.print(f"[green]✓[/green] {name:<14} {seconds:7.2f} s{extra}")
+
+    @contextmanager
+    def live(self, name: str, detail: Callable[[], str] | None = None) -> Iterator[Callable[[str], None]]:
+        """A stage with no known length (perception, the physics check): a spinner, the stage's
+        current step and the elapsed time stay on screen while it runs (rich, transient); yields a
+        step(text) callback that replaces the step shown. The stage's line is printed as usual."""
+        if self._console is None:
+            with self.stage(name, detail):
+                yield lambda _text: None
+            return
+        from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+        with self.stage(name, detail):
+            with Progress(
+                SpinnerColumn(),
+                TextColumn(f"{name:<14}"),
+                TimeElapsedColumn(),
+                TextColumn("[dim]{task.description}"),
+                console=self._console,
+                transient=True,
+            ) as bar:
+                task = bar.add_task("", total=None)
+                yield lambda text: bar.update(task, description=text)
 
     @contextmanager
     def loop(self, name: str, total: int) -> Iterator[Callable[[str], None]]:
@@ -134,7 +163,7 @@ def build(
     # Stages are imported here, not at module level, so `scene-builder --help` stays instant.
     from exporters import export_scene, record_scene, write_mjcf
     from generation import generate_assets
-    from layout import settled_scene, solve_layout, verify_scene
+    from layout import make_background, settled_scene, solve_layout, unstable_objects, verify_scene
     from perception import perceive
     from perception.inputs import check_paths
     from scene_builder.report import build_report, write_report
@@ -146,8 +175,8 @@ def build(
     total_start = time.perf_counter()
     staging = _make_staging(out_dir)
     try:
-        with log.stage("perception", lambda: _perception_summary(perceived)):
-            perceived = perceive(inputs, config.perception, config.seed)
+        with log.live("perception", lambda: _perception_summary(perceived)) as step:
+            perceived = perceive(inputs, config.perception, config.seed, on_step=step)
         with log.loop("generation", len(perceived.objects)) as tick:
             generated = generate_assets(perceived, config.generation, config.seed, on_object=tick)
         with log.stage("layout", lambda: f"{len(layout.support)} support edges, {layout.iterations} iterations"):
@@ -155,10 +184,24 @@ def build(
         scene = layout.scene
         with log.stage("export mjcf"):
             mjcf_path = write_mjcf(scene, staging)
-        with log.stage("physics check", lambda: _verdict_summary(verdict)):
+        with log.live("physics check", lambda: _verdict_summary(verdict)) as step:
+            step(f"{config.layout.settle_s:g} s of simulation, then render-and-compare")
             verdict, fidelity = verify_scene(mjcf_path, scene, config.layout, perceived)
+        for _ in range(UNSTABLE_ROUNDS):
+            # An object that does not stay at rest where it was seen (a thin frame toppling off
+            # a shelf) cannot stand there physically: it becomes static background, not moved.
+            unstable = unstable_objects(verdict, scene, config.layout)
+            if not unstable:
+                break
+            with log.stage("unstable to background", lambda: f"{len(unstable)} objects; {_verdict_summary(verdict)}"):
+                layout = make_background(layout, unstable)
+                scene = layout.scene
+                shutil.rmtree(staging / "meshes", ignore_errors=True)  # the old objects' meshes
+                mjcf_path = write_mjcf(scene, staging)
+                verdict, fidelity = verify_scene(mjcf_path, scene, config.layout, perceived)
         if config.layout.adopt_settled:
-            with log.stage("adopt settled", lambda: _verdict_summary(verdict)):
+            with log.live("adopt settled", lambda: _verdict_summary(verdict)) as step:
+                step("re-checking the settled poses")
                 scene = settled_scene(scene, verdict)
                 mjcf_path = write_mjcf(scene, staging)
                 verdict, fidelity = verify_scene(mjcf_path, scene, config.layout, perceived)

@@ -36,6 +36,7 @@ def build_report(
     k = perception.observation.intrinsics
     perceived = {o.name: o for o in perception.objects}
     verdicts = {v.name: v for v in verdict.objects}
+    placements = {p.name: p for p in layout.placements}
     objects = []
     for placed in scene.objects:
         a = placed.asset
@@ -58,11 +59,16 @@ def build_report(
                 "position_m": [_r(x, 4) for x in placed.world_from_asset[:3, 3]],
                 "yaw_deg": _r(np.degrees(yaw_of(placed.world_from_asset[:3, :3])), 2),
                 "support": placed.support,
+                "displacement_m": _r(placements[a.name].displacement_m, 4) if a.name in placements else None,
+                "yaw_change_deg": _r(placements[a.name].yaw_change_deg, 2) if a.name in placements else None,
+                "moved_because": placements[a.name].reason if a.name in placements else "",
+                "became_background": False,
                 "parts": len(a.parts),
                 "collision_pieces": int(sum(len(p.collision) for p in a.parts)),
                 "materials": sorted({p.material.name for p in a.parts}),
                 "joints": joints,
                 "generator": a.backend,
+                "generator_fallback_reason": a.fallback_reason or None,
                 "physics": None
                 if v is None
                 else {
@@ -70,10 +76,24 @@ def build_report(
                     "drift_m": _r(v.drift_m),
                     "rotation_deg": _r(v.rotation_deg, 3),
                     "toppled": v.toppled,
+                    "end_penetration_m": _r(v.end_penetration_m),
                 },
             }
         )
+    # Objects that could not stand where they were seen and became static background.
+    for p in layout.placements:
+        if p.became_background:
+            obs = perceived.get(p.name)
+            objects.append({"name": p.name, "label": obs.label if obs else None, "became_background": True, "support": "none",
+                            "displacement_m": 0.0, "moved_because": p.reason})
+    moved = [p.displacement_m for p in layout.placements if not p.became_background]
+    lowered = sum(1 for p in layout.placements if p.lowered_m > 0.10)
     timings = {name: _r(s, 3) for name, s in timings_s}
+    failures = [
+        {"object": o.asset.name, "answered_by": o.asset.backend, "reason": o.asset.fallback_reason}
+        for o in scene.objects
+        if o.asset.fallback_reason
+    ]
     return {
         "format": REPORT_FORMAT,
         "version": __version__,
@@ -87,7 +107,8 @@ def build_report(
         },
         "seed": config.seed,
         "backends": [{"task": b.task, "backend": b.backend, "reason": b.reason} for b in perception.backends]
-        + [{"task": "generation", "backend": b, "reason": "per object"} for b in sorted({o.asset.backend for o in scene.objects})],
+        + [_generation_use(b, scene) for b in sorted({o.asset.backend for o in scene.objects})],
+        "generation_failures": failures,
         "timings_s": timings,
         "objects": objects,
         "layout": {
@@ -96,6 +117,12 @@ def build_report(
             "settle_max_rotation_deg": _r(verdict.settle_max_rotation_deg, 4),
             "simulated_s": verdict.simulated_s,
             "stable": verdict.stable,
+            "max_penetration_settled_m": _r(verdict.max_penetration_settled_m, 7),
+            "movable_objects": verdict.movable_count,
+            "fixed_objects": verdict.fixed_count,
+            "background_objects": sum(1 for p in layout.placements if p.became_background),
+            "displacement_m": {"median": _r(float(np.median(moved)), 4), "max": _r(float(np.max(moved)), 4)} if moved else None,
+            "lowered_over_10cm": lowered,
             "solver_iterations": layout.iterations,
             "max_penetration_before_solver_m": _r(layout.max_penetration_before_m, 7),
             "support": [{"child": e.child, "parent": e.parent} for e in layout.support],
@@ -104,12 +131,29 @@ def build_report(
         "fidelity": None
         if fidelity is None
         else {
+            "psnr_db": _r(fidelity.psnr_db, 3),
+            "ssim": _r(fidelity.ssim, 4),
+            "psnr_settled_db": _r(fidelity.psnr_settled_db, 3),
+            "ssim_settled": _r(fidelity.ssim_settled, 4),
             "depth_absrel": _r(fidelity.depth_absrel, 5),
+            "depth_absrel_settled": _r(fidelity.depth_absrel_settled, 5),
+            "object_depth_absrel": _r(fidelity.object_depth_absrel, 5),
             "mask_iou_mean": _r(fidelity.mask_iou_mean, 5),
             "mask_iou": {name: _r(iou, 4) for name, iou in fidelity.mask_iou},
         },
         "machine": {"python": platform.python_version(), "platform": platform.platform()},
     }
+
+
+def _generation_use(backend: str, scene: Scene) -> dict:
+    """The generation entry of ``backends`` for one generator: how many objects it made, and for
+    how many of them it stood in for a generator that failed."""
+    made = [o.asset for o in scene.objects if o.asset.backend == backend]
+    fell_back = [a.name for a in made if a.fallback_reason]
+    reason = f"{len(made)} objects"
+    if fell_back:
+        reason += f"; fallback for {len(fell_back)} the preferred generator failed on ({', '.join(fell_back)}; see generation_failures)"
+    return {"task": "generation", "backend": backend, "reason": reason}
 
 
 def write_report(out_dir: Path, scene: Scene, report: dict) -> Path:

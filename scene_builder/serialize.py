@@ -6,7 +6,10 @@ Any dataclass of :mod:`scene_builder.model` serialises to plain JSON and back to
 * numpy arrays become ``{"dtype", "shape", "data"}`` with ``data`` a flat list for small arrays
   (readable) or base64 of the little-endian bytes for large ones (compact and exact);
 * enums become their value; tuples become lists; nested dataclasses become objects with a
-  ``"__type__"`` key naming the class.
+  ``"__type__"`` key naming the class;
+* a :class:`~scene_builder.model.Texture` is stored once per name as a PNG (lossless, so the
+  round trip is exact; deterministic bytes for the same image), and later uses of the same
+  texture refer to it by name (``{"__texture__": name}``).
 """
 
 from __future__ import annotations
@@ -36,12 +39,43 @@ _TYPES: dict[str, type] = {
 FORMAT_VERSION = 1
 
 
-def to_jsonable(value):
+def _png_base64(image_rgb: np.ndarray) -> str:
+    import io
+
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(image_rgb)).save(buf, format="PNG", compress_level=6)
+    return base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def _image_from_png_base64(data: str) -> np.ndarray:
+    import io
+
+    from PIL import Image
+
+    try:
+        with Image.open(io.BytesIO(base64.b64decode(data, validate=True))) as im:
+            return np.array(im.convert("RGB"))
+    except Exception as err:  # PIL raises several types for corrupt data; report one
+        raise ValueError(f"scene.json: a texture is not a readable PNG ({type(err).__name__})") from err
+
+
+def to_jsonable(value, _textures: dict[str, int] | None = None):
     """Convert a model value (dataclass, array, enum, tuple, scalar) to JSON-compatible data."""
+    if _textures is None:
+        _textures = {}
+    if isinstance(value, model.Texture):
+        if value.name in _textures:
+            if _textures[value.name] != id(value):
+                raise ValueError(f"two different textures are named {value.name!r}; texture names must be unique")
+            return {"__texture__": value.name}
+        _textures[value.name] = id(value)
+        return {"__type__": "Texture", "name": value.name, "png_base64": _png_base64(value.image_rgb)}
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         out = {"__type__": type(value).__name__}
         for f in dataclasses.fields(value):
-            out[f.name] = to_jsonable(getattr(value, f.name))
+            out[f.name] = to_jsonable(getattr(value, f.name), _textures)
         return out
     if isinstance(value, np.ndarray):
         arr = np.ascontiguousarray(value)
@@ -53,7 +87,7 @@ def to_jsonable(value):
     if isinstance(value, enum.Enum):
         return value.value
     if isinstance(value, (tuple, list)):
-        return [to_jsonable(v) for v in value]
+        return [to_jsonable(v, _textures) for v in value]
     if isinstance(value, Path):
         return str(value)
     if isinstance(value, (np.floating, np.integer, np.bool_)):
@@ -104,9 +138,10 @@ def _decode_array(obj: dict, where: str) -> np.ndarray:
     return arr.astype(want, copy=True)
 
 
-def _from(value, hint, where: str):
+def _from(value, hint, where: str, textures: dict[str, "model.Texture"]):
     """The model value of JSON ``value`` for a field annotated ``hint``; SceneFileError when it
-    does not fit. Unknown annotations pass the value through."""
+    does not fit. Unknown annotations pass the value through. ``textures``: the textures defined
+    so far (each is written once, then referred to by name)."""
     origin = typing.get_origin(hint)
     args = typing.get_args(hint)
     if origin in (typing.Union, types.UnionType):
@@ -114,7 +149,7 @@ def _from(value, hint, where: str):
             return None
         non_none = [a for a in args if a is not type(None)]
         if len(non_none) == 1:
-            return _from(value, non_none[0], where)
+            return _from(value, non_none[0], where, textures)
         return value
     if value is None:
         raise SceneFileError(f"scene.json: {where} is null")
@@ -122,19 +157,24 @@ def _from(value, hint, where: str):
         if not (isinstance(value, dict) and value.get("__ndarray__") is True):
             raise SceneFileError(f"scene.json: {where} must be an array object")
         return _decode_array(value, where)
+    if hint is model.Texture and isinstance(value, dict) and "__texture__" in value:
+        name = value["__texture__"]
+        if not isinstance(name, str) or name not in textures:
+            raise SceneFileError(f"scene.json: {where}: texture {str(name)[:30]!r} is used before it is defined")
+        return textures[name]
     if isinstance(hint, type) and dataclasses.is_dataclass(hint):
         if not (isinstance(value, dict) and value.get("__type__") == hint.__name__):
             raise SceneFileError(f"scene.json: {where} must be a {hint.__name__} object")
-        return _from_object(value, where)
+        return _from_object(value, where, textures)
     if origin is tuple:
         if not isinstance(value, list):
             raise SceneFileError(f"scene.json: {where} must be a list")
         if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_from(v, args[0], f"{where}[{i}]") for i, v in enumerate(value))
+            return tuple(_from(v, args[0], f"{where}[{i}]", textures) for i, v in enumerate(value))
         if args:
             if len(value) != len(args):
                 raise SceneFileError(f"scene.json: {where} must have {len(args)} items, has {len(value)}")
-            return tuple(_from(v, a, f"{where}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
+            return tuple(_from(v, a, f"{where}[{i}]", textures) for i, (v, a) in enumerate(zip(value, args)))
         return tuple(value)
     if isinstance(hint, type) and issubclass(hint, enum.Enum):
         try:
@@ -160,15 +200,25 @@ def _from(value, hint, where: str):
     return value
 
 
-def _from_object(obj: dict, where: str):
+def _from_object(obj: dict, where: str, textures: dict[str, "model.Texture"]):
     cls = _TYPES.get(obj.get("__type__", "")) if isinstance(obj.get("__type__"), str) else None
     if cls is None:
         raise SceneFileError(f"scene.json: {where}: unknown type {str(obj.get('__type__'))[:30]!r}")
+    if cls is model.Texture:
+        name, data = obj.get("name"), obj.get("png_base64")
+        if not (isinstance(name, str) and isinstance(data, str)):
+            raise SceneFileError(f"scene.json: {where}: a Texture needs a text 'name' and 'png_base64'")
+        try:
+            texture = model.Texture(name, _image_from_png_base64(data))
+        except ValueError as err:
+            raise SceneFileError(f"scene.json: {where}: {' '.join(str(err).split())[:160]}") from err
+        textures[texture.name] = texture
+        return texture
     hints = typing.get_type_hints(cls)
     kwargs = {}
     for f in dataclasses.fields(cls):
         if f.name in obj:
-            kwargs[f.name] = _from(obj[f.name], hints[f.name], f"{where}.{f.name}")
+            kwargs[f.name] = _from(obj[f.name], hints[f.name], f"{where}.{f.name}", textures)
         elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
             raise SceneFileError(f"scene.json: {where}: {cls.__name__} has no {f.name!r}")
     try:
@@ -177,12 +227,12 @@ def _from_object(obj: dict, where: str):
         raise SceneFileError(f"scene.json: {where}: {' '.join(str(err).split())[:160]}") from err
 
 
-def from_jsonable(obj: dict):
+def from_jsonable(obj: dict, _textures: dict[str, "model.Texture"] | None = None):
     """Inverse of :func:`to_jsonable` for a dataclass object. Raises SceneFileError (a
     ValueError) naming the field when ``obj`` does not describe a valid model value."""
     if not isinstance(obj, dict):
         raise SceneFileError("scene.json: expected an object")
-    return _from_object(obj, str(obj.get("__type__", "value")))
+    return _from_object(obj, str(obj.get("__type__", "value")), {} if _textures is None else _textures)
 
 
 def scene_to_json(scene: model.Scene) -> str:

@@ -66,6 +66,13 @@ CATEGORIES: tuple[Category, ...] = (
     Category("towel", (0.3, 0.5, 0.03), _D, on_floor=False),
     Category("blanket", (1.0, 1.5, 0.05), _D, on_floor=False),
     Category("soft_toy", (0.2, 0.2, 0.3), _D, on_floor=False),
+    # Classes an object detector (COCO, Open Images) names that the furniture above does not cover.
+    Category("bench", (0.4, 1.2, 0.45), _R),
+    Category("suitcase", (0.25, 0.45, 0.65), _R),
+    Category("bag", (0.2, 0.35, 0.4), _R),
+    Category("vase", (0.15, 0.15, 0.3), _R, on_floor=False),
+    Category("clock", (0.05, 0.3, 0.3), _R, on_floor=False),
+    Category("keyboard", (0.15, 0.45, 0.03), _R, on_floor=False),
     Category("object", (0.3, 0.3, 0.3), _R),
 )
 

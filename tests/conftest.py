@@ -16,6 +16,9 @@ import pytest
 # MuJoCo picks its GL backend at import: render offscreen on the CPU (Mesa llvmpipe via EGL).
 os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+# Tests never reach the real model hub: the download tests serve a local hub (HF_ENDPOINT) and
+# switch this off for themselves.
+os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"

@@ -125,7 +125,7 @@ def test_collision_pieces_hidden_by_the_blueprint_and_eye_at_the_camera(recordin
     reader = RrdReader(str(path))
     bp = list(reader.store(store=reader.blueprints()[0]).stream())
     hidden = {c.entity_path.split("/overrides/")[1].rsplit("/visualizers", 1)[0] for c in bp if "/overrides/" in c.entity_path}
-    assert hidden == {f"world/objects/{o.name}/collision" for o in scene.objects}
+    assert hidden == {f"world/objects/{o.name}/collision" for o in scene.objects} | {"world/background/collision"}
     eye = next(c for c in bp if c.entity_path.endswith("/EyeControls3D")).to_record_batch()
     position = np.asarray(eye.column("EyeControls3D:position").to_pylist()[0][0])
     target = np.asarray(eye.column("EyeControls3D:look_target").to_pylist()[0][0])
@@ -190,3 +190,43 @@ def test_blueprint_ids_are_deterministic(recording, tmp_path):
     assert len(views) == 4  # 3D scene, photo + masks, depth, report
     assert sorted(a) == sorted(b)
     assert {k: sorted(v) for k, v in a.items()} == {k: sorted(v) for k, v in b.items()}
+
+
+def test_photo_and_twin_render_side_by_side(tmp_path):
+    """With a render-and-compare result, the recording holds the input-camera render and the
+    default blueprint gains the photo and the render as two views (six views in all)."""
+    from rerun.chunk import RrdReader
+
+    from scene_builder.model import Fidelity
+
+    scene = mixed_scene()
+    k = scene.camera.intrinsics
+    render = np.full((k.height_px, k.width_px, 3), 90, np.uint8)
+    fidelity = Fidelity(0.1, 0.5, (), psnr_db=20.0, ssim=0.8, render_rgb=render, render_settled_rgb=render)
+    path = record_scene(tmp_path / "s.rrd", scene=scene, perception=_perception(scene), fidelity=fidelity)
+    paths = {c.entity_path for c in _chunks(path)}
+    assert {"/render/input_camera", "/render/settled"} <= paths
+    reader = RrdReader(str(path))
+    views = {c.entity_path for c in reader.store(store=reader.blueprints()[0]).stream() if c.entity_path.count("/") == 2 and c.entity_path.startswith("/view/")}
+    plain = record_scene(tmp_path / "p.rrd", scene=scene, perception=_perception(scene))
+    reader = RrdReader(str(plain))
+    plain_views = {c.entity_path for c in reader.store(store=reader.blueprints()[0]).stream() if c.entity_path.count("/") == 2 and c.entity_path.startswith("/view/")}
+    assert len(views) == 6 and len(plain_views) == 4
+
+
+@pytest.mark.slow
+def test_view_screenshot_from_the_cli(recording, tmp_path):
+    """`scene-builder view OUT --screenshot PNG` writes the default view without a display."""
+    import sys
+
+    from PIL import Image
+
+    shot = tmp_path / "view.png"
+    proc = subprocess.run([sys.executable, "-m", "scene_builder.cli", "view", str(recording[1]), "--screenshot", str(shot)],
+                          capture_output=True, text=True, timeout=300)
+    if proc.returncode != 0 and ("vulkan" in proc.stderr.lower() or "adapter" in proc.stderr.lower()):
+        pytest.skip(f"no Vulkan adapter for the headless viewer: {proc.stderr.strip().splitlines()[-1]}")
+    assert proc.returncode == 0, proc.stderr
+    img = np.asarray(Image.open(shot).convert("RGB"))
+    # The viewer may render at a pixel ratio above 1 (2x here): same aspect, at least that size.
+    assert img.shape[0] >= 1000 and img.shape[1] * 1000 == img.shape[0] * 1600 and img.std() > 10.0

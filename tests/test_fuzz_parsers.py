@@ -1,9 +1,9 @@
 """Every parser of outside data, fuzzed with hypothesis (issue 12): the geometry token decoders,
 the PhysX model text protocol, basic_info.json, scene.json, the depth, camera and image file
 readers. Nothing may raise except the parser's documented error type; lenient decoders raise
-nothing. About 4,000 inputs in all; ``python -m scene_builder.bench_fuzz`` runs 100,000 per parser.
+nothing. About 4,000 inputs in all; ``python -m scene_builder.bench.fuzz`` runs 100,000 per parser.
 
-Inputs: mutations of real seeds (``scene_builder.bench_fuzz``: the recorded PhysX answers, random
+Inputs: mutations of real seeds (``scene_builder.bench.fuzz``: the recorded PhysX answers, random
 voxel encodings, a scene.json, small image / depth / camera files), grammar-aware text and raw
 bytes."""
 
@@ -19,12 +19,14 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from scene_builder import bench_fuzz
-from scene_builder.bench_fuzz import GRAMMAR, EXTREMES, Target, make_input, make_targets
+from scene_builder.bench import fuzz as bench_fuzz
+from scene_builder.bench.fuzz import GRAMMAR, EXTREMES, Target, make_input, make_targets
 
 _WORK = Path(tempfile.mkdtemp(prefix="scene-builder-fuzz-test-"))
 TARGETS = {t.name: t for t in make_targets(_WORK)}
-SETTINGS = settings(max_examples=250, deadline=None, suppress_health_check=[HealthCheck.too_slow], database=None)
+# derandomize: CI runs the same inputs every time (a rare find must not make CI flaky); the
+# benchmark (python -m scene_builder.bench.fuzz --n 100000) explores further.
+SETTINGS = settings(max_examples=250, deadline=None, suppress_health_check=[HealthCheck.too_slow], database=None, derandomize=True)
 
 
 @pytest.fixture(scope="module", autouse=True)

@@ -7,7 +7,7 @@ import pytest
 
 from generation import generate_assets, generator_registry
 from generation.materials import CATEGORY_MATERIAL, MATERIALS
-from generation.synthetic import SyntheticBox, synthetic_perception
+from scene_builder.bench.synthetic_boxes import SyntheticBox, synthetic_perception
 from scene_builder.config import GenerationConfig
 from scene_builder.model import AssetKind
 from scene_builder.vocabulary import LABELS, category

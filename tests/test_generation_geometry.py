@@ -9,7 +9,7 @@ from generation.collision import convex_pieces, voxel_convex_pieces
 from generation.completion import complete_occupancy
 from generation.meshing import mesh_from_occupancy
 from generation.pose import fit_box, min_area_rectangle
-from generation.synthetic import SyntheticBox, visible_box_points
+from scene_builder.bench.synthetic_boxes import SyntheticBox, visible_box_points
 from scene_builder.frames import transform_points
 
 

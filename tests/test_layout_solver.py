@@ -7,12 +7,13 @@ import numpy as np
 import pytest
 
 from layout.solver import candidate_pairs, solve_layout_with_stats
-from layout.synthetic import asset_from_pieces, box_asset, box_mesh, clutter, empty_perception, surface_points, table_asset
+from scene_builder.bench.clutter import asset_from_pieces, clutter_layout_config, box_asset, box_mesh, clutter, empty_perception, surface_points, table_asset
 from scene_builder.config import LayoutConfig
 from scene_builder.frames import pose, rot_z, transform_points, yaw_of
 from scene_builder.model import GeneratedAsset, Plane
 
 CFG = LayoutConfig()
+CLUTTER = clutter_layout_config()
 
 
 def _gen(asset, xyz, yaw=0.0, points=None):
@@ -58,7 +59,7 @@ def test_broad_phase_matches_brute_force():
 
 def test_clutter_has_no_interpenetration_and_everything_rests():
     perception, generated = clutter(40, seed=1)
-    result, stats = solve_layout_with_stats(perception, generated, CFG)
+    result, stats = solve_layout_with_stats(perception, generated, CLUTTER)
     assert stats.converged
     assert result.max_penetration_before_m > 0.1  # the clutter really overlapped
     assert result.max_penetration_after_m < 1e-4
@@ -93,7 +94,7 @@ def test_solved_clutter_is_stable_in_mujoco(tmp_path):
     from tests.test_layout_verify import write_fixture_mjcf
 
     perception, generated = clutter(12, seed=5, mix=(0.6, 0.0, 0.2, 0.2))
-    result = solve_layout_with_stats(perception, generated, CFG)[0]
+    result = solve_layout_with_stats(perception, generated, CLUTTER)[0]
     assert result.max_penetration_before_m > 0.05
     assert any(e.parent not in ("floor", "wall") for e in result.support)
     verdict, _ = verify_scene(write_fixture_mjcf(result.scene, tmp_path / "c.xml"), result.scene, CFG)
@@ -154,12 +155,17 @@ def test_support_graph_of_a_hand_made_stack():
 
 def test_buried_face_is_not_a_support():
     # A solid cabinet decomposed into two stacked pieces: the lower piece's top face (z = 0.4)
-    # lies inside the object. A box observed at 0.45 must not be set on it.
+    # lies inside the object. A box observed at 0.45 must not be set on it; with nothing else
+    # within reach under it (the floor is 45 cm down, the space under it unseen, and a column
+    # down to the floor would pass through the cabinet) it is left where it was seen, as static
+    # background, and the placement says why.
     cabinet = asset_from_pieces("cabinet", "cabinet", [box_mesh([-0.3, -0.4, 0.0], [0.3, 0.4, 0.4]), box_mesh([-0.3, -0.4, 0.4], [0.3, 0.4, 0.8])])
     box = box_asset("box", (0.2, 0.2, 0.2))
     result, _ = solve_layout_with_stats(empty_perception(), (_gen(cabinet, (0, 0, 0)), _gen(box, (0.0, 0.0, 0.45), yaw=0.5)), CFG)
-    assert {e.child: e.parent for e in result.support}["box"] == "floor"
-    assert result.max_penetration_after_m < 1e-5
+    assert "box" not in {e.child for e in result.support} and [o.name for o in result.scene.objects] == ["cabinet"]
+    placement = {p.name: p for p in result.placements}["box"]
+    assert placement.became_background and placement.displacement_m == 0.0 and "another object's" in placement.reason
+    assert result.scene.room.background is not None and result.scene.room.background.static_names == ("box",)
     # Observed 2 cm sunk into the real top, it rests on the top.
     result, _ = solve_layout_with_stats(empty_perception(), (_gen(cabinet, (0, 0, 0)), _gen(box, (0.0, 0.0, 0.78), yaw=0.5)), CFG)
     assert {e.child: e.parent for e in result.support}["box"] == "cabinet"
@@ -169,20 +175,42 @@ def test_buried_face_is_not_a_support():
 def test_minimal_horizontal_push_split_by_mass():
     a = box_asset("a", (0.4, 0.4, 0.4))
     b = box_asset("b", (0.4, 0.4, 0.4))
-    # 4 cm overlap along x, equal masses: each moves (4 cm + clearance) / 2, along x only.
-    result, _ = solve_layout_with_stats(empty_perception(), (_gen(a, (0.0, 0.0, 0.0)), _gen(b, (0.36, 0.0, 0.0))), CFG)
+    # 10 cm overlap along x (deeper than layout.trim cuts), equal masses: each moves
+    # (10 cm + clearance) / 2, along x only.
+    result, _ = solve_layout_with_stats(empty_perception(), (_gen(a, (0.0, 0.0, 0.0)), _gen(b, (0.30, 0.0, 0.0))), CFG)
     pa, pb = (o.world_from_asset[:3, 3] for o in result.scene.objects)
-    half = (0.04 + CFG.clearance_m) / 2
+    half = (0.10 + CFG.clearance_m) / 2
     np.testing.assert_allclose(pa, [-half, 0.0, 0.0], atol=1e-6)
-    np.testing.assert_allclose(pb, [0.36 + half, 0.0, 0.0], atol=1e-6)
+    np.testing.assert_allclose(pb, [0.30 + half, 0.0, 0.0], atol=1e-6)
     # A heavy (larger) box moves less than a light one.
     big = box_asset("big", (0.8, 0.8, 0.4))
     small = box_asset("small", (0.2, 0.2, 0.2))
-    result, _ = solve_layout_with_stats(empty_perception(), (_gen(big, (0.0, 0.0, 0.0)), _gen(small, (0.45, 0.0, 0.0))), CFG)
+    result, _ = solve_layout_with_stats(empty_perception(), (_gen(big, (0.0, 0.0, 0.0)), _gen(small, (0.41, 0.0, 0.0))), CFG)
     p = {o.name: o.world_from_asset[:3, 3] for o in result.scene.objects}
-    move_big, move_small = abs(p["big"][0]), abs(p["small"][0] - 0.45)
+    move_big, move_small = abs(p["big"][0]), abs(p["small"][0] - 0.41)
     assert move_small > 10 * move_big
-    assert move_big + move_small == pytest.approx(0.05 + CFG.clearance_m, abs=1e-6)
+    assert move_big + move_small == pytest.approx(0.09 + CFG.clearance_m, abs=1e-6)
+
+
+def test_shallow_overlap_is_trimmed_not_pushed():
+    """Two boxes whose hidden backs overlap by 4 cm stay where they were seen: their collision
+    pieces are cut apart at the mid-plane (layout.trim), leaving the clearance, and no volume is
+    shared (manifold3d)."""
+    a = box_asset("a", (0.4, 0.4, 0.4))
+    b = box_asset("b", (0.4, 0.4, 0.4))
+    gen = (_gen(a, (0.0, 0.0, 0.0)), _gen(b, (0.36, 0.0, 0.0)))
+    result, _ = solve_layout_with_stats(empty_perception(), gen, CFG)
+    for g, o in zip(gen, result.scene.objects):
+        np.testing.assert_array_equal(o.world_from_asset, g.world_from_asset)
+    assert all(p.displacement_m == 0.0 for p in result.placements)
+    assert result.max_penetration_after_m < 1e-5
+    assert _max_intersection_volume(result.scene) < 1e-9
+    xa = max(p[:, 0].max() for p in _world_pieces(result.scene.objects[0]))
+    xb = min(p[:, 0].min() for p in _world_pieces(result.scene.objects[1]))
+    assert xa == pytest.approx(0.18 - 0.001, abs=1e-6) and xb == pytest.approx(0.18 + 0.001, abs=1e-6)
+    # Visual meshes and masses are the observed ones.
+    assert result.scene.objects[0].asset.parts[0].visual is a.parts[0].visual
+    assert result.scene.objects[0].asset.mass_kg == a.mass_kg
 
 
 def test_separated_objects_do_not_move():
@@ -197,9 +225,14 @@ def test_fixed_furniture_does_not_move_and_walls_push_out():
     walls = (Plane(np.array([1.0, 0.0, 0.0]), 1.0, "wall", 100), Plane(np.array([0.0, -1.0, 0.0]), 2.0, "wall", 50))
     counter = box_asset("counter", (0.6, 1.5, 0.9), label="counter", fixed=True)
     box = box_asset("box", (0.4, 0.4, 0.4))
-    # The box overlaps the counter and sticks 10 cm through the x = -1 wall; a second box is
-    # through the y = 2 wall.
-    gen = (_gen(counter, (0.0, 0.0, 0.0)), _gen(box, (-0.9, 0.5, 0.0)), _gen(box_asset("other", (0.3, 0.3, 0.3)), (2.0, 1.9, 0.0)))
+    # The box overlaps the counter and sticks 4 cm through the x = -1 wall; a second box is 3 cm
+    # through the y = 2 wall; a third 15 cm through it (more than max_wall_push_m: it is wall).
+    gen = (
+        _gen(counter, (0.0, 0.0, 0.0)),
+        _gen(box, (-0.84, 0.5, 0.0)),
+        _gen(box_asset("other", (0.3, 0.3, 0.3)), (1.0, 1.88, 0.0)),
+        _gen(box_asset("in_wall", (0.3, 0.3, 0.3)), (-1.0, 1.9, 0.0)),
+    )
     result, stats = solve_layout_with_stats(empty_perception(walls), gen, CFG)
     assert stats.converged
     placed = {o.name: o for o in result.scene.objects}
@@ -208,21 +241,25 @@ def test_fixed_furniture_does_not_move_and_walls_push_out():
         v = np.concatenate(_world_pieces(placed[name]))
         for w in walls:
             assert w.signed_distance_m(v).min() >= CFG.clearance_m - 1e-4
+    deep = {p.name: p for p in result.placements}["in_wall"]
+    assert deep.became_background and "reaches 15 cm into a wall" in deep.reason and "in_wall" not in placed
     assert result.max_penetration_after_m < 1e-5
     assert _max_intersection_volume(result.scene) < 1e-9
 
 
 def test_determinism_and_input_order_independence():
     perception, generated = clutter(25, seed=7)
-    r1 = solve_layout_with_stats(perception, generated, CFG, seed=3)[0]
-    r2 = solve_layout_with_stats(perception, generated, CFG, seed=3)[0]
-    r3 = solve_layout_with_stats(perception, tuple(reversed(generated)), CFG, seed=3)[0]
+    r1 = solve_layout_with_stats(perception, generated, CLUTTER, seed=3)[0]
+    r2 = solve_layout_with_stats(perception, generated, CLUTTER, seed=3)[0]
+    r3 = solve_layout_with_stats(perception, tuple(reversed(generated)), CLUTTER, seed=3)[0]
     for a, b in zip(r1.scene.objects, r2.scene.objects):
         np.testing.assert_array_equal(a.world_from_asset, b.world_from_asset)
     p3 = {o.name: o.world_from_asset for o in r3.scene.objects}
     for a in r1.scene.objects:
         np.testing.assert_allclose(a.world_from_asset, p3[a.name], atol=1e-12)
-    assert [o.name for o in r3.scene.objects] == [g.asset.name for g in reversed(generated)]
+    left = {p.name for p in r1.placements if p.became_background}
+    assert left == {p.name for p in r3.placements if p.became_background}
+    assert [o.name for o in r3.scene.objects] == [g.asset.name for g in reversed(generated) if g.asset.name not in left]
     assert r1.support == r2.support
 
 
@@ -249,24 +286,54 @@ def test_yaw_snapping_follows_the_evidence():
     assert placed["cabinet"].asset is cabinet
 
 
-def test_unsupported_rigid_object_high_on_a_wall_is_hung_there():
-    """A picture seen 1.5 m up against a wall is welded where it was seen, not dropped
-    from its pixels; the same box away from walls, or low, still falls to the floor; two
-    overlapping hung objects are still pushed apart."""
+def test_unsupported_object_is_never_welded_in_mid_air_nor_dropped():
+    """A picture seen 1.5 m up against a wall, a box floating in the room and one 40 cm up have
+    nothing under them within reach, and the camera saw through the space under them: none is
+    welded to the wall or dropped metres from its pixels; each hangs where it was seen as static
+    background, and the placement says so. A box seen 1.5 cm above the floor comes down onto it
+    (the move is reported)."""
     walls = (Plane(np.array([1.0, 0.0, 0.0]), 1.0, "wall", 100),)  # x = -1, room at x > -1
     gen = (
         _gen(box_asset("picture", (0.04, 0.6, 0.4)), (-0.95, 0.0, 1.5)),
-        _gen(box_asset("frame", (0.04, 0.6, 0.4)), (-0.95, 0.4, 1.6)),  # overlaps the picture
         _gen(box_asset("floating", (0.04, 0.6, 0.4)), (0.5, 0.0, 1.5)),
-        _gen(box_asset("low", (0.04, 0.6, 0.4)), (-0.95, 2.0, 0.4)),
+        _gen(box_asset("low", (0.04, 0.6, 0.4)), (-0.95, 0.65, 0.4)),
+        _gen(box_asset("near_floor", (0.3, 0.3, 0.3)), (0.5, 2.0, 0.015)),
     )
-    result, stats = solve_layout_with_stats(empty_perception(walls), gen, CFG)
-    placed = {o.name: o for o in result.scene.objects}
-    for name in ("picture", "frame"):
-        assert placed[name].support == "wall" and placed[name].asset.is_fixed
-        assert _bottom(placed[name]) == pytest.approx(_bottom(GeneratedAsset(gen[0].asset, gen[0].world_from_asset, np.zeros((0, 3)))) + (0.1 if name == "frame" else 0.0), abs=1e-9)
-    for name in ("floating", "low"):
-        assert placed[name].support == "floor" and not placed[name].asset.is_fixed
-        assert _bottom(placed[name]) == pytest.approx(0.0, abs=1e-9)
-    assert result.max_penetration_after_m < 1e-5
-    assert _max_intersection_volume(result.scene) < 1e-9
+    result, _ = solve_layout_with_stats(empty_perception(walls, depth_m=20.0), gen, CFG)
+    placements = {p.name: p for p in result.placements}
+    for name in ("picture", "floating", "low"):
+        assert placements[name].became_background and placements[name].displacement_m == 0.0
+        assert "camera saw empty space under it" in placements[name].reason
+    assert [o.name for o in result.scene.objects] == ["near_floor"]
+    assert not any(o.asset.is_fixed for o in result.scene.objects)
+    bg = result.scene.room.background
+    assert sorted(bg.static_names) == ["floating", "low", "picture"]
+    # Their geometry is in the background exactly where it was seen.
+    for g in gen[:3]:
+        k = bg.static_names.index(g.asset.name)
+        np.testing.assert_allclose(bg.static_meshes[k].vertices_m, transform_points(g.world_from_asset, g.asset.parts[0].visual.vertices_m))
+    near = placements["near_floor"]
+    assert near.support == "floor" and near.lowered_m == pytest.approx(0.015) and "lowered 2 cm onto the floor" in near.reason
+    assert _bottom(result.scene.objects[0]) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_object_seen_above_its_support_stands_on_legs(tmp_path):
+    """A nightstand seen 8 cm above the floor (its dark plinth cut from its mask) keeps its
+    height: it stands on four collision legs down to the floor, nothing visual is added, and it
+    is at rest in MuJoCo."""
+    from exporters import write_mjcf
+    from layout import verify_scene
+
+    stand = box_asset("stand", (0.4, 0.5, 0.5))
+    gen = (_gen(stand, (0.0, 0.0, 0.08)),)
+    result, _ = solve_layout_with_stats(empty_perception(), gen, CFG)
+    placed = result.scene.object("stand")
+    np.testing.assert_array_equal(placed.world_from_asset, gen[0].world_from_asset)
+    p = result.placements[0]
+    assert p.support == "floor" and p.displacement_m == 0.0 and "8 cm collision legs" in p.reason
+    root = placed.asset.root
+    assert len(root.collision) == 1 + 4 and root.visual is stand.root.visual and placed.asset.mass_kg == stand.mass_kg
+    assert _bottom(placed) == pytest.approx(0.0, abs=1e-9)
+    verdict, _ = verify_scene(write_mjcf(result.scene, tmp_path), result.scene, CFG)
+    assert verdict.max_penetration_m < 1e-3 and verdict.stable and verdict.settle_max_drift_m < 2e-3
+

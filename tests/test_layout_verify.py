@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from layout.synthetic import box_asset, empty_perception
+from scene_builder.bench.clutter import box_asset, empty_perception
 from scene_builder.config import LayoutConfig
 from scene_builder.frames import mujoco_camera, pose, quat_wxyz_from_matrix, rot_z, transform_points
 from scene_builder.model import Observation, PerceivedObject, Perception, PlacedObject, Plane, Scene
@@ -215,10 +215,10 @@ def test_verify_reads_the_project_exporter_mjcf(tmp_path):
     naming conventions agree and the solver's output is penetration-free and at rest."""
     exporters_mjcf = pytest.importorskip("exporters.mjcf")
     from layout import solve_layout, verify_scene
-    from layout.synthetic import clutter
+    from scene_builder.bench.clutter import clutter, clutter_layout_config
 
     perception, generated = clutter(8, seed=11, mix=(0.6, 0.0, 0.2, 0.2))
-    result = solve_layout(perception, generated, LayoutConfig())
+    result = solve_layout(perception, generated, clutter_layout_config())
     path = exporters_mjcf.write_mjcf(result.scene, tmp_path)
     verdict, _ = verify_scene(path, result.scene, LayoutConfig())
     assert len(verdict.objects) == 8

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scene_builder import metrics as M
+from scene_builder.bench import metrics as M
 
 
 def box(c, s, yaw=0.0):

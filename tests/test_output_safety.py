@@ -28,7 +28,7 @@ DETERMINISTIC = ("scene.json", "scene.xml", "scene.usda", "scene.urdf", "scene.g
 @pytest.fixture(scope="module")
 def room(tmp_path_factory) -> tuple[Path, list[str]]:
     """A small procedural RGB-D room (3 objects) and the build flags for it."""
-    from scene_builder.procedural import write_demo_input
+    from scene_builder.bench.render import write_demo_input
 
     sample = write_demo_input(tmp_path_factory.mktemp("in") / "room", seed=1, n_objects=3)
     cam = json.loads((sample / "camera.json").read_text())

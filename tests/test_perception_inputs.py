@@ -300,7 +300,9 @@ def test_depth_formats_agree(tmp_path):
 
 def test_large_image_is_downscaled_with_depth_and_intrinsics(tmp_path):
     w, h = 2000, 1500
-    Image.fromarray(np.zeros((h, w, 3), dtype=np.uint8)).save(tmp_path / "big.png")
+    photo = np.zeros((h, w, 3), dtype=np.uint8)
+    photo[::2, ::2] = 255  # a 1-px checkerboard that any downscaling blurs to grey
+    Image.fromarray(photo).save(tmp_path / "big.png")
     mm = np.full((h, w), 2000, dtype=np.uint16)
     mm[:, w // 2 :] = 4000
     _depth_png(tmp_path / "d.png", mm)
@@ -310,3 +312,13 @@ def test_large_image_is_downscaled_with_depth_and_intrinsics(tmp_path):
     assert set(np.unique(loaded.depth_m).tolist()) == {2.0, 4.0}
     k = loaded.intrinsics
     assert k.fx_px == pytest.approx(1500.0 * 0.64) and k.cx_px == pytest.approx((MAX_SIDE_PX - 1) / 2)
+    # the photo itself is kept at full resolution, untouched (textures are built from it)
+    assert loaded.rgb_full is not None and np.array_equal(loaded.rgb_full, photo)
+    small = load_input(InputSpec(tmp_path / "big.png"), CFG)
+    assert small.rgb_full is not None and small.rgb.shape[1] == MAX_SIDE_PX
+
+
+def test_small_image_keeps_no_second_copy(tmp_path):
+    Image.fromarray(np.zeros((480, 640, 3), dtype=np.uint8)).save(tmp_path / "vga.png")
+    loaded = load_input(InputSpec(tmp_path / "vga.png"), CFG)
+    assert loaded.rgb.shape == (480, 640, 3) and loaded.scale == 1.0 and loaded.rgb_full is None

@@ -1,4 +1,4 @@
-"""perceive() on procedural rooms with exact ground truth (scene_builder.procedural: MuJoCo
+"""perceive() on procedural rooms with exact ground truth (scene_builder.bench.procedural: MuJoCo
 renders with Kinect-like depth noise): camera frame and instance masks against the truth."""
 
 from __future__ import annotations
@@ -18,7 +18,9 @@ SEEDS = (0, 2, 8)
 
 @pytest.fixture(scope="module")
 def rooms(tmp_path_factory):
-    from scene_builder.procedural import load_truth, make_room, render_room
+    from scene_builder.bench.procedural import make_room
+    from scene_builder.bench.render import render_room
+    from scene_builder.bench.truth import load_truth
 
     out = []
     for seed in SEEDS:
@@ -50,7 +52,7 @@ def test_instances_match_the_truth(rooms):
 
 
 def test_matched_objects_are_named_by_category(rooms):
-    from scene_builder.bench_perception import score_room
+    from scene_builder.bench.perception import score_room
 
     scores = [score_room(p, truth) for p, truth in rooms]
     matched = sum(s.matched for s in scores)

@@ -4,6 +4,7 @@ and silhouette filling of object masks, on ray-cast RGB-D scenes."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from PIL import Image
 
 from perception import perceive
@@ -64,3 +65,55 @@ def test_silhouettes_take_enclosed_room_pixels_but_not_other_objects():
     assert mask[5:15, 5:15].sum() == 100 - 9 and not (mask & inner).any()
     assert np.array_equal(pix, ring)  # observed points are unchanged
     assert np.array_equal(mask2, inner)
+
+
+def _ball_query_reference(points: np.ndarray, samples: np.ndarray, radius_m: float) -> np.ndarray:
+    """The colour split's neighbour search as it was: one ball query per sample over all points
+    (about 8e8 indices on a large flat cluster); the reference for :func:`_near_points`."""
+    from scipy.spatial import cKDTree
+
+    near = cKDTree(points).query_ball_point(samples, radius_m)
+    return np.unique(np.concatenate([np.asarray(n, dtype=np.int64) for n in near]))
+
+
+def test_near_points_is_the_union_of_ball_queries():
+    from perception.segment_depth import _near_points
+
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(0, 1, (20000, 2))
+    samples = rng.uniform(0.3, 0.6, (300, 2))
+    assert np.array_equal(_near_points(pts, samples, 0.03), _ball_query_reference(pts, samples, 0.03))
+    # Points exactly at the radius count (a ball query is inclusive).
+    grid = np.array([[0.0, 0.0], [0.03, 0.0], [0.0, 0.0300001]])
+    assert np.array_equal(_near_points(grid, np.zeros((1, 2)), 0.03), [0, 1])
+    assert len(_near_points(pts, np.zeros((0, 2)), 0.03)) == 0
+
+
+@pytest.mark.slow
+def test_colour_split_labels_are_unchanged_on_a_real_sample(monkeypatch):
+    """The one-shot nearness query gives the depth-cluster segmenter the same labels as the
+    per-sample ball queries it replaced, on a real RGB-D photo where the colour split runs."""
+    import perception.segment_depth as sd
+    from perception.backends import build_registries
+    from perception.inputs import load_input
+    from perception.perceive import _resolve_depth
+    from perception.room import estimate_room
+    from tests.conftest import REAL_DATA, require
+
+    d = require(REAL_DATA / "nyuv2_metric3d_00050")
+    cfg = PerceptionConfig()
+    loaded = load_input(InputSpec(d / "rgb.jpg", d / "depth.png"), cfg)
+    depth, k, *_ = _resolve_depth(loaded, build_registries(cfg), cfg)
+    frame = estimate_room(k.unproject(depth), depth > 0, 0)
+    new = sd.DepthClusterSegmenter().segment(loaded.rgb, depth, k, frame.background, up_cam=frame.up_cam)
+    calls = []
+
+    def reference(points, samples, radius_m):
+        calls.append(len(points))
+        return _ball_query_reference(points, samples, radius_m)
+
+    monkeypatch.setattr(sd, "_near_points", reference)
+    old = sd.DepthClusterSegmenter().segment(loaded.rgb, depth, k, frame.background, up_cam=frame.up_cam)
+    assert len(calls) >= 5  # the split's neighbour search really ran on this photo
+    assert new.labels.max() >= 10
+    assert np.array_equal(new.labels, old.labels)

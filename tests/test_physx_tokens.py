@@ -162,7 +162,7 @@ def test_lenient_omni_decoder_reads_reference_variants():
 
 
 def test_bench_counts_and_checks_procedural_shapes():
-    from generation.physx.bench_tokens import format_table, measure, procedural_shapes
+    from scene_builder.bench.tokens import format_table, measure, procedural_shapes
 
     shapes = procedural_shapes()
     rows = measure({k: shapes[k] for k in ("chair", "cabinet")}, repeats=1)  # asserts losslessness

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from perception.single_view import SingleViewDepth, closeup_box_px, detect_segments
+from perception.single_view import SingleViewDepth, analysis_image, closeup_box_px, detect_segments
 from tests.conftest import PHOTOS, REAL_DATA, require
 
 
@@ -28,19 +28,38 @@ def _cabinet_dirs() -> list[Path]:
 
 
 def test_closeup_detected_on_cabinet_photos_and_not_on_rooms():
+    """At the analysis size the depth estimator uses: all 10 URDFormer cabinet photos are close-ups
+    of one object filling most of the frame; none of the room photos (plain and RGB-D) is."""
     cabinets = _cabinet_dirs()
-    rooms = [REAL_DATA / n for n in ("nyuv2_metric3d_00000", "nyuv2_metric3d_00050", "nyuv2_metric3d_00100", "open3d_SUN",
-                                     "sunrgbd_imvotenet_000002", "sunrgbd_imvotenet_000004")]
-    rooms += sorted(require(PHOTOS).glob("sunrgbd_total3d_demo_*"))
-    for d in cabinets[:5]:
-        rgb = _rgb(d)
+    rooms = sorted(require(PHOTOS).glob("sunrgbd_total3d_demo_*")) + [d for d in sorted(require(REAL_DATA).iterdir()) if d.is_dir()]
+    for d in cabinets:
+        rgb = analysis_image(_rgb(d))
         box = closeup_box_px(detect_segments(rgb), *rgb.shape[:2])
         assert box is not None, d.name
         u0, v0, u1, v1 = box
         assert (u1 - u0) > 0.6 * rgb.shape[1] and (v1 - v0) > 0.6 * rgb.shape[0], (d.name, box)
+    assert len(rooms) >= 15
     for d in rooms:
-        rgb = _rgb(require(d))
+        rgb = analysis_image(_rgb(d))
         assert closeup_box_px(detect_segments(rgb), *rgb.shape[:2]) is None, d.name
+
+
+def test_a_head_on_wall_of_horizontal_lines_is_no_closeup():
+    """Issue 11: a head-on kitchen photo (1000x667) gave 23 mostly horizontal segments, frame
+    aligned and spread over the image, and was taken for a close-up of one object at 0.38 m. The
+    same pattern, and a denser one, must not count: a close-up shows the object's full-height
+    vertical edges too."""
+    h, w = 667, 1000
+    rows = np.linspace(60, 620, 20)
+    horizontal = np.array([[40.0 + 7 * i, r, 960.0 - 5 * i, r + 0.5] for i, r in enumerate(rows)])
+    vertical = np.array([[100.0, 300.0, 100.5, 420.0], [500.0, 300.0, 500.0, 400.0], [900.0, 320.0, 900.5, 420.0]])
+    kitchen = np.concatenate([horizontal, vertical])
+    assert len(kitchen) == 23 and closeup_box_px(kitchen, h, w) is None
+    denser = np.concatenate([kitchen, horizontal + [0.0, 12.0, 0.0, 12.0]])  # 43 segments, still 9 % vertical
+    assert closeup_box_px(denser, h, w) is None
+    # with full-height verticals (carcass sides, door edges) the same photo would be one
+    cabinet = np.concatenate([denser, np.array([[u, 50.0, u, 630.0] for u in np.linspace(40.0, 960.0, 24)])])
+    assert closeup_box_px(cabinet, h, w) is not None
 
 
 def test_closeup_depth_has_the_category_scale():

@@ -7,12 +7,13 @@ import json
 import numpy as np
 import pytest
 
-from scene_builder import frames, procedural
+from scene_builder import frames
+from scene_builder.bench import procedural, render, truth
 from scene_builder.model import CameraIntrinsics
 
 
 def _gt(spec):
-    return json.dumps(procedural.ground_truth(spec), sort_keys=True)
+    return json.dumps(render.ground_truth(spec), sort_keys=True)
 
 
 def test_rooms_are_deterministic_for_a_seed():
@@ -60,7 +61,7 @@ def test_ground_truth_objects_do_not_interpenetrate(seed):
     import mujoco
 
     spec = procedural.make_room(seed, n_objects=9)
-    model = procedural.build_mjspec(spec, free_bodies=True).compile()
+    model = render.build_mjspec(spec, free_bodies=True).compile()
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     assert model.nbody == 1 + len(spec.objects) + sum(len(o.joints) for o in spec.objects)
@@ -104,7 +105,7 @@ def test_rendered_depth_matches_the_geometry_and_instances_match_objects(tmp_pat
     from PIL import Image
 
     spec = procedural.make_room(4, n_objects=7)
-    out = procedural.render_room(spec, tmp_path / "room")
+    out = render.render_room(spec, tmp_path / "room")
     depth_m = np.asarray(Image.open(out / "depth.png")).astype(np.float64) / 1000.0
     inst = np.asarray(Image.open(out / "instances.png"))
     meta = json.loads((out / "meta.json").read_text())
@@ -142,19 +143,19 @@ def test_depth_noise_is_proportional_with_holes():
     clean[:, :80] = 2.0  # a flat region and a depth edge at column 80
     clean[:, 80:] = 4.0
     noise = procedural.DepthNoise(rel_sigma=0.01, holes=3, edge_dropout=1.0)
-    noisy = procedural.corrupt_depth(clean, noise, seed=3)
+    noisy = render.corrupt_depth(clean, noise, seed=3)
     valid = noisy > 0
     assert 0.5 < valid.mean() < 1.0
     assert not valid[:, 79:81].any()  # dropped at the discontinuity
     rel = (noisy[valid] - clean[valid]) / clean[valid]
     assert abs(rel.mean()) < 2e-3 and 0.008 < rel.std() < 0.012
-    assert np.array_equal(noisy, procedural.corrupt_depth(clean, noise, seed=3))
+    assert np.array_equal(noisy, render.corrupt_depth(clean, noise, seed=3))
 
 
 def test_demo_input_is_a_loadable_sample(tmp_path):
     from PIL import Image
 
-    out = procedural.write_demo_input(tmp_path / "demo", seed=0, n_objects=7)
+    out = render.write_demo_input(tmp_path / "demo", seed=0, n_objects=7)
     for name in ("rgb.png", "depth.png", "camera.json", "meta.json", "instances.png"):
         assert (out / name).exists()
     rgb = np.asarray(Image.open(out / "rgb.png").convert("RGB"))
@@ -166,12 +167,12 @@ def test_demo_input_is_a_loadable_sample(tmp_path):
 
 
 def test_compare_to_ground_truth_aligns_worlds_through_the_camera(tmp_path):
-    from layout.synthetic import box_asset
+    from scene_builder.bench.clutter import box_asset
 
     from scene_builder.model import Camera, PlacedObject, Room, Scene
 
     spec = procedural.make_room(8, n_objects=6)
-    sample = procedural.render_room(spec, tmp_path / "room")
+    sample = render.render_room(spec, tmp_path / "room")
     # The same objects described in another world frame (yawed 40 degrees and shifted): only the
     # camera relates the two, as for a real build.
     other_from_gt = frames.pose(frames.rot_z(np.radians(40)), (1.0, -2.0, 0.0))
@@ -180,10 +181,10 @@ def test_compare_to_ground_truth_aligns_worlds_through_the_camera(tmp_path):
         size = np.array(o.size_m) * (1.1 if i == 0 else 1.0)  # the first is built 10 % too big
         placed.append(PlacedObject(box_asset(o.name, size, o.category), other_from_gt @ o.world_from_object))
     scene = Scene(Camera(spec.camera.intrinsics, other_from_gt @ spec.camera.world_from_camera), Room(), tuple(placed))
-    result = procedural.compare_to_ground_truth(scene, sample)
+    result = truth.compare_to_ground_truth(scene, sample)
     s = result["summary"]
     gt_objects = json.loads((sample / "meta.json").read_text())["ground_truth"]["objects"]
-    visible = {o["name"] for o in gt_objects if o["visible_px"] >= procedural.MIN_VISIBLE_PX}
+    visible = {o["name"] for o in gt_objects if o["visible_px"] >= truth.MIN_VISIBLE_PX}
     built = {o.name for o in spec.objects[:-1]}
     assert s["precision"] == 1.0 and s["category_accuracy"] == 1.0
     assert s["recall"] == pytest.approx(len(visible & built) / len(visible))

@@ -7,31 +7,112 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["BACKEND_NAME", "PhysxVlmGenerator", "register_backends"]
+import numpy as np
+
+__all__ = ["BACKEND_NAME", "PhysxVlmGenerator", "register_backends", "turn_to_match"]
 
 BACKEND_NAME = "physx-anything-vlm"
 
 
 class PhysxVlmGenerator:
-    """Generates one object from its image crop with the PhysX model found in ``model_dir``.
+    """An ``AssetGenerator``: each object from a single-object image of it, answered by the
+    PhysX model found in ``model_dir`` (or by ``chat``, any :class:`~generation.physx.vlm.ChatModel`,
+    with ``prompts``), scaled to the box observed in the photo.
 
-    The model is loaded on first use."""
+    The model is loaded on first use; a failure to load is raised again for every later object
+    without trying again. Failures raise ``SceneBuilderError`` subclasses (ProtocolError,
+    TruncatedAnswerError, VlmCallError, ModelUnavailableError): ``generation.generate_assets``
+    falls back to the shape prior for that object."""
 
-    def __init__(self, model_dir: Path) -> None:
+    name = BACKEND_NAME
+
+    def __init__(self, model_dir: Path | None = None, chat=None, prompts=None) -> None:
+        if model_dir is None and (chat is None or prompts is None):
+            raise ValueError("PhysxVlmGenerator needs a model_dir, or a chat model and its prompts")
         self.model_dir = model_dir
-        self._chat = None
+        self._chat = chat
+        self._prompts = prompts
+        self._load_error: Exception | None = None
 
-    def generate_object(self, image_rgb, name: str, label: str, config=None, seed: int = 0):
-        """(ObjectAsset, warnings): run the conversation on ``image_rgb`` ((H, W, 3) uint8 crop of
-        the object), parse, decode and assemble. Raises ProtocolError when the answer is unusable."""
+    def _model(self):
+        from generation.physx.vlm import PhysxPrompts, TransformersQwenVL, VlmCallError
+
+        from scene_builder.errors import SceneBuilderError
+
+        if self._load_error is not None:
+            raise self._load_error
+        if self._chat is None or self._prompts is None:
+            try:
+                self._prompts = PhysxPrompts.from_dir(self.model_dir)
+                self._chat = TransformersQwenVL.from_pretrained(self.model_dir)
+            except SceneBuilderError as err:
+                self._load_error = err
+                raise
+            except Exception as err:  # transformers / torch failing to load the folder
+                self._load_error = VlmCallError(f"cannot load the PhysX model from {self.model_dir} ({type(err).__name__}: {err})".splitlines()[0])
+                raise self._load_error from err
+        return self._chat, self._prompts
+
+    def converse(self, image_rgb: np.ndarray, config=None):
+        """The model's raw answers for ``image_rgb`` ((H, W, 3) uint8 single-object image), the
+        answer budget and retries from ``config``."""
+        from generation.physx.vlm import run_conversation
+
+        from scene_builder.config import GenerationConfig
+
+        cfg = config if config is not None else GenerationConfig()
+        chat, prompts = self._model()
+        return run_conversation(chat, image_rgb, prompts, max_new_tokens=cfg.vlm_max_new_tokens or None, retries=cfg.vlm_retries)
+
+    def generate_object(self, image_rgb, name: str, label: str, config=None, seed: int = 0, target_size_m=None):
+        """(ObjectAsset, warnings) from a single-object image: the conversation, parsed and
+        decoded, the parts scaled to ``target_size_m`` ((3,) asset-frame extents) when given,
+        meshed, weighed and decomposed."""
         from generation.physx.convert import to_object_asset
-        from generation.physx.vlm import PhysxPrompts, TransformersQwenVL, physx_from_conversation, run_conversation
+        from generation.physx.vlm import physx_from_conversation
 
-        if self._chat is None:
-            self._chat = TransformersQwenVL.from_pretrained(self.model_dir)
-        conv = run_conversation(self._chat, image_rgb, PhysxPrompts.from_dir(self.model_dir))
-        obj, report = physx_from_conversation(conv)
-        return to_object_asset(obj, name, label, config=config, seed=seed, backend=BACKEND_NAME), report.warnings
+        conv = self.converse(image_rgb, config)
+        obj, report = physx_from_conversation(conv, target_size_m=target_size_m)
+        return to_object_asset(obj, name, label, config=config, seed=seed, backend=BACKEND_NAME), conv.notes + report.warnings
+
+    def generate(self, obj, perception, config, seed: int = 0):
+        """One ``GeneratedAsset`` for perceived object ``obj``: the single-object crop of the photo
+        (:func:`~generation.physx.vlm.object_crop`), the model's articulated object with every part
+        scaled per axis to the observed box (the shape prior's box: gravity-aligned, front towards
+        the camera, completed to the category's depth), posed on that box. When the model's
+        footprint proportions match the box turned by 90 degrees clearly better, the asset is
+        turned (its front then faces the box's side)."""
+        from generation.physx.convert import model_size_m, physx_object, to_object_asset
+        from generation.physx.vlm import decode_conversation, object_crop
+        from generation.pose import fit_box, floor_snap_height_m
+        from generation.shape_prior import complete_box
+
+        from scene_builder.frames import pose, rot_z, transform_points
+        from scene_builder.model import GeneratedAsset
+
+        crop = object_crop(perception.observation.rgb, obj.mask, config.vlm_crop_px, config.vlm_crop_fill)
+        others = [o.points_world_m for o in perception.objects if o.name != obj.name]
+        snap_m = floor_snap_height_m(obj.points_world_m, others)
+        fit = complete_box(fit_box(obj.points_world_m, perception.camera.position_m, floor_snap_m=snap_m), obj.label, perception.room.walls)
+        conv = self.converse(crop, config)
+        description, grids, _ = decode_conversation(conv)
+        observed = np.asarray(fit.size_m, dtype=np.float64)
+        turn = turn_to_match(model_size_m(description, grids), observed)
+        physx = physx_object(description, grids, target_size_m=observed[[1, 0, 2]] if turn else observed)
+        world_from_asset = fit.world_from_box @ pose(rot_z(np.pi / 2), np.zeros(3)) if turn else fit.world_from_box
+        seen = transform_points(np.linalg.inv(world_from_asset), obj.points_world_m)
+        asset = to_object_asset(physx, obj.name, obj.label, config=config, seed=seed, backend=BACKEND_NAME,
+                                observed_points_m=seen, observed_colors_rgb=obj.colors_rgb)
+        return GeneratedAsset(asset, world_from_asset, obj.points_world_m)
+
+
+def turn_to_match(model_size_m: np.ndarray, observed_size_m: np.ndarray, margin: float = 1.25) -> bool:
+    """True when the model's footprint (asset x front-back, y width) matches the observed box
+    (x towards the camera, y across) turned by 90 degrees better than as seen, by more than a
+    factor ``margin`` in aspect ratio."""
+    own = float(np.log(model_size_m[0] / model_size_m[1]))
+    seen = float(np.log(observed_size_m[0] / observed_size_m[1]))
+    return abs(own + seen) + float(np.log(margin)) < abs(own - seen)
 
 
 def register_backends(registry, models_dir: Path | None = None) -> None:

@@ -14,7 +14,7 @@ each part its material in SI units and its joint in metres / radians.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import Mapping
 
 import numpy as np
@@ -25,7 +25,7 @@ from scene_builder.model import Joint, JointType, Material, ObjectAsset
 from generation.physx.protocol import GridFrame, PhysxDescription, ProtocolError, group_joint
 from generation.physx.tokens import decode_omni, decode_omni_lenient, decode_ranges, decode_ranges_lenient
 
-__all__ = ["PhysxObject", "PhysxPartSpec", "decode_part_tokens", "physx_object", "to_object_asset"]
+__all__ = ["PhysxObject", "PhysxPartSpec", "decode_part_tokens", "model_size_m", "physx_object", "to_object_asset"]
 
 # PhysX material words -> rows of the generator's material table (which supplies friction and
 # restitution; PhysX gives density, Young's modulus and Poisson's ratio itself).
@@ -117,7 +117,10 @@ class PhysxPartSpec:
 
 @dataclass(frozen=True, eq=False)
 class PhysxObject:
-    """A PhysX description with geometry, in the asset frame. size_m: (3,) box of all parts."""
+    """A PhysX description with geometry, in the asset frame. size_m: (3,) box of all parts
+    (after the scale reconciliation when a target size was given). scale_to_target: (3,) the
+    per-axis factors (asset x, y, z) applied to the model's own metric size to reach the target
+    size (ones when there was no target)."""
 
     name: str
     category: str
@@ -127,6 +130,7 @@ class PhysxObject:
     frame: GridFrame
     description: PhysxDescription
     warnings: tuple[str, ...] = ()
+    scale_to_target: np.ndarray = field(default_factory=lambda: np.ones(3))
 
     def part(self, name: str) -> PhysxPartSpec:
         for p in self.parts:
@@ -181,25 +185,56 @@ def _material(part, warnings: list[str]) -> Material:
     )
 
 
+def model_size_m(description: PhysxDescription, part_grids: Mapping[int, np.ndarray]) -> np.ndarray:
+    """(3,) asset-frame extents (x front-back, y width, z height) of the model's own answer: its
+    Dimension fitted to the union of its parts' voxels as :func:`physx_object` does, in metres; in
+    voxel units when the description states no Dimension (the proportions still hold). Raises
+    ProtocolError when no part has a voxel."""
+    union = np.zeros((description.grid,) * 3, dtype=bool)
+    for p in description.parts:
+        occ = part_grids.get(p.label)
+        if occ is not None:
+            union |= np.asarray(occ, dtype=bool)
+    if not union.any():
+        raise ProtocolError(f"PhysX object {description.name!r}: no part has any voxel")
+    idx = np.argwhere(union)
+    lo, hi = idx.min(axis=0), idx.max(axis=0)
+    n = (hi - lo + 1.0)[[1, 0, 2]]
+    if description.dimension_cm is None:
+        return n
+    frame, _ = GridFrame.from_dimension(description.dimension_cm, description.grid, (lo, hi))
+    return n * frame.metres_per_voxel[[1, 0, 2]]
+
+
 def physx_object(
     description: PhysxDescription,
     part_grids: Mapping[int, np.ndarray],
     fill_closed_shells: bool = True,
     max_anisotropy: float = 0.25,
+    target_size_m: np.ndarray | None = None,
+    max_target_anisotropy: float = 3.0,
 ) -> PhysxObject:
     """Part specifications in the asset frame from a description and each part's grid.
 
     part_grids: PhysX part label -> (G, G, G) bool ``[x, y, z]`` in the PhysX grid. Parts without
     voxels are dropped (with a warning); a group whose parts are all gone passes its children to
-    its parent. Raises ProtocolError when nothing of the base group has voxels, InputError when the
-    description has no Dimension (nothing gives the metric scale).
+    its parent. target_size_m: (3,) asset-frame extents (x front-back, y width, z height) the
+    object must have, e.g. the observed box: every part's voxels, joint anchors and slide ranges
+    are scaled per axis so that the union of the parts spans exactly that box (all three axes,
+    not the largest one alone). Raises ProtocolError when nothing of the base group has voxels or
+    when the target's proportions differ from the model's by more than ``max_target_anisotropy``
+    (largest over smallest per-axis factor: the model described another shape), InputError when
+    the description has no Dimension and no target gives the metric scale.
     """
     from scipy import ndimage
 
     g_side = description.grid
     warnings: list[str] = []
     if description.dimension_cm is None:
-        raise InputError(f"PhysX description of {description.name!r} has no Dimension line; cannot give the asset a metric size")
+        if target_size_m is None:
+            raise InputError(f"PhysX description of {description.name!r} has no Dimension line; cannot give the asset a metric size")
+        warnings.append("no Dimension line: the size comes from the target box alone")
+        description = replace(description, dimension_cm=(100.0, 100.0, 100.0))
     grids: dict[int, np.ndarray] = {}
     for p in description.parts:
         occ = part_grids.get(p.label)
@@ -222,6 +257,20 @@ def physx_object(
     lo, hi = idx.min(axis=0), idx.max(axis=0)
     frame, frame_warnings = GridFrame.from_dimension(description.dimension_cm, g_side, (lo, hi), max_anisotropy)
     warnings += frame_warnings
+    factors = np.ones(3)
+    if target_size_m is not None:
+        target = np.asarray(target_size_m, dtype=np.float64)
+        if target.shape != (3,) or not np.all(target > 0):
+            raise InputError(f"target size must be three positive extents in metres, got {target_size_m}")
+        own = (hi - lo + 1.0)[[1, 0, 2]] * frame.metres_per_voxel[[1, 0, 2]]  # asset x, y, z
+        factors = target / own
+        if factors.max() / factors.min() > max_target_anisotropy:
+            raise ProtocolError(
+                f"PhysX object {description.name!r}: its proportions {own[0]:.2f} x {own[1]:.2f} x {own[2]:.2f} m and the "
+                f"observed box {target[0]:.2f} x {target[1]:.2f} x {target[2]:.2f} m differ by more than {max_target_anisotropy:g}x between axes"
+            )
+        # asset x = -grid y, asset y = grid x, asset z = grid z
+        frame = GridFrame(g_side, frame.metres_per_voxel * factors[[1, 0, 2]], frame.origin_vox)
     sx, sy, sz = frame.metres_per_voxel
     voxel_size = np.array([sy, sx, sz])
     origin = np.array([-(hi[1] + 1 - frame.origin_vox[1]) * sy, (lo[0] - frame.origin_vox[0]) * sx, (lo[2] - frame.origin_vox[2]) * sz])
@@ -304,6 +353,7 @@ def physx_object(
         frame=frame,
         description=description,
         warnings=tuple(warnings),
+        scale_to_target=factors,
     )
 
 
@@ -328,10 +378,14 @@ def to_object_asset(
     config=None,
     seed: int = 0,
     backend: str = "physx-anything-vlm",
+    observed_points_m: np.ndarray | None = None,
+    observed_colors_rgb: np.ndarray | None = None,
 ) -> ObjectAsset:
     """Mesh, weigh and decompose the parts with the generator's ``assemble_asset`` (marching
     cubes, mass and inertia by integration over the watertight mesh, convex collision pieces).
-    The PhysX texts give no friction; joints get the generator's derived damping and friction."""
+    The PhysX texts give no friction; joints get the generator's derived damping and friction.
+    observed_points_m: (N, 3) points seen in the photo, in the asset frame, with their
+    observed_colors_rgb (N, 3) uint8: the meshes take the photo's colours, as the shape prior's do."""
     from scene_builder.config import GenerationConfig
 
     from generation.assembly import JointSpec, PartSpec, assemble_asset
@@ -355,4 +409,7 @@ def to_object_asset(
             )
         )
     text = f"{obj.name} ({obj.category})" if obj.category else obj.name
-    return assemble_asset(name, label, specs, config=cfg, seed=seed, description=text, backend=backend, recenter=False)
+    return assemble_asset(
+        name, label, specs, config=cfg, seed=seed, description=text, backend=backend, recenter=False,
+        observed_points_m=observed_points_m, observed_colors_rgb=observed_colors_rgb,
+    )

@@ -11,7 +11,19 @@ from pathlib import Path
 from scene_builder.config import PerceptionConfig
 from scene_builder.registry import Registry
 
-__all__ = ["register_backends"]
+__all__ = ["register_backends", "register_box_prompt_backends", "register_detection_backends"]
+
+
+def _weights(name: str, models_dir: Path | None) -> Path:
+    """The local weights of model ``name``; ModelUnavailableError (one line) when absent."""
+    from perception import models
+
+    path = models.resolve_weights(name, models_dir)
+    if path is None:
+        from scene_builder.errors import ModelUnavailableError
+
+        raise ModelUnavailableError(models.unavailable_reason(name, models_dir) or f"{name} is not available")
+    return path
 
 
 def register_backends(depth: Registry, segmentation: Registry, naming: Registry, config: PerceptionConfig) -> None:
@@ -27,12 +39,7 @@ def register_backends(depth: Registry, segmentation: Registry, naming: Registry,
     models_dir = config.models_dir
 
     def weights(name: str) -> Path:
-        path = models.resolve_weights(name, models_dir)
-        if path is None:
-            from scene_builder.errors import ModelUnavailableError
-
-            raise ModelUnavailableError(models.unavailable_reason(name, models_dir) or f"{name} is not available")
-        return path
+        return _weights(name, models_dir)
 
     da_name = models.default_model("depth").name
     sam_name = models.default_model("segmentation").name
@@ -46,12 +53,19 @@ def register_backends(depth: Registry, segmentation: Registry, naming: Registry,
     def make_single_view():
         from perception.single_view import SingleViewDepth
 
-        return SingleViewDepth()
+        # A COCO detector, when its weights are here, stands beds, sofas and chairs on the floor
+        # as cuboids of their typical size (and their heights refine the metric scale).
+        det_path = models.resolve_weights("centernet-mbv3-coco", models_dir)
+        if det_path is None:
+            return SingleViewDepth()
+        from perception.learned.detectors import CenterNetCocoDetector
+
+        return SingleViewDepth(detector=CenterNetCocoDetector(det_path))
 
     def make_sam2():
         from perception.learned.sam2 import Sam2Segmenter
 
-        return Sam2Segmenter(weights(sam_name))
+        return Sam2Segmenter(weights(sam_name), config.sam2)
 
     def make_efficientnet():
         from perception.learned.naming import EfficientNetNamer
@@ -72,7 +86,7 @@ def register_backends(depth: Registry, segmentation: Registry, naming: Registry,
         "single-view-geometry",
         make_single_view,
         priority=0,
-        description="vanishing points + floor plane from a 1.4 m camera-height prior; no weights",
+        description="vanishing points, floor and room box from a 1.3 m camera-height prior (plus COCO boxes of known size when centernet-mbv3-coco is present)",
     )
     segmentation.register(
         "sam2",
@@ -88,3 +102,72 @@ def register_backends(depth: Registry, segmentation: Registry, naming: Registry,
         available=_eff_ok,
         description="EfficientNet-Lite0 ImageNet classifier mapped to the project vocabulary",
     )
+
+
+def register_box_prompt_backends(registry: Registry, config: PerceptionConfig) -> None:
+    """Register ``"sam2"`` (priority 100, when its weights resolve locally) into a registry of
+    ``perception.protocols.BoxPromptSegmenter`` backends: detector boxes prompt SAM 2 as in
+    Grounded-SAM-2. The caller registers its classical fallback (GrabCut) at a lower priority."""
+    from perception import models
+
+    sam_name = models.default_model("segmentation").name
+
+    def make_sam2():
+        from perception.learned.sam2 import Sam2Segmenter
+
+        return Sam2Segmenter(_weights(sam_name, config.models_dir), config.sam2)
+
+    registry.register(
+        "sam2",
+        make_sam2,
+        priority=100,
+        available=lambda: models.unavailable_reason(sam_name, config.models_dir),
+        description=f"SAM 2 prompted with detector boxes, one mask per box ({sam_name}, transformers)",
+    )
+
+
+def register_detection_backends(detection: Registry, semantic: Registry, box_prompt: Registry, config: PerceptionConfig) -> None:
+    """Register the offline detectors, the semantic segmenter and SAM 2 box prompts (lazy
+    factories; availability says why not, in one line).
+
+    detection: ``"centernet-mbv3-coco"`` (priority 100) and ``"ssd-mobilenet-oid"`` (priority 50),
+    each when its file resolves through the model registry (the ``"detections"`` segmenter runs
+    every available one). semantic: ``"deeplabv3-mnv2-pascal"`` (priority 50).
+    box_prompt: ``"sam2"`` (priority 100, when its weights resolve locally; GrabCut is the
+    always-available fallback registered by ``perception.backends``).
+    """
+    from perception import models
+
+    models_dir = config.models_dir
+
+    def weights(name: str) -> Path:
+        return _weights(name, models_dir)
+
+    def make_centernet():
+        from perception.learned.detectors import CenterNetCocoDetector
+
+        return CenterNetCocoDetector(weights("centernet-mbv3-coco"))
+
+    def make_ssd():
+        from perception.learned.detectors import SsdOidDetector
+
+        return SsdOidDetector(weights("ssd-mobilenet-oid"))
+
+    def make_deeplab():
+        from perception.learned.detectors import DeepLabPascalSegmenter
+
+        return DeepLabPascalSegmenter(weights("deeplabv3-mnv2-pascal"))
+
+    for name, factory, priority, what in (
+        ("centernet-mbv3-coco", make_centernet, 100, "CenterNet MobileNetV3, 80 COCO classes (onnxruntime)"),
+        ("ssd-mobilenet-oid", make_ssd, 50, "SSD MobileNetV2, Open Images indoor classes incl. desk and table (TFLite)"),
+    ):
+        detection.register(name, factory, priority=priority, available=lambda n=name: models.unavailable_reason(n, models_dir), description=what)
+    semantic.register(
+        "deeplabv3-mnv2-pascal",
+        make_deeplab,
+        priority=50,
+        available=lambda: models.unavailable_reason("deeplabv3-mnv2-pascal", models_dir),
+        description="DeepLab v3 MobileNetV2, PASCAL VOC classes (TFLite)",
+    )
+    register_box_prompt_backends(box_prompt, config)

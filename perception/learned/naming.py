@@ -91,6 +91,14 @@ IMAGENET_TO_LABEL: tuple[tuple[int, str, str], ...] = (
     (533, "dishrag", "towel"),
     (750, "quilt", "blanket"),
     (850, "teddy bear", "soft_toy"),
+    (703, "park bench", "bench"),
+    (414, "backpack", "bag"),
+    (748, "purse", "bag"),
+    (883, "vase", "vase"),
+    (892, "wall clock", "clock"),
+    (409, "analog clock", "clock"),
+    (530, "digital clock", "clock"),
+    (508, "computer keyboard", "keyboard"),
 )
 
 _MEAN, _SCALE = 127.0, 128.0  # EfficientNet-Lite input normalisation: (x - 127) / 128
@@ -196,7 +204,7 @@ def size_plausibility(label: str, size_m: tuple[float, float, float], sigma_log:
 #: The classifier's evidence for a label is the likelihood ratio (p + floor) / floor of its summed
 #: ImageNet probability p: a label the classifier does not see keeps the size prior's score, one it
 #: gives p = 0.9 gains a factor 4 (1.4 nats, what a size a factor 1.5 off on every axis costs).
-#: Chosen on 74 objects of 16 procedural rooms (python -m scene_builder.bench_perception), where
+#: Chosen on 74 objects of 16 procedural rooms (python -m scene_builder.bench.perception), where
 #: ImageNet classes name MuJoCo primitives poorly (28% right alone): a floor of 0.05 named 59%,
 #: 0.3 named 65% (as many as size alone); a real photo gives the classifier more to say.
 CLASSIFIER_FLOOR = 0.3

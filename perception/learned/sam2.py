@@ -1,18 +1,32 @@
-"""SAM 2 automatic instance masks and prompted refinement (``transformers`` ``Sam2Model``).
+"""SAM 2 automatic instance masks and box-prompted masks (``transformers`` ``Sam2Model``).
 
 transformers' ``Sam2ImageProcessor`` needs torchvision, which cannot be installed on this
 project's machines, so preprocessing is written here: the SAM 2 checkpoints were trained on the
-whole image resized to a 1024 x 1024 square (SAM 2's own transform; SAM 1 instead letterboxed the
-longest side to 1024), ImageNet mean/std. ``letterbox=True`` selects the SAM 1 style (longest side
-to 1024, zero padding bottom/right) for checkpoints trained that way; masks are mapped back either
-way.
+whole image resized to a 1024 x 1024 square (SAM 2's own ``SAM2Transforms``; SAM 1 instead
+letterboxed the longest side to 1024), ImageNet mean/std. ``letterbox=True`` selects the SAM 1
+style (longest side to 1024, zero padding bottom/right) for checkpoints trained that way; masks are
+mapped back either way. Prompt coordinates follow ``SAM2Transforms.transform_coords``: continuous
+image coordinates scaled by 1024 / width and 1024 / height.
 
-The automatic generator follows SAM's recipe: a regular grid of single positive point prompts,
-three masks per point (multimask output), predicted-IoU and stability-score filters, mask NMS,
-removal of small islands and holes, and finally each pixel to the highest-scoring mask that covers
-it so that no pixel belongs to two instances. The filters and NMS run on the decoder's 256 x 256
-low-resolution logits (16x fewer pixels than the full image) and only the surviving masks are
-upsampled: the ranking they produce is the same up to boundary pixels.
+The automatic generator is upstream's ``SAM2AutomaticMaskGenerator`` (facebookresearch/sam2,
+``sam2/automatic_mask_generator.py``) with one crop layer, its defaults in
+:class:`scene_builder.config.Sam2Settings`: a regular grid of single positive point prompts
+(``build_point_grid``), three masks per point, predicted IoU ``> pred_iou_thresh``, stability
+``>= stability_score_thresh``, then **box** NMS (boxes of the masks, scored by predicted IoU,
+``batched_nms`` at ``box_nms_thresh``), then, only when ``min_mask_region_area_px > 0``, removal
+of small islands and holes followed by another box NMS that prefers unchanged masks. torchvision's
+``batched_nms`` cannot be used here (no torchvision), so :func:`box_nms` reimplements it (same
+IoU, same strict ``>`` test).
+
+One deviation, for memory: upstream computes the stability score and the mask boxes on logits
+upsampled to the full photo; here they are computed on the decoder's 256 x 256 logits (16x fewer
+pixels than a 1024 image, and no K x H x W float array for a 12 MP photo), and only the surviving
+masks are upsampled. Box IoU is unchanged by the common scaling; stability differs only by
+boundary pixels.
+
+After upstream's generator, :meth:`Sam2Segmenter.segment` drops masks lying mostly on floor,
+walls or ceiling and gives each pixel to the best-ranked mask covering it (no pixel in two
+instances), this project's own steps.
 """
 
 from __future__ import annotations
@@ -23,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from perception.protocols import InstanceMasks
+from scene_builder.config import Sam2Settings
 from scene_builder.errors import InputError, ModelUnavailableError
 from scene_builder.model import CameraIntrinsics, as_array
 
@@ -30,8 +45,11 @@ __all__ = [
     "MaskProposals",
     "Sam2Segmenter",
     "assign_instances",
+    "box_iou_matrix",
+    "box_nms",
     "mask_iou_matrix",
     "mask_nms",
+    "masks_to_boxes",
     "point_grid",
     "preprocess",
     "remove_small_regions",
@@ -68,8 +86,8 @@ class MaskProposals:
 
     @property
     def scores(self) -> np.ndarray:
-        """(K,) float32 ranking score: predicted IoU times stability."""
-        return (self.predicted_iou * self.stability).astype(np.float32)
+        """(K,) float32 ranking score: the predicted IoU (upstream ranks and NMS-es by it)."""
+        return self.predicted_iou
 
 
 # --------------------------------------------------------------------------------------------
@@ -78,12 +96,13 @@ class MaskProposals:
 
 
 def point_grid(points_per_side: int, width_px: int, height_px: int) -> np.ndarray:
-    """(n*n, 2) float64 pixel coordinates (u, v) of a regular grid with half-cell margins, rows
-    first (SAM's point layout)."""
+    """(n*n, 2) float64 continuous image coordinates (u, v) of a regular grid with half-cell
+    margins, rows first, x fastest: upstream's ``build_point_grid(n)`` (points
+    ``(i + 0.5) / n`` of [0, 1]) times the image size, as ``_process_crop`` scales it."""
     if points_per_side < 1:
         raise InputError("points_per_side must be at least 1")
     t = (np.arange(points_per_side) + 0.5) / points_per_side
-    uu, vv = np.meshgrid(t * width_px - 0.5, t * height_px - 0.5)
+    uu, vv = np.meshgrid(t * width_px, t * height_px)
     return np.stack([uu.ravel(), vv.ravel()], axis=-1)
 
 
@@ -129,6 +148,58 @@ def mask_nms(masks: np.ndarray, scores: np.ndarray, iou_threshold: float = 0.7) 
             if np.any(iou > iou_threshold):
                 continue
         kept.append(int(i))
+    return np.array(kept, dtype=np.int64)
+
+
+def masks_to_boxes(masks: np.ndarray) -> np.ndarray:
+    """(K, 4) float64 boxes (x0, y0, x1, y1) of (K, H, W) bool masks, x1 / y1 the last occupied
+    column / row (inclusive), [0, 0, 0, 0] for an empty mask: upstream's ``batched_mask_to_box``."""
+    m = np.asarray(masks, dtype=np.bool_)
+    out = np.zeros((len(m), 4), dtype=np.float64)
+    if len(m) == 0:
+        return out
+    cols = m.any(axis=1)  # (K, W)
+    rows = m.any(axis=2)  # (K, H)
+    nonempty = cols.any(axis=1)
+    w, h = m.shape[2], m.shape[1]
+    out[:, 0] = np.argmax(cols, axis=1)
+    out[:, 2] = w - 1 - np.argmax(cols[:, ::-1], axis=1)
+    out[:, 1] = np.argmax(rows, axis=1)
+    out[:, 3] = h - 1 - np.argmax(rows[:, ::-1], axis=1)
+    out[~nonempty] = 0.0
+    return out
+
+
+def box_iou_matrix(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(N, M) IoU of boxes a: (N, 4) and b: (M, 4), xyxy, area (x1 - x0) * (y1 - y0) as
+    torchvision's ``box_iou`` computes it."""
+    a = np.asarray(a, dtype=np.float64).reshape(-1, 4)
+    b = np.asarray(b, dtype=np.float64).reshape(-1, 4)
+    area_a = (a[:, 2] - a[:, 0]) * (a[:, 3] - a[:, 1])
+    area_b = (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
+    lt = np.maximum(a[:, None, :2], b[None, :, :2])
+    rb = np.minimum(a[:, None, 2:], b[None, :, 2:])
+    wh = np.clip(rb - lt, 0.0, None)
+    inter = wh[..., 0] * wh[..., 1]
+    union = area_a[:, None] + area_b[None, :] - inter
+    return np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
+
+
+def box_nms(boxes_xyxy: np.ndarray, scores: np.ndarray, iou_threshold: float = 0.7) -> np.ndarray:
+    """Greedy box non-maximum suppression with torchvision's ``nms`` semantics: boxes in
+    decreasing score; a box is dropped when its IoU with a kept box is strictly above
+    ``iou_threshold``. Returns (K,) int64 kept indices, best first (ties: lower index first)."""
+    boxes = np.asarray(boxes_xyxy, dtype=np.float64).reshape(-1, 4)
+    scores = np.asarray(scores, dtype=np.float64)
+    order = np.lexsort((np.arange(len(scores)), -scores))
+    iou = box_iou_matrix(boxes, boxes)
+    suppressed = np.zeros(len(boxes), dtype=bool)
+    kept: list[int] = []
+    for i in order:
+        if suppressed[i]:
+            continue
+        kept.append(int(i))
+        suppressed |= iou[i] > iou_threshold
     return np.array(kept, dtype=np.int64)
 
 
@@ -214,28 +285,19 @@ def preprocess(rgb: np.ndarray, image_size: int = 1024, letterbox: bool = False)
 
 
 class Sam2Segmenter:
-    """SAM 2 automatic masks (an ``InstanceSegmenter``) and prompted masks.
+    """SAM 2 automatic masks (an ``InstanceSegmenter``) and box-prompted masks (a
+    ``BoxPromptSegmenter``: detector boxes in, one mask per box out, as Grounded-SAM-2 does).
 
-    weights_dir: folder with ``config.json`` and ``model.safetensors`` of a transformers ``Sam2Model``.
-    points_per_side: the prompt grid is points_per_side^2 points. points_per_batch: prompts decoded
-    together. pred_iou_threshold, stability_threshold: SAM's filters. nms_iou_threshold: mask NMS.
-    min_region_frac: islands/holes smaller than this fraction of the image are removed, and
-    instances smaller than it dropped. max_background_frac: masks with more of their pixels on
-    ``background`` (floor, walls) than this are not objects.
+    weights_dir: folder with ``config.json`` and ``model.safetensors`` of a transformers
+    ``Sam2Model``. settings: generator settings, upstream's defaults unless changed through
+    ``PerceptionConfig.sam2``. letterbox: SAM 1 style resize (see the module docstring).
     """
 
     def __init__(
         self,
         weights_dir: Path | str,
+        settings: Sam2Settings | None = None,
         device: str | None = None,
-        points_per_side: int = 16,
-        points_per_batch: int = 64,
-        pred_iou_threshold: float = 0.7,
-        stability_threshold: float = 0.85,
-        stability_offset: float = 1.0,
-        nms_iou_threshold: float = 0.7,
-        min_region_frac: float = 0.001,
-        max_background_frac: float = 0.5,
         letterbox: bool = False,
     ) -> None:
         import torch
@@ -244,17 +306,12 @@ class Sam2Segmenter:
         weights_dir = Path(weights_dir)
         if not (weights_dir / "config.json").is_file():
             raise ModelUnavailableError(f"no config.json in {weights_dir}; run: scene-builder models fetch sam2-hiera-tiny")
+        self.settings = settings if settings is not None else Sam2Settings()
+        if self.settings.points_per_side < 1 or self.settings.points_per_batch < 1:
+            raise InputError("SAM 2 settings: points_per_side and points_per_batch must be at least 1")
         self.device = device or ("cuda" if torch.cuda.is_available() else "cpu")
         self.model = Sam2Model.from_pretrained(weights_dir, use_safetensors=True).to(self.device).eval()
         self.image_size = int(self.model.config.prompt_encoder_config.image_size)
-        self.points_per_side = points_per_side
-        self.points_per_batch = points_per_batch
-        self.pred_iou_threshold = pred_iou_threshold
-        self.stability_threshold = stability_threshold
-        self.stability_offset = stability_offset
-        self.nms_iou_threshold = nms_iou_threshold
-        self.min_region_frac = min_region_frac
-        self.max_background_frac = max_background_frac
         self.letterbox = letterbox
 
     # -- model plumbing ---------------------------------------------------------------------
@@ -268,12 +325,13 @@ class Sam2Segmenter:
         return emb, inner
 
     def _to_model_coords(self, uv: np.ndarray, shape: tuple[int, int], inner: tuple[int, int]) -> np.ndarray:
-        """Pixel (u, v) of the input image -> pixel coordinates of the S x S model input."""
+        """Continuous image coordinates (u, v) -> coordinates of the S x S model input
+        (``SAM2Transforms.transform_coords``: divide by the image size, times the resized size)."""
         h0, w0 = shape
         h, w = inner
         out = np.asarray(uv, dtype=np.float64).copy()
-        out[..., 0] = (out[..., 0] + 0.5) * (w / w0) - 0.5
-        out[..., 1] = (out[..., 1] + 0.5) * (h / h0) - 0.5
+        out[..., 0] *= w / w0
+        out[..., 1] *= h / h0
         return out
 
     def _decode(self, emb, points=None, labels=None, boxes=None, multimask: bool = True):
@@ -290,46 +348,68 @@ class Sam2Segmenter:
             out = self.model(image_embeddings=emb, multimask_output=multimask, **kw)
         return out.pred_masks[0].float().cpu().numpy(), out.iou_scores[0].float().cpu().numpy()
 
+    def _valid_lowres(self, m: int, inner: tuple[int, int]) -> tuple[int, int]:
+        """Rows and columns of the m x m low-res logits that cover the image (all of them unless
+        letterboxed)."""
+        ch = max(1, int(round(inner[0] * m / self.image_size)))
+        cw = max(1, int(round(inner[1] * m / self.image_size)))
+        return ch, cw
+
     def _upsample(self, logits: np.ndarray, shape: tuple[int, int], inner: tuple[int, int]) -> np.ndarray:
-        """(K, m, m) low-res logits -> (K, H, W) bool masks at the input resolution."""
+        """(K, m, m) low-res logits -> (K, H, W) bool masks at the input resolution: bilinear,
+        ``align_corners=False`` (``SAM2Transforms.postprocess_masks``), then ``> mask_threshold``."""
         import torch
 
         if len(logits) == 0:
             return np.zeros((0, *shape), dtype=np.bool_)
-        m = logits.shape[-1]
-        ch = max(1, int(round(inner[0] * m / self.image_size)))
-        cw = max(1, int(round(inner[1] * m / self.image_size)))
+        ch, cw = self._valid_lowres(logits.shape[-1], inner)
         t = torch.from_numpy(np.ascontiguousarray(logits[:, None, :ch, :cw]))
         up = torch.nn.functional.interpolate(t, size=shape, mode="bilinear", align_corners=False)[:, 0]
-        return (up > 0.0).numpy()
+        return (up > self.settings.mask_threshold).numpy()
 
     # -- public API -------------------------------------------------------------------------
 
     def generate(self, rgb: np.ndarray) -> MaskProposals:
-        """All masks of the automatic generator, after filtering and NMS, best first."""
+        """All masks of the automatic generator after upstream's filters and box NMS, best
+        (highest predicted IoU) first."""
+        st = self.settings
         shape = rgb.shape[:2]
         emb, inner = self._embed(rgb)
-        grid = point_grid(self.points_per_side, shape[1], shape[0])
-        all_logits, all_iou, all_pts = [], [], []
-        for start in range(0, len(grid), self.points_per_batch):
-            pts = grid[start : start + self.points_per_batch]
+        grid = point_grid(st.points_per_side, shape[1], shape[0])
+        kept_logits, kept_iou, kept_stab, kept_pts = [], [], [], []
+        for start in range(0, len(grid), st.points_per_batch):
+            pts = grid[start : start + st.points_per_batch]
             model_pts = self._to_model_coords(pts, shape, inner)[:, None, :]  # (P, 1, 2)
-            logits, iou = self._decode(emb, model_pts, np.ones((len(pts), 1), dtype=np.int64))
+            logits, iou = self._decode(emb, model_pts, np.ones((len(pts), 1), dtype=np.int64), multimask=st.multimask_output)
             p, m = iou.shape
-            all_logits.append(logits.reshape(p * m, *logits.shape[-2:]))
-            all_iou.append(iou.reshape(p * m))
-            all_pts.append(np.repeat(pts, m, axis=0))
-        logits = np.concatenate(all_logits)
-        iou = np.concatenate(all_iou)
-        pts = np.concatenate(all_pts)
-        stab = stability_score(logits, 0.0, self.stability_offset)
-        keep = np.flatnonzero((iou >= self.pred_iou_threshold) & (stab >= self.stability_threshold))
-        logits, iou, stab, pts = logits[keep], iou[keep], stab[keep], pts[keep]
-        nms_keep = mask_nms(logits > 0.0, iou * stab, self.nms_iou_threshold)
+            logits = logits.reshape(p * m, *logits.shape[-2:])
+            iou = iou.reshape(p * m)
+            pts = np.repeat(pts, m, axis=0)
+            # upstream's _process_batch: predicted IoU (strict), then stability (>=), per batch
+            keep = np.ones(len(iou), dtype=bool)
+            if st.pred_iou_thresh > 0.0:
+                keep &= iou > st.pred_iou_thresh
+            stab = stability_score(logits, st.mask_threshold, st.stability_score_offset)
+            if st.stability_score_thresh > 0.0:
+                keep &= stab >= st.stability_score_thresh
+            kept_logits.append(logits[keep])
+            kept_iou.append(iou[keep])
+            kept_stab.append(stab[keep])
+            kept_pts.append(pts[keep])
+        logits = np.concatenate(kept_logits)
+        iou, stab, pts = np.concatenate(kept_iou), np.concatenate(kept_stab), np.concatenate(kept_pts)
+        ch, cw = self._valid_lowres(logits.shape[-1], inner)
+        boxes = masks_to_boxes(logits[:, :ch, :cw] > st.mask_threshold)
+        nms_keep = box_nms(boxes, iou, st.box_nms_thresh)
         logits, iou, stab, pts = logits[nms_keep], iou[nms_keep], stab[nms_keep], pts[nms_keep]
         masks = self._upsample(logits, shape, inner)
-        min_area = int(self.min_region_frac * shape[0] * shape[1])
-        masks = np.stack([remove_small_regions(m, min_area) for m in masks]) if len(masks) else masks
+        if st.min_mask_region_area_px > 0 and len(masks):
+            # upstream's postprocess_small_regions: clean, then box NMS preferring unchanged masks
+            cleaned = np.stack([remove_small_regions(mk, st.min_mask_region_area_px) for mk in masks])
+            unchanged = np.all(cleaned == masks, axis=(1, 2)).astype(np.float64)
+            keep2 = box_nms(masks_to_boxes(cleaned), unchanged, st.box_nms_thresh)
+            keep2 = np.sort(keep2)  # keep the predicted-IoU order
+            masks, iou, stab, pts = cleaned[keep2], iou[keep2], stab[keep2], pts[keep2]
         return MaskProposals(masks, iou, stab, pts)
 
     def segment(
@@ -341,6 +421,7 @@ class Sam2Segmenter:
     ) -> InstanceMasks:
         """Non-overlapping instances (labels (H, W) int32, scores (K,) float32); masks lying mostly
         on ``background`` (floor, walls, ceiling) are left out, and background pixels stay 0."""
+        st = self.settings
         props = self.generate(rgb)
         masks = props.masks
         scores = props.scores
@@ -348,13 +429,41 @@ class Sam2Segmenter:
             bg = np.asarray(background, dtype=np.bool_)
             area = masks.reshape(len(masks), -1).sum(1)
             on_bg = (masks & bg).reshape(len(masks), -1).sum(1)
-            ok = on_bg <= self.max_background_frac * np.maximum(area, 1)
+            ok = on_bg <= st.max_background_frac * np.maximum(area, 1)
             masks = masks[ok] & ~bg
             scores = scores[ok]
         if len(masks) == 0:
             return InstanceMasks(np.zeros(rgb.shape[:2], dtype=np.int32), np.zeros(0, dtype=np.float32))
-        min_area = max(1, int(self.min_region_frac * rgb.shape[0] * rgb.shape[1]))
+        min_area = max(1, int(st.min_instance_frac * rgb.shape[0] * rgb.shape[1]))
         return assign_instances(masks, scores, min_area)
+
+    def segment_boxes(self, rgb: np.ndarray, boxes_xyxy_px: np.ndarray) -> np.ndarray:
+        """One mask per detector box (``BoxPromptSegmenter``), as Grounded-SAM-2 prompts SAM 2:
+        all boxes on one image embedding, ``multimask_output`` from
+        ``Sam2Settings.box_prompt_multimask`` (False upstream; when True, the mask with the best
+        predicted IoU). rgb: (H, W, 3) uint8; boxes_xyxy_px: (K, 4) continuous pixel coordinates
+        (x1, y1, x2, y2). Returns (K, H, W) bool, possibly overlapping."""
+        st = self.settings
+        arr = np.asarray(rgb)
+        if arr.ndim != 3 or arr.shape[2] != 3 or arr.dtype != np.uint8:
+            raise InputError(f"expected an (H, W, 3) uint8 RGB image, got {arr.shape} {arr.dtype}")
+        boxes = np.asarray(boxes_xyxy_px, dtype=np.float64)
+        if boxes.size == 0:
+            return np.zeros((0, *arr.shape[:2]), dtype=np.bool_)
+        if boxes.ndim != 2 or boxes.shape[1] != 4 or not np.all(np.isfinite(boxes)):
+            raise InputError(f"box prompts must be a (K, 4) array of finite x1, y1, x2, y2 pixels, got shape {boxes.shape}")
+        if np.any(boxes[:, 2] < boxes[:, 0]) or np.any(boxes[:, 3] < boxes[:, 1]):
+            raise InputError("box prompts must have x2 >= x1 and y2 >= y1")
+        shape = arr.shape[:2]
+        emb, inner = self._embed(arr)
+        out = []
+        for start in range(0, len(boxes), st.points_per_batch):
+            b = boxes[start : start + st.points_per_batch].reshape(-1, 2, 2)
+            model_boxes = self._to_model_coords(b, shape, inner).reshape(-1, 4)
+            logits, iou = self._decode(emb, boxes=model_boxes, multimask=st.box_prompt_multimask)
+            best = np.argmax(iou, axis=1)
+            out.append(self._upsample(logits[np.arange(len(best)), best], shape, inner))
+        return np.concatenate(out)
 
     def segment_with_prompts(
         self,
@@ -387,7 +496,7 @@ class Sam2Segmenter:
         best = np.argmax(iou, axis=1)
         rows = np.arange(len(best))
         best_logits, best_iou = logits[rows, best], iou[rows, best]
-        stab = stability_score(best_logits, 0.0, self.stability_offset)
+        stab = stability_score(best_logits, self.settings.mask_threshold, self.settings.stability_score_offset)
         masks = self._upsample(best_logits, shape, inner)
         if points is not None:
             src = np.asarray(points, dtype=np.float64).reshape(len(best), -1, 2)[:, 0]

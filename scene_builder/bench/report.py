@@ -1,4 +1,4 @@
-"""Render bench JSON files as Markdown: ``python -m scene_builder.bench_report bench.json real.json [--extras] > BENCHMARKS.md``.
+"""Render bench JSON files as Markdown: ``python -m scene_builder.bench.report bench.json real.json [--extras] > BENCHMARKS.md``.
 
 For each file: the exact command, machine and date, the pipeline-versus-baseline summary table,
 median seconds per stage, and one row per scene; then the metric definitions once. With
@@ -17,7 +17,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from scene_builder.bench import DEFINITIONS, SUMMARY_ROWS, format_value
+from scene_builder.bench.suites import DEFINITIONS, SUMMARY_ROWS, format_value
 from scene_builder.errors import InputError
 
 __all__ = ["EXTRAS", "Extra", "main", "render", "render_extra", "run_extra"]
@@ -38,45 +38,70 @@ class Extra:
 EXTRAS: tuple[Extra, ...] = (
     Extra(
         "Layout solver scaling",
-        "Random clutter of boxes, tables and convex pieces dropped overlapping (`layout.synthetic.clutter`), solved to no "
+        "Random clutter of boxes, tables and convex pieces dropped overlapping (`scene_builder.bench.clutter.clutter`), solved to no "
         "penetration: wall and CPU seconds, iterations, penetration before / after, CPU seconds by phase.",
-        ("-m", "layout.bench_solver"),
+        ("-m", "scene_builder.bench.solver"),
     ),
     Extra(
         "Generation: per-object timings and physics against analytic solids",
-        "One asset per vocabulary category from synthetic half-observed points (`generation.bench`): kind, parts, collision "
+        "One asset per vocabulary category from synthetic half-observed points (`scene_builder.bench.assets`): kind, parts, collision "
         "pieces, mass, seconds per object; then the voxel path (completion, meshing, CoACD).",
-        ("-m", "generation.bench"),
+        ("-m", "scene_builder.bench.assets"),
         markdown=True,
     ),
     Extra(
         "PhysX token counts and encode / decode times",
-        "Voxel parts of the PhysX-Anything representation under each encoding (`generation.physx.bench_tokens`): units and "
+        "Voxel parts of the PhysX-Anything representation under each encoding (`scene_builder.bench.tokens`): units and "
         "Qwen tokens, milliseconds to encode and decode.",
-        ("-m", "generation.physx.bench_tokens"),
+        ("-m", "scene_builder.bench.tokens"),
         markdown=True,
     ),
     Extra(
         "Depth backends",
-        "Every available depth backend on the real RGB-D samples (`perception.bench_depth`): AbsRel, delta1 (metric and median "
+        "Every available depth backend on the real RGB-D samples (`scene_builder.bench.depth`): AbsRel, delta1 (metric and median "
         "scaled), seconds and memory per image. Learned backends appear only where their weights are installed.",
-        ("-m", "perception.bench_depth"),
+        ("-m", "scene_builder.bench.depth"),
+    ),
+    Extra(
+        "Single photo: depth and perception time",
+        "The real RGB-D samples used as plain photos, their depth only for scoring (`scene_builder.bench.single_photo`): "
+        "AbsRel and delta1 of single-photo depth per sample with their median, against a constant 2.5 m, with no weights and "
+        "with the COCO detector's objects of known size; then `perceive` seconds per photo for every suite (plain photos, "
+        "real samples plain and RGB-D, a 12 MP upscaled photo plain and RGB-D) with the slowest named.",
+        ("-m", "scene_builder.bench.single_photo", "--large"),
+        markdown=True,
+    ),
+    Extra(
+        "Learned backends at their published size",
+        "Depth Anything V2 Small and SAM 2 Hiera-Tiny built from their published architectures with random weights and run "
+        "through the project's backends on a real 640 x 480 photo (`scene_builder.bench.learned`): CPU and wall seconds, peak "
+        "memory. Compute does not depend on the weights' values; no weights reach these machines.",
+        ("-m", "scene_builder.bench.learned"),
+        markdown=True,
     ),
     Extra(
         "Segmentation and naming on procedural rooms",
         "The default (best available) segmentation and naming backends on rendered procedural rooms with ground-truth "
-        "instances (`scene_builder.bench_perception`; `--segmentation NAME`, `--naming NAME` pick others): object recall "
+        "instances (`scene_builder.bench.perception`; `--segmentation NAME`, `--naming NAME` pick others): object recall "
         "at mask IoU 0.5, mean best IoU, category accuracy of the matched objects, seconds of `perceive` per frame. "
         "Here only `depth-clusters` segmentation is available: SAM2 needs its weights.",
-        ("-m", "scene_builder.bench_perception"),
+        ("-m", "scene_builder.bench.perception"),
+    ),
+    Extra(
+        "Detection-driven instances on real photos used as plain photos",
+        "Every photo of `../shared/data/photos` and `../shared/data/real` without its depth map, with the offline "
+        "detectors of `../shared/models` (`scene_builder.bench.detect`): objects and movable objects per photo, category "
+        "recall and precision against the hand-made inventory `tests/data/photo_inventory.json`, the SUN RGB-D "
+        "ground-truth boxes' labels, seconds of `perceive` per photo (the slowest named).",
+        ("-m", "scene_builder.bench.detect"),
     ),
     Extra(
         "Parser fuzzing",
-        "Every parser of outside data (`scene_builder.bench_fuzz`): PhysX geometry token decoders (strict and lenient), the "
+        "Every parser of outside data (`scene_builder.bench.fuzz`): PhysX geometry token decoders (strict and lenient), the "
         "PhysX text protocol, basic_info.json, scene.json, depth, camera.json and image files, on mutated real seeds. "
         "`rejected` = the parser's documented error; a crash is any other exception. The slowest input bounds the time "
         "one input can take. About 40 minutes on 2 cores.",
-        ("-m", "scene_builder.bench_fuzz", "--n", "100000"),
+        ("-m", "scene_builder.bench.fuzz", "--n", "100000"),
         markdown=True,
         timeout_s=5400.0,
     ),
@@ -143,6 +168,29 @@ def _machine(m: dict) -> str:
     return f"{m.get('cpu')}, {m.get('cores')} cores, {m.get('memory_gb')} GB RAM, {gpu}; {m.get('os')}; Python {m.get('python')}, MuJoCo {m.get('mujoco')}{load}"
 
 
+def _twin_rows(d: dict) -> list[str]:
+    """Per-scene twin fidelity of the pipeline (render against the photo, depth, silhouettes,
+    displacement, what became background)."""
+    rows = [
+        "| scene | PSNR dB | SSIM | depth AbsRel t = 0 / settled | mask IoU median | displacement median / max (m) | movable / fixed / background | penetration mm t = 0 / settled |",
+        "|---|---:|---:|---|---:|---|---|---|",
+    ]
+    for s in d["scenes"]:
+        p = s.get("pipeline")
+        if s.get("error") or not p:
+            continue
+        ious = sorted(p.get("mask_iou") or [])
+        disp = sorted(p.get("displacement_m") or [])
+        movable = p["n_free"]
+        rows.append(
+            f"| {s['name']} | {_fmt(p.get('psnr_db'), '{:.1f}')} | {_fmt(p.get('ssim'), '{:.2f}')} | "
+            f"{_fmt(p.get('depth_absrel'))} / {_fmt(p.get('depth_absrel_settled'))} | {_fmt(ious[len(ious) // 2] if ious else None, '{:.2f}')} | "
+            f"{_fmt(disp[len(disp) // 2] if disp else None)} / {_fmt(disp[-1] if disp else None)} | {movable} / {p.get('n_fixed', 0)} / {p.get('n_background', 0)} | "
+            f"{_fmt(p['max_penetration_m'], '{:.2f}', 1000)} / {_fmt(p.get('max_penetration_settled_m'), '{:.2f}', 1000)} |"
+        )
+    return rows
+
+
 def _scene_rows(d: dict) -> list[str]:
     rows = [
         "| scene | objects built / true | recall | position error median (m) | max penetration mm (pipeline / baseline) | stable (pipeline / baseline) | depth AbsRel (pipeline / baseline) | seconds |",
@@ -177,7 +225,7 @@ def render(paths: list[Path], extras: tuple[ExtraRun, ...] = ()) -> str:
         "object's depth points, gravity along the camera's y axis, the floor at the lowest observed point, no penetration handling, no "
         "settling; its boxes are solid 500 kg/m^3 assets built by `generation.assembly`. Both methods are `Scene`s that go through one "
         "code path: the MJCF exporter (`exporters.write_mjcf`) and the physics check (`layout.verify_scene`: MuJoCo contacts at t = 0, "
-        "3 s of simulation, rendering from the input camera); box metrics against ground truth come from `scene_builder.metrics`.",
+        "3 s of simulation, rendering from the input camera); box metrics against ground truth come from `scene_builder.bench.metrics`.",
         "",
     ]
     for d in docs:
@@ -193,12 +241,13 @@ def render(paths: list[Path], extras: tuple[ExtraRun, ...] = ()) -> str:
         if s.get("peak_rss_mb") is not None:
             out.append(f"Peak memory (resident set of the bench process): {s['peak_rss_mb']:.0f} MiB.")
         out += ["", "### Per scene", ""] + _scene_rows(d) + [""]
+        out += ["### Twin fidelity per scene (pipeline)", ""] + _twin_rows(d) + [""]
     out += ["## Definitions", ""] + [f"- **{k}**: {v}" for k, v in DEFINITIONS.items()] + [""]
     if extras:
-        from scene_builder.bench import machine_description
+        from scene_builder.bench.suites import machine_description
 
         machine = machine_description()
-        out += ["# Stage benchmarks", "", "Each produced by `make bench` (`python -m scene_builder.bench_report ... --extras`) with the command shown.", ""]
+        out += ["# Stage benchmarks", "", "Each produced by `make bench` (`python -m scene_builder.bench.report ... --extras`) with the command shown.", ""]
         out += [render_extra(r, machine) for r in extras]
     return "\n".join(out)
 
@@ -208,7 +257,7 @@ def main(argv: list[str] | None = None) -> int:
     with_extras = "--extras" in args
     args = [a for a in args if a != "--extras"]
     if not args:
-        print("usage: python -m scene_builder.bench_report BENCH.json [MORE.json ...] [--extras] > BENCHMARKS.md", file=sys.stderr)
+        print("usage: python -m scene_builder.bench.report BENCH.json [MORE.json ...] [--extras] > BENCHMARKS.md", file=sys.stderr)
         return 2
     try:
         for a in args:

@@ -1,7 +1,7 @@
-"""Timing of the shape-prior generator: ``python -m generation.bench``.
+"""Timing of the shape-prior generator: ``python -m scene_builder.bench.assets``.
 
 Per category of the vocabulary, one synthetic half-observed object of the category's typical
-size (``generation.synthetic``): seconds for the whole object, and for the voxel path
+size (``scene_builder.bench.synthetic_boxes``): seconds for the whole object, and for the voxel path
 (``object`` label at ``voxel_resolution``) the split into completion, meshing and convex
 decomposition. Median of ``--repeats`` runs. Prints a Markdown table.
 """
@@ -30,7 +30,7 @@ def main(argv: list[str] | None = None) -> None:
     from generation.meshing import mesh_from_occupancy
     from generation.pose import fit_box
     from generation.shape_prior import ShapePriorGenerator, complete_box
-    from generation.synthetic import SyntheticBox, synthetic_perception
+    from scene_builder.bench.synthetic_boxes import SyntheticBox, synthetic_perception
     from scene_builder.config import GenerationConfig
     from scene_builder.frames import transform_points
     from scene_builder.vocabulary import CATEGORIES

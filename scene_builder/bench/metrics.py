@@ -5,7 +5,7 @@ Conventions
 -----------
 * A :class:`Box3D` is gravity-aligned: ``center_m`` is the box centre, ``size_m`` its full extents
   along its own x (the heading ``(cos yaw, sin yaw, 0)``), y and z, ``yaw_rad`` the rotation about
-  +Z. It is the ground-truth convention of :mod:`scene_builder.procedural` and of the SUN RGB-D
+  +Z. It is the ground-truth convention of :mod:`scene_builder.bench.procedural` and of the SUN RGB-D
   boxes in ``../shared/data`` (there ``size_m`` = [l, w, h] with l along the heading).
 * Matching: Hungarian assignment (``scipy.optimize.linear_sum_assignment``) on mask IoU when masks
   exist (the procedural suite: perceived masks against the rendered instance ids; a pair needs

@@ -1,7 +1,7 @@
 """Perception benchmark on procedural rooms with ground truth: instance recall at IoU 0.5, mean
 best IoU, category accuracy of the matched objects, and wall time of ``perceive`` per frame.
 
-    .venv/bin/python -m scene_builder.bench_perception --seeds 0 1 2 3 4 5 --naming auto
+    .venv/bin/python -m scene_builder.bench.perception --seeds 0 1 2 3 4 5 --naming auto
 
 Speed numbers belong in BENCHMARKS.md, never in tests.
 """
@@ -68,7 +68,9 @@ def main(argv: list[str] | None = None) -> None:
     os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering of the rooms, before mujoco loads
     from perception import perceive
     from scene_builder.config import InputSpec, PerceptionConfig
-    from scene_builder.procedural import load_truth, make_room, render_room
+    from scene_builder.bench.procedural import make_room
+    from scene_builder.bench.render import render_room
+    from scene_builder.bench.truth import load_truth
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4, 5, 6, 7])

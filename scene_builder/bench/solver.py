@@ -1,6 +1,6 @@
-"""Solver timing on synthetic clutter: ``python -m layout.bench_solver [N ...] [--seed S]``.
+"""Solver timing on synthetic clutter: ``python -m scene_builder.bench.solver [N ...] [--seed S]``.
 
-For each N it builds ``layout.synthetic.clutter(N)`` (boxes, random convex pieces, tables with
+For each N it builds ``scene_builder.bench.clutter.clutter(N)`` (boxes, random convex pieces, tables with
 legs, small boxes on tables, all dropped overlapping), solves it, and prints wall and CPU time,
 iterations, penetration before/after and plan displacement; then the growth exponent of the
 time, fitted as time ~ N^k over the sizes given.
@@ -17,7 +17,7 @@ import numpy as np
 def bench(n: int, seed: int = 0) -> dict[str, float]:
     """Solve one clutter of ``n`` objects; returns the measured numbers."""
     from layout.solver import solve_layout_with_stats
-    from layout.synthetic import clutter
+    from scene_builder.bench.clutter import clutter
     from scene_builder.config import LayoutConfig
 
     perception, generated = clutter(n, seed)

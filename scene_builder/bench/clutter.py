@@ -119,9 +119,11 @@ def surface_points(asset: ObjectAsset, world_from_asset: np.ndarray, rng: np.ran
     return u @ world_from_asset[:3, :3].T + world_from_asset[:3, 3]
 
 
-def empty_perception(walls: tuple[Plane, ...] = (), width_px: int = 64, height_px: int = 48) -> Perception:
+def empty_perception(walls: tuple[Plane, ...] = (), width_px: int = 64, height_px: int = 48, depth_m: float = 0.0) -> Perception:
     """A perception with a blank small observation, a camera at (-3, 0, 1.5) looking along +X and
-    tilted 20 deg down, the given walls and no perceived objects (the solver does not need them)."""
+    tilted 20 deg down, the given walls and no perceived objects (the solver does not need them).
+    depth_m: the planar depth seen at every pixel (0: none, nothing was seen through; 20: a far
+    backdrop, the camera saw through the whole room)."""
     k = CameraIntrinsics.from_fov(width_px, height_px, 60.0)
     pitch = np.radians(20.0)
     # OpenCV camera: z forward (+X world, tilted down), x right (-Y world), y down.
@@ -129,8 +131,18 @@ def empty_perception(walls: tuple[Plane, ...] = (), width_px: int = 64, height_p
     right = np.array([0.0, -1.0, 0.0])
     down = np.cross(fwd, right)
     world_from_camera = pose(np.stack([right, down, fwd], axis=1), [-3.0, 0.0, 1.5])
-    obs = Observation("synthetic", np.zeros((height_px, width_px, 3), np.uint8), np.zeros((height_px, width_px), np.float32), k, "synthetic")
+    obs = Observation("synthetic", np.zeros((height_px, width_px, 3), np.uint8), np.full((height_px, width_px), depth_m, np.float32), k, "synthetic")
     return Perception(observation=obs, camera=Camera(k, world_from_camera), room=Room(walls), objects=())
+
+
+def clutter_layout_config():
+    """The layout settings for :func:`clutter`: it drops objects at random, half-sizes deep into
+    its walls, up to 5 cm above the floor and tens of centimetres into each other, to exercise the
+    solver's pushes; with the defaults (meant for perceived objects) much of it would be left where
+    it was dropped as background or stand on legs."""
+    from scene_builder.config import LayoutConfig
+
+    return LayoutConfig(max_wall_push_m=1.0, max_lower_m=0.1, max_push_m=10.0)
 
 
 def clutter(

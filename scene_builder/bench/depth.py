@@ -1,6 +1,6 @@
 """Benchmark of the depth backends against the real RGB-D samples.
 
-Run: ``python -m perception.bench_depth [--data ../shared/data/real] [--models-dir DIR]``.
+Run: ``python -m scene_builder.bench.depth [--data ../shared/data/real] [--models-dir DIR]``.
 
 For every available depth backend (and a constant-depth reference) prints AbsRel and delta1
 (fraction of pixels with max(pred/gt, gt/pred) < 1.25), both metric and after median scaling,
@@ -114,7 +114,7 @@ def bench(data_root: Path, models_dir: Path | None = None) -> list[dict]:
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real")
+    parser.add_argument("--data", type=Path, default=Path(__file__).resolve().parents[3] / "shared" / "data" / "real")
     parser.add_argument("--models-dir", type=Path, default=None)
     args = parser.parse_args(argv)
     rows = bench(args.data, args.models_dir)

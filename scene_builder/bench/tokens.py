@@ -1,6 +1,6 @@
 """Tokens per object and speed of the PhysX geometry encodings.
 
-``python -m generation.physx.bench_tokens`` prints, for each shape on a 64^3 grid: the template
+``python -m scene_builder.bench.tokens`` prints, for each shape on a 64^3 grid: the template
 RLE with the upstream threshold-0.5 template rule and with the exact minimum-cost choice, the
 range encoding (on the same 64^3 grid, and on 32^3 as PhysX-Anything uses it), and the raw list
 of occupied indices; counted in grammar units and Qwen2 pre-tokens (a lower bound of Qwen2.5

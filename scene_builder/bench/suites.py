@@ -2,7 +2,7 @@
 
 Suites
 ------
-* ``synthetic``: N procedural rooms (:mod:`scene_builder.procedural`, seeds ``seed .. seed+N-1``,
+* ``synthetic``: N procedural rooms (:mod:`scene_builder.bench.procedural`, seeds ``seed .. seed+N-1``,
   5 to 8 objects, every other room with sensor-like depth noise) with exact ground truth: boxes,
   masses, instance masks and clean depth.
 * ``real``: every sample with depth under ``../shared/data/real`` (or a folder given). Only the
@@ -11,10 +11,11 @@ Suites
 
 The baseline
 ------------
-The naive placement of a published scene application: for each perceived object (the same masks
-and depth the pipeline perceived), the axis-aligned box of its depth points **in the camera
-frame**, gravity taken along the camera's +y axis, the floor at the lowest observed point, no
-penetration handling and no settling; free box bodies of density 500 kg/m^3.
+The naive placement of a published scene application (:mod:`scene_builder.bench.baseline`): for
+each perceived object (the same masks and depth the pipeline perceived), the axis-aligned box of
+its depth points **in the camera frame**, gravity taken along the camera's +y axis, the floor at
+the lowest observed point, no penetration handling and no settling; free box bodies of density
+500 kg/m^3.
 
 Both methods are :class:`~scene_builder.model.Scene` objects that go through one code path: the
 project's MJCF exporter (``exporters.write_mjcf``) and its physics check (``layout.verify_scene``:
@@ -42,7 +43,9 @@ from pathlib import Path
 
 import numpy as np
 
-from scene_builder import frames, metrics
+from scene_builder import frames
+from scene_builder.bench import metrics
+from scene_builder.bench.baseline import naive_baseline
 from scene_builder.config import BuildConfig, ExportConfig, InputSpec
 from scene_builder.errors import InputError
 from scene_builder.model import (
@@ -51,12 +54,11 @@ from scene_builder.model import (
     Camera,
     CameraIntrinsics,
     Fidelity,
-    ObjectAsset,
+    LayoutResult,
     Observation,
     PerceivedObject,
     Perception,
     PhysicsVerdict,
-    PlacedObject,
     Plane,
     Room,
     Scene,
@@ -67,18 +69,15 @@ __all__ = [
     "MethodScores",
     "SceneResult",
     "Summary",
-    "baseline_box_asset",
     "evaluate_baseline",
     "evaluate_sample",
-    "naive_baseline",
     "oracle_perception",
     "print_result",
     "run_bench",
 ]
 
-BASELINE_DENSITY_KG_M3 = 500.0
 SUITES = ("synthetic", "real")
-DEFAULT_REAL_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+DEFAULT_REAL_DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "real"
 
 DEFINITIONS = {
     "recall": "matched visible true objects / visible true objects (>= 150 visible pixels), pooled over scenes",
@@ -91,67 +90,20 @@ DEFINITIONS = {
     "box_iou_3d": "exact IoU of gravity-aligned yawed boxes (footprint polygon overlap x height overlap)",
     "max_penetration_m": "per scene: deepest contact between different objects or an object and the floor/walls at t = 0 (layout.verify_scene on the exported MJCF); summary: median over scenes (worst in max_penetration_m_worst)",
     "stable_fraction": "free objects that move < 1 cm and rotate < 2 deg over 3 s of simulation (soft bodies: centroid within their sag allowance) / free objects, pooled over scenes (layout.verify_scene)",
-    "depth_absrel": "per scene: mean |rendered - reference| / reference depth over object pixels where the render hits geometry (true instances and clean depth for synthetic rooms; perceived masks and observed depth for real photos), rendered from input_camera by layout.verify_scene; summary: median over scenes",
-    "mask_iou": "per object: IoU of the object's rendered silhouette and its true instance mask (synthetic, matched objects) or perceived mask (real); summary: median over objects",
+    "depth_absrel": "per scene: mean |rendered - reference| / reference depth over every pixel with valid reference depth (isolated outliers, more than 10 % off their 5x5 median, excluded; a pixel where the render hits nothing counts as error 1), rendered from input_camera by layout.verify_scene at t = 0 and after settling (clean depth for synthetic rooms; observed depth for real photos); summary: median over scenes",
+    "max_penetration_settled_m": "per scene: deepest overlap over every pair of collision geoms of different bodies (objects, fixed furniture, floor, walls, static background), measured with mj_geomDistance after 3 s of settling; summary: worst scene",
+    "psnr_db / ssim": "per scene: the input_camera render (the scene's own lights, t = 0) against the photo, scikit-image peak_signal_noise_ratio / structural_similarity on RGB; summary: median over scenes",
+    "displacement_m": "per movable object: distance from its observed pose (generation's fit to its points) to its placed pose; pooled over objects (the baseline has none: it places its boxes where seen and does not fix anything)",
+    "lowered / fixed / background objects": "objects the layout lowered more than 10 cm, fixed (built-in) objects (never counted as at rest), objects that could not stand where seen and became static background; totals over scenes",
+    "mask_iou": "per movable object: IoU of the object's rendered (visible) silhouette and its true instance mask (synthetic, matched objects) or perceived mask (real); summary: median over objects",
     "seconds_per_scene": "wall-clock seconds of pipeline.build (pipeline) or of building the baseline's box assets and exporting its MJCF (baseline)",
     "peak_rss_mb": "resource.getrusage(RUSAGE_SELF).ru_maxrss of the bench process after the scene (MiB)",
 }
 
 
 # --------------------------------------------------------------------------------------------
-# The naive baseline, as a Scene that goes through the project's exporter and physics check
+# Inputs made from ground truth, and the baseline scored like the pipeline
 # --------------------------------------------------------------------------------------------
-
-
-# World X = camera z, world Y = camera -x, world Z = camera -y.
-_BASE_R_WORLD_CAM = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
-
-
-def baseline_box_asset(name: str, label: str, size_m) -> ObjectAsset:
-    """A free, solid, single-part box asset of extents ``size_m`` (3,) (asset frame: x, y, z),
-    density ``BASELINE_DENSITY_KG_M3``, friction of the generation table's wood; mass and inertia
-    by integration over the box (``generation.assembly``, as for every generated asset)."""
-    from generation.assembly import ConvexSolids, PartSpec, assemble_asset, box_solid
-    from generation.materials import material
-
-    half = np.asarray(size_m, dtype=np.float64) / 2.0
-    mat = dataclasses.replace(material("wood"), name="baseline", density_kg_m3=BASELINE_DENSITY_KG_M3, source="naive baseline: one density for everything")
-    part = PartSpec("body", None, ConvexSolids((box_solid([-half[0], -half[1], 0.0], [half[0], half[1], 2.0 * half[2]]),)), mat)
-    return assemble_asset(name, label, [part], kind=AssetKind.RIGID, is_fixed=False, backend="naive-baseline")
-
-
-def naive_baseline(perception: Perception, max_depth_m: float = 10.0) -> Scene:
-    """The naive placement as a :class:`Scene`: for each perceived object, the axis-aligned box of
-    its depth points (its mask on the observed depth) in the camera frame, as a free box asset.
-
-    The scene's world is the camera's axes permuted (world Z = camera -y: gravity along camera +y,
-    world X = camera z), its floor ``z = 0`` at the lowest observed point of the whole image, no
-    walls; every box stays where its camera-frame box is (no penetration handling, no settling).
-    """
-    obs = perception.observation
-    k = obs.intrinsics
-    depth = obs.depth_m.astype(np.float64)
-    valid = (depth > 0) & (depth < max_depth_m)
-    if not valid.any():
-        raise InputError("the observation has no valid depth; the baseline needs depth")
-    pts = k.unproject(depth)
-    floor_y = float(pts[..., 1][valid].max())  # camera y points down: the lowest point has the largest y
-    world_from_camera = frames.pose(_BASE_R_WORLD_CAM, (0.0, 0.0, floor_y))
-    placed = []
-    for o in perception.objects:
-        m = o.mask & valid
-        if not m.any():
-            continue
-        p = pts[m]
-        lo, hi = p.min(axis=0), p.max(axis=0)
-        size_cam = np.maximum(hi - lo, 0.01)  # a flat patch still makes a 1 cm box
-        # The world is a permutation of the camera axes, so the box stays axis-aligned: its
-        # extents along world X, Y, Z are the camera z, x, y sizes.
-        size_w = np.array([size_cam[2], size_cam[0], size_cam[1]])
-        center_w = frames.transform_points(world_from_camera, ((lo + hi) / 2.0)[None])[0]
-        bottom_w = center_w - np.array([0.0, 0.0, size_w[2] / 2.0])
-        placed.append(PlacedObject(baseline_box_asset(o.name, o.label, size_w), frames.pose(np.eye(3), bottom_w), "floor"))
-    return Scene(Camera(k, world_from_camera), Room(), tuple(placed))
 
 
 def oracle_perception(sample_dir: Path, clean_depth: bool = False) -> Perception:
@@ -218,6 +170,14 @@ class MethodScores:
     mask_iou: tuple[float, ...]
     seconds: float
     pipeline_verdict: dict | None = None
+    psnr_db: float | None = None
+    ssim: float | None = None
+    depth_absrel_settled: float | None = None
+    max_penetration_settled_m: float | None = None
+    displacement_m: tuple[float, ...] | None = None
+    n_fixed: int = 0
+    n_background: int = 0
+    n_lowered_10cm: int = 0
 
 
 @dataclass(frozen=True)
@@ -259,6 +219,16 @@ class Summary:
     seconds_per_scene_median: float | None
     stage_seconds_median: dict[str, float] | None = None
     peak_rss_mb: float | None = None
+    psnr_db_median: float | None = None
+    ssim_median: float | None = None
+    depth_absrel_settled_median: float | None = None
+    depth_absrel_worst: float | None = None
+    max_penetration_settled_m_worst: float | None = None
+    displacement_m_median: float | None = None
+    displacement_m_max: float | None = None
+    fixed_objects: int | None = None
+    background_objects: int | None = None
+    lowered_10cm_objects: int | None = None
 
 
 @dataclass(frozen=True)
@@ -302,6 +272,7 @@ def summarize(scenes: list[SceneResult] | tuple[SceneResult, ...], which: str) -
     cat = [(o.category_accuracy, len(o.pairs)) for o in objs if o.category_accuracy is not None]
     n_free = sum(m.n_free for m in ms)
     pens = [m.max_penetration_m for m in ms]
+    disp = [x for m in ms if m.displacement_m is not None for x in m.displacement_m]
     stages: dict[str, list[float]] = {}
     if which == "pipeline":
         for s in scenes:
@@ -327,6 +298,16 @@ def summarize(scenes: list[SceneResult] | tuple[SceneResult, ...], which: str) -
         seconds_per_scene_median=metrics.median_or_none([m.seconds for m in ms]),
         stage_seconds_median={k: float(np.median(v)) for k, v in stages.items()} or None,
         peak_rss_mb=max((s.peak_rss_mb for s in scenes), default=None),
+        psnr_db_median=metrics.median_or_none([m.psnr_db for m in ms]),
+        ssim_median=metrics.median_or_none([m.ssim for m in ms]),
+        depth_absrel_settled_median=metrics.median_or_none([m.depth_absrel_settled for m in ms]),
+        depth_absrel_worst=max((m.depth_absrel for m in ms if m.depth_absrel is not None), default=None),
+        max_penetration_settled_m_worst=max((m.max_penetration_settled_m for m in ms if m.max_penetration_settled_m is not None), default=None),
+        displacement_m_median=metrics.median_or_none(disp),
+        displacement_m_max=max(disp) if disp else None,
+        fixed_objects=sum(m.n_fixed for m in ms) if ms else None,
+        background_objects=sum(m.n_background for m in ms) if ms else None,
+        lowered_10cm_objects=sum(m.n_lowered_10cm for m in ms) if ms else None,
     )
 
 
@@ -393,6 +374,7 @@ def _score_scene(
     seconds: float,
     reference: Perception | None = None,
     verdict_json: dict | None = None,
+    layout: LayoutResult | None = None,
 ) -> MethodScores:
     """Score one method's scene: boxes against the truth, physics and render-and-compare by
     ``layout.verify_scene`` on its exported MJCF (``checked``: a verdict already measured on that
@@ -418,8 +400,17 @@ def _score_scene(
     else:
         ious = tuple(v for _, v in fidelity.mask_iou)
     n_free, n_stable = _n_stable(scene, verdict, config)
+    placements = layout.placements if layout is not None else ()
     return MethodScores(
-        obj_scores, verdict.max_penetration_m, verdict.settle_max_drift_m, n_free, n_stable, _finite_or_none(fidelity.depth_absrel), ious, seconds, verdict_json
+        obj_scores, verdict.max_penetration_m, verdict.settle_max_drift_m, n_free, n_stable, _finite_or_none(fidelity.depth_absrel), ious, seconds, verdict_json,
+        psnr_db=_finite_or_none(fidelity.psnr_db),
+        ssim=_finite_or_none(fidelity.ssim),
+        depth_absrel_settled=_finite_or_none(fidelity.depth_absrel_settled),
+        max_penetration_settled_m=float(verdict.max_penetration_settled_m),
+        displacement_m=tuple(float(p.displacement_m) for p in placements if not p.became_background) if layout is not None else None,
+        n_fixed=verdict.fixed_count,
+        n_background=sum(1 for p in placements if p.became_background),
+        n_lowered_10cm=sum(1 for p in placements if p.lowered_m > 0.10),
     )
 
 
@@ -441,7 +432,7 @@ def _match(pred: list[metrics.ObjectBox], perception: Perception, truth) -> metr
 def evaluate_sample(sample_dir: Path, work_dir: Path, config: BuildConfig) -> SceneResult:
     """Build one sample with the pipeline and the baseline and score both."""
     from scene_builder.pipeline import build
-    from scene_builder.procedural import load_truth
+    from scene_builder.bench.truth import load_truth
 
     s = _sample(Path(sample_dir))
     truth = load_truth(s.path)
@@ -455,7 +446,7 @@ def evaluate_sample(sample_dir: Path, work_dir: Path, config: BuildConfig) -> Sc
 
     v = result.verdict
     verdict = {"max_penetration_m": v.max_penetration_m, "settle_max_drift_m": v.settle_max_drift_m, "stable": v.stable}
-    pipe = _score_scene(result.scene, result.files.mjcf, (result.verdict, result.fidelity), perception, truth, config, t_pipe, reference, verdict)
+    pipe = _score_scene(result.scene, result.files.mjcf, (result.verdict, result.fidelity), perception, truth, config, t_pipe, reference, verdict, result.layout)
     bl = evaluate_baseline(perception, truth, work_dir / f"{s.name}_baseline", config, reference)
     return SceneResult(
         name=s.name,
@@ -514,7 +505,8 @@ def machine_description() -> dict:
 
 def _suite_samples(suite: str, rooms: int, data_dir: Path | None, seed: int, tmp: Path, n_objects: int | None = None) -> list[Path]:
     if suite == "synthetic":
-        from scene_builder.procedural import make_room, render_room
+        from scene_builder.bench.procedural import make_room
+        from scene_builder.bench.render import render_room
 
         if rooms < 1:
             raise InputError(f"--rooms must be at least 1, got {rooms}")
@@ -618,8 +610,18 @@ SUMMARY_ROWS = (
     ("max penetration, median scene (mm)", "max_penetration_m", "{:.1f}", 1000.0),
     ("max penetration, worst scene (mm)", "max_penetration_m_worst", "{:.1f}", 1000.0),
     ("stable fraction (3 s)", "stable_fraction", "{:.2f}"),
-    ("depth AbsRel median", "depth_absrel_median", "{:.3f}"),
+    ("max penetration after settling, worst scene (mm)", "max_penetration_settled_m_worst", "{:.1f}", 1000.0),
+    ("render vs photo PSNR median (dB)", "psnr_db_median", "{:.1f}"),
+    ("render vs photo SSIM median", "ssim_median", "{:.2f}"),
+    ("depth AbsRel median (t = 0)", "depth_absrel_median", "{:.3f}"),
+    ("depth AbsRel median (after settling)", "depth_absrel_settled_median", "{:.3f}"),
+    ("depth AbsRel, worst scene", "depth_absrel_worst", "{:.3f}"),
     ("mask IoU median", "mask_iou_median", "{:.2f}"),
+    ("displacement from where seen, median (m)", "displacement_m_median", "{:.3f}"),
+    ("displacement from where seen, max (m)", "displacement_m_max", "{:.3f}"),
+    ("objects lowered > 10 cm", "lowered_10cm_objects", "{:d}"),
+    ("fixed objects", "fixed_objects", "{:d}"),
+    ("objects turned into background", "background_objects", "{:d}"),
     ("seconds per scene median", "seconds_per_scene_median", "{:.2f}"),
 )
 
@@ -627,10 +629,10 @@ SUMMARY_ROWS = (
 def format_value(summary: dict | Summary, row: tuple) -> str:
     """One cell of the summary table ('-' where there is nothing to report)."""
     key, fmt = row[1], row[2]
-    v = summary[key] if isinstance(summary, dict) else getattr(summary, key)
+    v = summary.get(key) if isinstance(summary, dict) else getattr(summary, key)
     if v is None:
         return "-"
-    return fmt.format(v * (row[3] if len(row) > 3 else 1.0))
+    return fmt.format(v * row[3]) if len(row) > 3 else fmt.format(v)
 
 
 def print_result(result: BenchResult, console=None) -> None:

@@ -1,7 +1,7 @@
 """Fuzz benchmark of every parser of outside data (issue 12).
 
-    python -m scene_builder.bench_fuzz --n 100000          # all parsers, 100,000 inputs each
-    python -m scene_builder.bench_fuzz --n 2000 --only ranges-strict omni-lenient
+    python -m scene_builder.bench.fuzz --n 100000          # all parsers, 100,000 inputs each
+    python -m scene_builder.bench.fuzz --n 2000 --only ranges-strict omni-lenient
 
 Parsers (``TARGETS``) and what each may raise, its documented error type:
 
@@ -54,7 +54,7 @@ import numpy as np
 
 from scene_builder.errors import InputError
 
-SHARED_PROTOCOL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "physx_protocol"
+SHARED_PROTOCOL = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "physx_protocol"
 
 #: Tokens inserted by mutations: grammar pieces of every parser and numbers at the edges.
 EXTREMES = [
@@ -430,7 +430,7 @@ def markdown(results: list[TargetResult], n: int, seed: int) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m scene_builder.bench_fuzz", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m scene_builder.bench.fuzz", description=__doc__.split("\n\n")[0])
     parser.add_argument("--n", type=int, default=100_000, help="inputs per parser (default 100000)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--only", nargs="*", help="target names (default: all)")

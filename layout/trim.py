@@ -1,0 +1,215 @@
+"""Trimming overlapping collision pieces where two objects' hidden completions meet.
+
+Generation completes each object's unseen back on its own; where two objects stand close, their
+convex collision pieces (hulls of completed voxels or fitted shape parts) can reach a few
+centimetres into each other behind what the camera saw. Pushing the objects apart would move
+what was seen, by far more than the overlap when pieces interlock. Instead the two pieces are
+cut apart by a plane: along the axis of least overlap (the face normals of both pieces, the
+separating-axis test), each piece keeps its side of the mid-plane minus half the clearance. A cut
+convex piece is still convex (the hull of its kept vertices and of the plane's crossings).
+
+Overlaps up to :data:`MAX_TRIM_M` deep are cut at the mid-plane. A deeper overlap is cut only
+where the two objects' visual meshes stay on their own sides of the cut (the pieces bulged into
+each other, as hulls of voxel staircases do: the objects themselves do not overlap there); the
+cut then lies between the visuals. Otherwise it is a real overlap (a perception error) that the
+solver resolves by moving the lighter object. Visual meshes, masses and inertias are left as
+they are.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from scene_builder.model import ObjectAsset, TriangleMesh
+
+__all__ = ["MAX_TRIM_M", "clip_convex", "separating_plane", "trim_pair"]
+
+#: Deepest overlap (m) between two pieces that is cut away rather than pushed apart.
+MAX_TRIM_M = 0.06
+#: Gap (m) left between the two cut faces.
+TRIM_CLEARANCE_M = 0.002
+#: A cut piece smaller than this (m^3) is dropped (when its part keeps another piece).
+MIN_PIECE_VOLUME_M3 = 1e-7
+
+
+def _face_normals(v: np.ndarray) -> np.ndarray:
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        eq = ConvexHull(v).equations[:, :3]
+    except (QhullError, ValueError):
+        return np.eye(3)
+    return eq / np.linalg.norm(eq, axis=1, keepdims=True)
+
+
+def separating_plane(va: np.ndarray, vb: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """The axis of least overlap of two convex vertex sets (N, 3), (M, 3) (world frame) among the
+    face normals of both: unit normal n (A on its negative side), mid-plane offset c (n . x = c)
+    and the overlap depth along n (<= 0 when they are apart)."""
+    axes = np.concatenate([_face_normals(va), _face_normals(vb)])
+    pa, pb = va @ axes.T, vb @ axes.T
+    a_lo, a_hi, b_lo, b_hi = pa.min(0), pa.max(0), pb.min(0), pb.max(0)
+    up = a_hi - b_lo  # overlap when A is below B along the axis
+    down = b_hi - a_lo  # overlap when A is above B
+    k_up, k_down = int(np.argmin(up)), int(np.argmin(down))
+    if up[k_up] <= down[k_down]:
+        n = axes[k_up]
+        return n, 0.5 * float(a_hi[k_up] + b_lo[k_up]), float(up[k_up])
+    n = -axes[k_down]
+    return n, 0.5 * float(-a_lo[k_down] - b_hi[k_down]), float(down[k_down])
+
+
+def clip_convex(vertices: np.ndarray, normal: np.ndarray, offset: float) -> TriangleMesh | None:
+    """The convex hull of ``vertices`` (N, 3) cut to the half-space ``normal . x <= offset``, as a
+    closed outward-facing mesh; None when nothing (or nothing with volume) is left."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    v = np.asarray(vertices, dtype=np.float64)
+    s = v @ normal - offset
+    keep, cut = v[s <= 0], v[s > 0]
+    if len(keep) == 0:
+        return None
+    if len(cut) == 0:
+        pts = keep
+    else:
+        sk, sc = s[s <= 0], s[s > 0]
+        # Every segment from a kept to a cut vertex crosses the plane inside the polytope: the
+        # crossings include the cut face's corners (those of its edges), the rest lie inside.
+        t = sk[:, None] / (sk[:, None] - sc[None, :])
+        cross = keep[:, None, :] + t[..., None] * (cut[None, :, :] - keep[:, None, :])
+        pts = np.concatenate([keep, cross.reshape(-1, 3)])
+    try:
+        hull = ConvexHull(pts)
+    except (QhullError, ValueError):
+        return None
+    if hull.volume < MIN_PIECE_VOLUME_M3:
+        return None
+    used = np.unique(hull.simplices)
+    remap = -np.ones(len(pts), dtype=np.int64)
+    remap[used] = np.arange(len(used))
+    faces = remap[hull.simplices]
+    verts = pts[used]
+    # Outward orientation: each face's normal points away from the centroid.
+    centre = verts.mean(axis=0)
+    tri = verts[faces]
+    nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    flip = np.einsum("ij,ij->i", nrm, tri[:, 0] - centre) < 0
+    faces[flip] = faces[flip][:, [0, 2, 1]]
+    return TriangleMesh(verts, faces)
+
+
+def _world(mesh: TriangleMesh, world_from_asset: np.ndarray) -> np.ndarray:
+    return mesh.vertices_m @ world_from_asset[:3, :3].T + world_from_asset[:3, 3]
+
+
+#: Points spread over each visual mesh to find where it lies inside the other object's pieces.
+VISUAL_SAMPLES = 3000
+
+
+def _surface_points(vertices: np.ndarray, faces: np.ndarray, count: int = VISUAL_SAMPLES) -> np.ndarray:
+    """The mesh's vertices plus ``count`` points spread over its faces by area (fixed seed:
+    deterministic), (V + count, 3): a face can cross a piece none of its corners is in."""
+    if len(faces) == 0:
+        return vertices
+    t = vertices[faces]
+    area = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+    if area.sum() <= 0:
+        return vertices
+    rng = np.random.default_rng(0)
+    f = rng.choice(len(t), size=count, p=area / area.sum())
+    r1, r2 = rng.random(count), rng.random(count)
+    flip = r1 + r2 > 1.0
+    r1[flip], r2[flip] = 1.0 - r1[flip], 1.0 - r2[flip]
+    pts = t[f, 0] + r1[:, None] * (t[f, 1] - t[f, 0]) + r2[:, None] * (t[f, 2] - t[f, 0])
+    return np.concatenate([vertices, pts])
+
+
+def _inside(points: np.ndarray, hull_vertices: np.ndarray) -> np.ndarray:
+    """(N,) bool: which points lie inside the convex hull of ``hull_vertices``."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    if len(points) == 0:
+        return np.zeros(0, dtype=bool)
+    try:
+        eq = ConvexHull(hull_vertices).equations
+    except (QhullError, ValueError):
+        return np.zeros(len(points), dtype=bool)
+    return np.all(points @ eq[:, :3].T + eq[:, 3] <= 1e-9, axis=1)
+
+
+def _cut_offset(n: np.ndarray, c: float, depth: float, va_vis: np.ndarray, vb_vis: np.ndarray, ma: np.ndarray, mb: np.ndarray,
+                max_depth_m: float) -> float | None:
+    """Where to cut two overlapping pieces along ``n`` (A on the negative side): the mid-plane
+    ``c`` for a shallow overlap; for a deep one the offset nearest ``c`` that keeps A's visual
+    vertices inside B's piece on A's side and B's inside A's piece on B's side, give or take
+    half of ``max_depth_m`` (None when no such offset exists: the objects themselves overlap
+    there by more than ``max_depth_m``)."""
+    if depth <= max_depth_m:
+        return c
+    a_in = va_vis[_inside(va_vis, mb)] @ n
+    b_in = vb_vis[_inside(vb_vis, ma)] @ n
+    # The visuals themselves may overlap by up to max_depth_m (voxel surfaces are up to a voxel
+    # off), each reaching at most half of that past the cut; a deeper visual overlap is real.
+    lo = float(a_in.max()) - max_depth_m / 2 if len(a_in) else -np.inf
+    hi = float(b_in.min()) + max_depth_m / 2 if len(b_in) else np.inf
+    if lo > hi:
+        return None
+    return float(np.clip(c, lo, hi))
+
+
+def trim_pair(
+    a: ObjectAsset, ta: np.ndarray, b: ObjectAsset, tb: np.ndarray, max_depth_m: float = MAX_TRIM_M
+) -> tuple[ObjectAsset, ObjectAsset, float, float]:
+    """Cut apart every pair of overlapping collision pieces of assets ``a`` and ``b`` (placed at
+    the (4, 4) poses ``ta``, ``tb``): at the mid-plane when the overlap is at most
+    ``max_depth_m`` deep, between the two visuals when deeper (see the module docstring).
+    Returns the two assets (unchanged objects when nothing was cut), the deepest overlap cut, and
+    the deepest overlap left (the visuals overlap, or a part would lose its last piece)."""
+    pieces_a = {p.name: list(p.collision) for p in a.parts}
+    pieces_b = {p.name: list(p.collision) for p in b.parts}
+    vis_a = np.concatenate([_surface_points(_world(p.visual, ta), p.visual.faces) for p in a.parts])
+    vis_b = np.concatenate([_surface_points(_world(p.visual, tb), p.visual.faces) for p in b.parts])
+    cut_depth, left_depth = 0.0, 0.0
+    for pa_name in pieces_a:
+        for pb_name in pieces_b:
+            for i in range(len(pieces_a[pa_name])):
+                for j in range(len(pieces_b[pb_name])):
+                    ma, mb = pieces_a[pa_name][i], pieces_b[pb_name][j]
+                    if ma is None or mb is None:
+                        continue
+                    va, vb = _world(ma, ta), _world(mb, tb)
+                    if np.any(va.min(0) >= vb.max(0)) or np.any(vb.min(0) >= va.max(0)):
+                        continue
+                    n, c, depth = separating_plane(va, vb)
+                    if depth <= 0.0:
+                        continue
+                    c = _cut_offset(n, c, depth, vis_a, vis_b, va, vb, max_depth_m)
+                    if c is None:
+                        left_depth = max(left_depth, depth)
+                        continue
+                    # Plane in each asset's frame: n . (R v + t) = c  ->  (R^T n) . v = c - n . t
+                    na, nb = ta[:3, :3].T @ n, tb[:3, :3].T @ n
+                    new_a = clip_convex(ma.vertices_m, na, c - float(n @ ta[:3, 3]) - TRIM_CLEARANCE_M / 2)
+                    new_b = clip_convex(mb.vertices_m, -nb, -(c - float(n @ tb[:3, 3])) - TRIM_CLEARANCE_M / 2)
+                    alive_a = sum(m is not None for m in pieces_a[pa_name]) - 1 + (new_a is not None)
+                    alive_b = sum(m is not None for m in pieces_b[pb_name]) - 1 + (new_b is not None)
+                    if alive_a == 0 or alive_b == 0:
+                        left_depth = max(left_depth, depth)
+                        continue
+                    pieces_a[pa_name][i], pieces_b[pb_name][j] = new_a, new_b
+                    cut_depth = max(cut_depth, depth)
+
+    def rebuilt(asset: ObjectAsset, pieces: dict[str, list]) -> ObjectAsset:
+        parts = []
+        changed = False
+        for p in asset.parts:
+            new = tuple(m for m in pieces[p.name] if m is not None)
+            if len(new) != len(p.collision) or any(x is not y for x, y in zip(new, p.collision)):
+                changed = True
+                p = dataclasses.replace(p, collision=new)
+            parts.append(p)
+        return dataclasses.replace(asset, parts=tuple(parts)) if changed else asset
+
+    return rebuilt(a, pieces_a), rebuilt(b, pieces_b), cut_depth, left_depth

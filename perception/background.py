@@ -1,0 +1,256 @@
+"""The static background: every pixel that no movable object explains, as one textured mesh.
+
+What was observed but is not a movable object (floor, walls, ceiling, counters, shelves,
+built-ins, clutter too small or unclear to be an object) stays in the twin as static geometry,
+so that the twin rendered from the photo's camera looks like the photo and objects can rest on
+what was seen under them.
+
+Method:
+
+1. **A grid over the image.** Nodes at the pixel corners of every ``stride``-th pixel (so the
+   mesh covers the whole image: the outer nodes lie on the image border), ``stride`` chosen so
+   that the grid has at most about :data:`MAX_NODES` nodes. A node's depth is its pixel's depth.
+2. **Holes filled.** Nodes on a movable object (its mask dilated by one node: edge pixels mix
+   object and background) and nodes with no depth are filled with what lies behind: the first of
+   the floor and wall planes that the node's ray meets beyond the object's observed depth;
+   otherwise the depth inpainted from the surrounding background (Navier-Stokes inpainting,
+   OpenCV), never in front of the object.
+3. **Triangles** between neighbouring nodes, counter-clockwise seen from the camera. A triangle
+   spanning a depth jump larger than :data:`MAX_DEPTH_RATIO` (an occluding edge) would be a
+   "rubber sheet" from the near surface to the far one; instead its near corners are copied to
+   the far corner's depth, so the far surface continues under the near one's edge: seen from
+   the camera there is no crack, seen from elsewhere no sheet (``keep_stretched`` keeps the
+   sheets).
+4. **Texture**: the photo at full resolution (``Observation.photo_rgb``), with the pixels of
+   movable objects inpainted from
+   their surroundings (so that what an object hides looks plausible when it is moved); a node's
+   ``uv`` is its image position (see :mod:`scene_builder.model` for the convention).
+
+Everything is in the world frame (``camera.world_from_camera``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from scene_builder.frames import transform_points
+from scene_builder.model import Background, Camera, Observation, PerceivedObject, Plane, Texture, TriangleMesh
+
+__all__ = ["MAX_NODES", "MAX_DEPTH_RATIO", "observed_background", "grid_stride", "fill_depth_behind"]
+
+#: The grid has at most about this many nodes (one per ``stride`` x ``stride`` pixels).
+MAX_NODES = 100_000
+#: Triangles whose corner depths differ by more than this ratio span an occluding edge.
+MAX_DEPTH_RATIO = 1.15
+#: Background filled in behind an object lies at least this far behind the object's surface.
+BEHIND_MARGIN_M = 0.02
+#: Filled depth never exceeds this multiple of the farthest observed depth (rays that meet no
+#: plane and no observation, e.g. through a window).
+MAX_FILL_FACTOR = 1.5
+#: Colour inpainting runs on an image of at most this many pixels on its long side, and is
+#: upsampled into the masked pixels of the full-resolution texture.
+INPAINT_MAX_SIDE_PX = 1024
+
+
+def grid_stride(width_px: int, height_px: int, max_nodes: int = MAX_NODES) -> int:
+    """Pixels per grid cell so that the grid has at most about ``max_nodes`` nodes."""
+    return max(1, int(np.ceil(np.sqrt(width_px * height_px / float(max_nodes)))))
+
+
+def _plane_depths(rays_cam: np.ndarray, camera: Camera, planes: list[Plane]) -> np.ndarray:
+    """(P, N) planar depth at which each of the (N, 3) camera rays (z = 1) meets each plane
+    (inf when it does not, or behind the camera). Rays are scaled so planar depth = ray length
+    factor."""
+    r = camera.world_from_camera[:3, :3]
+    c = camera.world_from_camera[:3, 3]
+    d_world = rays_cam @ r.T  # (N, 3): world direction per unit planar depth
+    out = np.full((len(planes), len(rays_cam)), np.inf)
+    for k, plane in enumerate(planes):
+        denom = d_world @ plane.normal
+        dist = float(plane.normal @ c + plane.offset_m)  # camera's signed distance to the plane
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = -dist / denom
+        ok = (denom < -1e-9) & (t > 0)
+        out[k, ok] = t[ok]
+    return out
+
+
+def fill_depth_behind(
+    depth_m: np.ndarray,
+    need: np.ndarray,
+    lower_m: np.ndarray,
+    rays_cam: np.ndarray,
+    camera: Camera,
+    walls: tuple[Plane, ...],
+) -> np.ndarray:
+    """Depth (h, w) with the ``need`` nodes filled.
+
+    depth_m: (h, w) float observed depth (0 = none). need: (h, w) bool nodes to fill.
+    lower_m: (h, w) float, the least depth a filled node may take (an object's depth + margin,
+    or 0). rays_cam: (h, w, 3) camera-frame rays with z = 1. A node takes the nearest floor/wall
+    plane intersection beyond ``lower_m`` when there is one within reach, else the inpainted
+    depth of the surrounding background (clamped to ``lower_m``).
+    """
+    import cv2
+
+    h, w = depth_m.shape
+    out = depth_m.astype(np.float64).copy()
+    known = (depth_m > 0) & ~need
+    far = float(depth_m[known].max()) if np.any(known) else 10.0
+    cap = MAX_FILL_FACTOR * far
+    idx = np.flatnonzero(need)
+    if len(idx) == 0:
+        return out
+    floor = Plane(np.array([0.0, 0.0, 1.0]), 0.0, "floor")
+    planes = [floor, *walls]
+    t = _plane_depths(rays_cam.reshape(-1, 3)[idx], camera, planes)  # (P, n)
+    t_floor = t[0].copy()
+    low = lower_m.reshape(-1)[idx]
+    t = np.where(t > low[None, :], t, np.inf)
+    best = t.min(axis=0)
+    hit = np.isfinite(best) & (best <= cap)
+    flat = out.reshape(-1)
+    flat[idx[hit]] = best[hit]
+    rest = np.zeros(h * w, dtype=bool)
+    rest[idx[~hit]] = True
+    rest = rest.reshape(h, w)
+    if np.any(rest):
+        source = np.where(known | (need & ~rest), out, 0.0)
+        if np.any(source > 0):
+            # OpenCV's inpainting wants the holes marked and a float32 single-channel image.
+            holes = (rest | (source <= 0)).astype(np.uint8)
+            filled = cv2.inpaint(source.astype(np.float32), holes, 5, cv2.INPAINT_NS).astype(np.float64)
+        else:
+            filled = np.full((h, w), 2.5)
+        filled = np.where(np.isfinite(filled) & (filled > 0), filled, far)
+        out[rest] = np.minimum(np.maximum(filled[rest], lower_m[rest]), cap)
+    # Nothing filled lies below the floor: a node's depth stops where its ray meets the floor
+    # (inpainting across a far, dark region can otherwise bend the surface metres under it).
+    # (At an object's floor contact its lower bound can lie past the floor by the margin; the
+    # floor still wins there: the object hides that node.)
+    under = np.isfinite(t_floor) & (flat[idx] > t_floor)
+    flat[idx[under]] = t_floor[under]
+    return out
+
+
+def _inpaint_colour(rgb: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """The photo with ``mask`` pixels (H, W) inpainted (Telea) from their surroundings; the
+    inpainting runs at most INPAINT_MAX_SIDE_PX on the long side and is upsampled into the
+    masked pixels only (the rest keeps the photo's full resolution)."""
+    import cv2
+
+    if not np.any(mask):
+        return rgb
+    h, w = mask.shape
+    scale = min(1.0, INPAINT_MAX_SIDE_PX / float(max(h, w)))
+    if scale < 1.0:
+        size = (max(1, int(round(w * scale))), max(1, int(round(h * scale))))
+        small = cv2.resize(rgb, size, interpolation=cv2.INTER_AREA)
+        small_mask = cv2.resize(mask.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST)
+        small_mask = cv2.dilate(small_mask, np.ones((3, 3), np.uint8))
+        painted = cv2.inpaint(small, small_mask, 5, cv2.INPAINT_TELEA)
+        painted = cv2.resize(painted, (w, h), interpolation=cv2.INTER_LINEAR)
+    else:
+        painted = cv2.inpaint(np.ascontiguousarray(rgb), mask.astype(np.uint8), 5, cv2.INPAINT_TELEA)
+    out = rgb.copy()
+    out[mask] = painted[mask]
+    return out
+
+
+def observed_background(
+    observation: Observation,
+    camera: Camera,
+    walls: tuple[Plane, ...],
+    objects: tuple[PerceivedObject, ...],
+    max_depth_m: float = 10.0,
+    keep_stretched: bool = False,
+    max_nodes: int = MAX_NODES,
+) -> Background:
+    """The static background of an observation (see the module docstring).
+
+    Returns a :class:`Background` with the textured surface mesh in the world frame and no
+    collision geometry yet (the layout adds it once the objects are placed).
+    """
+    from scipy import ndimage
+
+    rgb = observation.rgb
+    h, w = rgb.shape[:2]
+    k = observation.intrinsics
+    s = grid_stride(w, h, max_nodes)
+    nu, nv = int(np.ceil(w / s)) + 1, int(np.ceil(h / s)) + 1
+    u = np.linspace(-0.5, w - 0.5, nu)
+    v = np.linspace(-0.5, h - 0.5, nv)
+    ui = np.clip(np.round(u).astype(int), 0, w - 1)
+    vi = np.clip(np.round(v).astype(int), 0, h - 1)
+
+    depth = np.asarray(observation.depth_m, dtype=np.float64)
+    obj_px = np.zeros((h, w), dtype=bool)
+    for o in objects:
+        obj_px |= o.mask
+    # Object depth at each node (for the "behind" bound): the nearest object pixel of the cell.
+    node_depth = depth[np.ix_(vi, ui)]
+    valid = (node_depth > 0) & (node_depth < max_depth_m)
+    on_obj = obj_px[np.ix_(vi, ui)]
+    node_obj = ndimage.binary_dilation(on_obj, iterations=1)
+    need = node_obj | ~valid
+    # Behind the object on its own nodes; around it (edge pixels mix object and background)
+    # anywhere from a little in front of the node's own depth.
+    lower = np.where(on_obj & valid, node_depth + BEHIND_MARGIN_M, np.where(valid, 0.9 * node_depth, 0.2))
+    if np.any(node_obj & ~valid):
+        # Object nodes without depth: behind the object's median depth at least.
+        obj_depth = depth[obj_px & (depth > 0)]
+        med = float(np.median(obj_depth)) if len(obj_depth) else 0.2
+        lower = np.where(node_obj & ~valid, med + BEHIND_MARGIN_M, lower)
+    uu, vv = np.meshgrid(u, v)
+    rays = np.stack([(uu - k.cx_px) / k.fx_px, (vv - k.cy_px) / k.fy_px, np.ones_like(uu)], axis=-1)
+    filled = fill_depth_behind(np.where(valid, node_depth, 0.0), need, lower, rays, camera, walls)
+
+    pts_cam = rays * filled[..., None]
+    verts = transform_points(camera.world_from_camera, pts_cam.reshape(-1, 3))
+    ids = np.arange(nu * nv).reshape(nv, nu)
+    a, b = ids[:-1, :-1].ravel(), ids[:-1, 1:].ravel()
+    c, d = ids[1:, :-1].ravel(), ids[1:, 1:].ravel()
+    faces = np.concatenate([np.stack([a, c, b], axis=1), np.stack([b, c, d], axis=1)])
+    uv = np.stack([(uu.ravel() + 0.5) / w, (vv.ravel() + 0.5) / h], axis=1)
+    observed = (valid & ~node_obj).ravel()
+    if not keep_stretched:
+        verts, faces, uv, observed = _tuck_stretched(verts, faces, uv, observed, rays.reshape(-1, 3), filled.ravel(), camera)
+    photo = observation.photo_rgb  # full resolution when the analysis ran downscaled
+    if photo.shape[:2] != (h, w):
+        import cv2
+
+        obj_full = cv2.resize(obj_px.astype(np.uint8), (photo.shape[1], photo.shape[0]), interpolation=cv2.INTER_NEAREST) > 0
+    else:
+        obj_full = obj_px
+    texture = Texture("background", _inpaint_colour(photo, obj_full))
+    surface = TriangleMesh(verts, faces, uv=np.clip(uv, 0.0, 1.0), texture=texture)
+    return Background(surface=surface, surface_observed=observed)
+
+
+def _tuck_stretched(verts, faces, uv, observed, rays, depth, camera: Camera):
+    """Replace each triangle spanning an occluding edge by a copy at its farthest corner's depth
+    (new vertices on the same rays; see the module docstring). Returns the new vertices (V', 3),
+    faces, uv (V', 2) and observed flags (V',)."""
+    z = depth[faces]
+    far = z.max(axis=1)
+    stretched = far > MAX_DEPTH_RATIO * z.min(axis=1)
+    if not np.any(stretched):
+        return verts, faces, uv, observed
+    sf = faces[stretched]
+    n0 = len(verts)
+    new_ids = n0 + np.arange(sf.size).reshape(-1, 3)
+    new_depth = np.repeat(far[stretched], 3)
+    # Not pushed under the floor: a near floor node tucked back to a far corner's depth stops
+    # where its ray meets the floor.
+    floor = Plane(np.array([0.0, 0.0, 1.0]), 0.0, "floor")
+    new_depth = np.minimum(new_depth, _plane_depths(rays[sf.ravel()], camera, [floor])[0])
+    new_cam = rays[sf.ravel()] * new_depth[:, None]
+    new_verts = transform_points(camera.world_from_camera, new_cam)
+    faces = faces.copy()
+    faces[stretched] = new_ids
+    return (
+        np.concatenate([verts, new_verts]),
+        faces,
+        np.concatenate([uv, uv[sf.ravel()]]),
+        np.concatenate([observed, np.zeros(sf.size, dtype=bool)]),
+    )

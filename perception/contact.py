@@ -1,0 +1,215 @@
+"""Detected objects stand at the depth of their floor contact (plain photos).
+
+Estimated single-photo depth can miss an object a detector sees: a coarse geometric estimate
+puts its pixels on the floor or a wall (the room's planes then claim them), or gives them no
+depth. Such an object stands where its outline meets the floor: each bottom pixel of its mask
+(the lowest mask pixel of each column, or the detector box's bottom edge when lower) is cast
+onto the floor plane, and the object becomes a vertical face, turned to the camera, through the
+median contact point. Where another object hides the contact, it lies between that object's back
+and the floor under the visible bottom, at the distance that gives the object its category's
+typical height; where the frame cuts the object, it stands at the floor under the frame's edge (generation completes
+the unseen depth from the category's proportions). What does not stand on the floor (a tv on a
+cabinet, a book on a table) takes the depth found just under its outline: the object already
+lifted there, else the estimated depth. An object the estimate does see (half its pixels off the
+room planes) keeps its estimated depth.
+
+Sensor depth is never changed (``perceive`` calls this only for estimated depth).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from scene_builder.model import CameraIntrinsics
+from scene_builder.vocabulary import category
+
+__all__ = ["LEGGED", "SEES_SHARE", "stand_on_contacts"]
+
+#: An object whose mask has this share of off-room depth is seen by the estimate: left as it is.
+SEES_SHARE = 0.5
+#: Categories that stand on legs: what lies under their top is mostly floor.
+LEGGED = frozenset({"table", "desk", "chair", "stool", "bench"})
+
+
+def _rays(k: CameraIntrinsics, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(N, 3) camera-frame rays with z = 1 through pixel centres (u, v)."""
+    return np.stack([(u - k.cx_px) / k.fx_px, (v - k.cy_px) / k.fy_px, np.ones_like(u, dtype=np.float64)], axis=1)
+
+
+def _face_depth(mask: np.ndarray, contact_cam: np.ndarray, up_cam: np.ndarray, k: CameraIntrinsics) -> np.ndarray:
+    """Planar depth of the mask's pixels on the vertical plane through ``contact_cam`` (3,) that
+    faces the camera (its normal is the horizontal direction from the camera to the contact)."""
+    n = contact_cam - (contact_cam @ up_cam) * up_cam
+    n /= max(np.linalg.norm(n), 1e-9)
+    rr, cc = np.nonzero(mask)
+    rays = _rays(k, cc.astype(np.float64), rr.astype(np.float64))
+    denom = rays @ n
+    z = np.where(denom > 1e-3, float(n @ contact_cam) / np.maximum(denom, 1e-3), 0.0)
+    return z
+
+
+def _floor_distance(rays: np.ndarray, rot: np.ndarray, cam: np.ndarray, max_depth_m: float) -> np.ndarray:
+    """Planar depth at which each (N, 3) z = 1 camera ray meets the floor (inf where it does not)."""
+    dz = rays @ rot[2]  # world z per unit of planar depth
+    s = np.full(len(rays), np.inf)
+    down = dz < -1e-6
+    s[down] = -cam[2] / dz[down]
+    s[(s < 0.2) | (s > max_depth_m)] = np.inf
+    return s
+
+
+def _height_distance(ray: np.ndarray, rot: np.ndarray, cam: np.ndarray, height_m: float) -> float:
+    """Planar depth at which the z = 1 camera ``ray`` reaches ``height_m`` above the floor (inf
+    when it runs nearly level: the top of the object is near the camera's height)."""
+    dz = float(ray @ rot[2])
+    if abs(dz) < 0.05:
+        return np.inf
+    s = (height_m - cam[2]) / dz
+    return s if s > 0.3 else np.inf
+
+
+def _in_front_of_walls(ray: np.ndarray, s: float, rot: np.ndarray, cam: np.ndarray, walls, margin_m: float = 0.15) -> float:
+    """``s`` shortened so that the point at planar depth ``s`` on ``ray`` stays ``margin_m`` in
+    front of every wall it would pass (a coarse room box may stand its walls too near)."""
+    d = rot @ ray
+    for wall in walls:
+        n = np.asarray(wall.normal, dtype=np.float64)
+        rate = float(n @ d)
+        if rate < -1e-6:
+            s_wall = (margin_m - float(n @ cam) - float(wall.offset_m)) / rate
+            if s_wall > 0.3:
+                s = min(s, s_wall)
+    return s
+
+
+def stand_on_contacts(
+    depth_m: np.ndarray,
+    valid: np.ndarray,
+    background: np.ndarray,
+    labels: np.ndarray,
+    names: tuple[str, ...],
+    world_from_camera: np.ndarray,
+    k: CameraIntrinsics,
+    max_depth_m: float = 10.0,
+    boxes_xyxy_px: np.ndarray | None = None,
+    walls=(),
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[int, ...]]:
+    """Object depth for the named instances the estimated depth does not see.
+
+    depth_m: (H, W) estimated depth; valid, background: (H, W) bool; labels: (H, W) instance ids
+    (1-based); names: vocabulary label of each instance (``""`` = not detected, left alone);
+    world_from_camera: (4, 4) with the floor at z = 0; boxes_xyxy_px: None or (K, 4) detector
+    boxes (NaN rows for none): a box's bottom edge is the floor contact when it is below the
+    mask's (thin legs, a foot the cut lost); walls: the room's walls (world planes), which the
+    objects stay in front of. Where another instance hides the contact, or the frame cuts the
+    object, the distance at which the object's top is at its category's typical height decides
+    within the bounds the view leaves (see the module doc); a visible contact that gives the
+    object a height no thing of its kind has (under 0.4 or over 2.5 times typical) gives way to
+    that distance too.
+
+    A solid floor-standing object's mask (not :data:`LEGGED`) grows down to its box's bottom
+    edge through pixels no other instance holds (what the cut left of it between its outline and
+    its contact).
+
+    Returns the object depth (H, W) float32, valid, background and labels updated for the
+    lifted instances, and the ids of the lifted instances.
+    """
+    depth = np.asarray(depth_m, dtype=np.float64).copy()
+    valid = valid.copy()
+    background = background.copy()
+    labels = np.asarray(labels).copy()
+    rot, cam = world_from_camera[:3, :3], world_from_camera[:3, 3]
+    up_cam = rot.T @ np.array([0.0, 0.0, 1.0])
+    h, w = depth.shape
+    ids = [i + 1 for i, n in enumerate(names) if n]
+    lowest = {i: int(np.flatnonzero((labels == i).any(axis=1)).max(initial=-1)) for i in ids}
+    # Floor-standing things first, nearest (lowest in the image) first: an occluder is placed
+    # before what it hides, and what stands on things looks for its support under its outline.
+    ids.sort(key=lambda i: (not category(names[i - 1]).on_floor, -lowest[i], i))
+    lifted: list[int] = []
+    for inst in ids:
+        mask = labels == inst
+        area = int(mask.sum())
+        if area == 0 or (mask & valid & ~background).sum() >= SEES_SHARE * area:
+            continue
+        label = names[inst - 1]
+        cols = np.flatnonzero(mask.any(axis=0))
+        bottom = (h - 1 - np.argmax(mask[::-1, cols], axis=0)).astype(np.float64)
+        top = np.argmax(mask[:, cols], axis=0).astype(np.float64)
+        # What is right under the outline: another object there hides the floor contact.
+        under_r = np.clip(bottom.astype(np.int64) + 3, 0, h - 1)
+        under = labels[under_r, cols]
+        box = None if boxes_xyxy_px is None else np.asarray(boxes_xyxy_px[inst - 1], dtype=np.float64)
+        if box is not None and np.all(np.isfinite(box)):
+            bottom = np.maximum(bottom, min(box[3], h) - 1.0)
+        contact = None
+        if category(label).on_floor:
+            rays = _rays(k, cols.astype(np.float64), bottom + 0.5)
+            s = _floor_distance(rays, rot, cam, max_depth_m)
+            hit = np.isfinite(s)
+            if hit.mean() >= 0.5:
+                s_floor = float(np.median(s[hit]))
+                mid = _rays(k, np.array([float(np.median(cols))]), np.array([float(np.percentile(top, 10))]))[0]
+                typical = category(label).typical_size_m
+                s_top = _height_distance(mid, rot, cam, typical[2])
+                if typical[2] < min(typical[:2]):
+                    # A low, deep thing (a bed, a table) shows its far edge at the top of its
+                    # outline: its front is about its depth nearer.
+                    s_top -= min(typical[:2])
+                occluders = under[(under > 0) & (under != inst)]
+                if len(occluders) >= 0.5 * len(cols):
+                    # Hidden behind another object: the contact lies between that object's back
+                    # (its depth plus its category's typical depth) and the floor under the
+                    # visible bottom; the typical height picks the distance in between.
+                    occ = int(np.bincount(occluders).argmax())
+                    occ_z = depth[labels == occ]
+                    occ_z = occ_z[occ_z > 0]
+                    back = float(np.median(occ_z)) if len(occ_z) else 0.0
+                    if 0 < occ <= len(names) and names[occ - 1]:
+                        back += min(category(names[occ - 1]).typical_size_m[:2])
+                    if np.isfinite(s_top) and back < s_floor:
+                        s_floor = float(np.clip(s_top, back, s_floor))
+                elif float(bottom.max()) >= h - 2:
+                    # Cut by the frame: the contact is below the photo, no farther than the floor
+                    # at its edge (the nearest the view allows).
+                    pass
+                else:
+                    # The contact is in view: trusted, unless it gives the object a height no
+                    # thing of its kind has (a foot the cut lost and the box missed).
+                    seen_h = float(cam[2] + s_floor * (mid @ rot[2]))
+                    if not 0.4 <= seen_h / category(label).typical_size_m[2] <= 2.5 and np.isfinite(s_top):
+                        s_floor = s_top
+                ray = _rays(k, np.array([float(np.median(cols[hit]))]), np.array([float(np.median(bottom[hit])) + 0.5]))[0]
+                contact = ray * _in_front_of_walls(ray, s_floor, rot, cam, walls)
+                # A solid thing reaches down to its contact: the free pixels of its columns
+                # between its outline and its box's bottom edge (a bed's white frame the cut
+                # left out) are its own, or it would float. Under a table top or a seat is
+                # mostly floor: legged things keep their outline (generation adds the legs).
+                if box is not None and np.all(np.isfinite(box)) and label not in LEGGED:
+                    low = h - 1 - np.argmax(mask[::-1, cols], axis=0)
+                    rows = np.arange(h)[:, None]
+                    reach = (rows > low[None, :]) & (rows <= min(box[3], h) - 1) & (labels[:, cols] == 0)
+                    if reach.any():
+                        grown = np.zeros_like(mask)
+                        grown[:, cols] = reach
+                        labels[grown] = inst
+                        mask |= grown
+        if contact is None:
+            below_r = np.clip(bottom.astype(np.int64) + 3, 0, h - 1)
+            zs = depth[below_r, cols]
+            ok = (zs > 0) & (zs < max_depth_m) & (labels[below_r, cols] != inst)
+            if ok.mean() < 0.3:
+                continue
+            z = float(np.median(zs[ok]))
+            ray = _rays(k, np.array([float(np.median(cols[ok]))]), np.array([float(np.median(bottom[ok]))]))[0]
+            contact = ray * _in_front_of_walls(ray, z, rot, cam, walls)
+        z_face = _face_depth(mask, contact, up_cam, k)
+        good = (z_face > 0.2) & (z_face < max_depth_m)
+        if good.mean() < 0.5:
+            continue
+        rr, cc = np.nonzero(mask)
+        depth[rr[good], cc[good]] = z_face[good]
+        valid[rr[good], cc[good]] = True
+        background[rr, cc] = False
+        lifted.append(inst)
+    return depth.astype(np.float32), valid, background, labels, tuple(sorted(lifted))

@@ -1,0 +1,140 @@
+"""The import rule of DEVELOPERS.md, read from the package files with ``ast`` (no module is run).
+
+* A stage package (perception, generation, layout, exporters) imports from the project only its
+  own package and the data-model modules of scene_builder (DEVELOPERS.md's list): never another
+  stage, never the application or the bench layer.
+* The data-model modules of scene_builder import only each other (no stage, no application).
+* Only scene_builder.pipeline, scene_builder.cli and scene_builder.bench.* import the stages.
+* No module under scene_builder/ is over 800 lines; no stage module is named like a benchmark or
+  synthetic data (those live in scene_builder/bench/).
+"""
+
+from __future__ import annotations
+
+import ast
+import functools
+import re
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+STAGES = ("perception", "generation", "layout", "exporters")
+PROJECT = ("scene_builder",) + STAGES
+MAX_LINES = 800
+
+
+def data_model_modules() -> set[str]:
+    """The modules DEVELOPERS.md allows stages to import: the names in its rule 'Stage packages
+    import only `scene_builder.x`, ... (the data model ...)'."""
+    text = (ROOT / "DEVELOPERS.md").read_text()
+    m = re.search(r"Stage packages import only (.*?)\(", text, re.S)
+    assert m, "DEVELOPERS.md lost its rule 'Stage packages import only ...'"
+    names = set(re.findall(r"`scene_builder\.(\w+)`", m.group(1)))
+    assert {"model", "frames", "errors"} <= names, names
+    return names
+
+
+def module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+@functools.cache
+def project_modules() -> dict[str, Path]:
+    return {module_name(p): p for pkg in PROJECT for p in sorted((ROOT / pkg).rglob("*.py"))}
+
+
+def imported_modules(source: str, name: str, is_package: bool = False) -> set[str]:
+    """Every project module that the module ``name`` with text ``source`` imports, anywhere in the
+    file (top level or inside functions): ``import a.b`` gives a.b; ``from a import b`` gives a.b
+    when a.b is a module, else a; relative imports are resolved against the module's package."""
+    modules = project_modules()
+    package = name if is_package else name.rpartition(".")[0]
+    found = set()
+    for node in ast.walk(ast.parse(source, name)):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = package.split(".")
+                base = ".".join(parts[: len(parts) - (node.level - 1)] + ([base] if base else []))
+            for a in node.names:
+                sub = f"{base}.{a.name}" if base else a.name
+                found.add(sub if sub in modules else base)
+    return {m for m in found if m.split(".")[0] in PROJECT}
+
+
+def violations(extra: dict[str, str] | None = None) -> list[str]:
+    """Each broken rule as one line 'module imports target (rule)'. ``extra``: text appended to
+    some files (relative path -> source), to show that the check sees a break."""
+    extra = extra or {}
+    allowed_data = data_model_modules()
+    data_modules = {f"scene_builder.{n}" for n in allowed_data | {"serialize"}} | {"scene_builder"}
+    may_import_stages = ("scene_builder.pipeline", "scene_builder.cli", "scene_builder.bench")
+    out = []
+    for name, path in project_modules().items():
+        top = name.split(".")[0]
+        source = path.read_text() + extra.get(path.relative_to(ROOT).as_posix(), "")
+        for target in sorted(imported_modules(source, name, path.name == "__init__.py")):
+            target_top = target.split(".")[0]
+            if top in STAGES:
+                if target_top == top:
+                    continue
+                if target_top == "scene_builder":
+                    if target not in data_modules - {"scene_builder.serialize"}:
+                        out.append(f"{name} imports {target} (stages import only the data model: {sorted(allowed_data)})")
+                else:
+                    out.append(f"{name} imports {target} (a stage never imports another stage)")
+            elif name in data_modules and target not in data_modules:
+                out.append(f"{name} imports {target} (the data model imports only the data model)")
+            elif target_top in STAGES and not any(name == m or name.startswith(m + ".") for m in may_import_stages):
+                out.append(f"{name} imports {target} (only {', '.join(may_import_stages)} import the stages)")
+    return out
+
+
+def test_import_rule_holds():
+    assert violations() == []
+
+
+def test_import_rule_is_checked():
+    """The checker sees a broken rule: a stage importing the bench layer inside a function, a
+    stage importing another stage's internals or the application, the data model importing a
+    stage, and the application's report importing a stage."""
+    broken = {
+        "layout/solver.py": "\ndef _f():\n    from scene_builder.bench.clutter import clutter\n",
+        "exporters/mjcf.py": "\nfrom layout.verify import verify_scene\n",
+        "scene_builder/frames.py": "\nimport perception.room\n",
+        "scene_builder/report.py": "\nfrom generation import generate_assets\n",
+        "perception/room.py": "\nfrom scene_builder import pipeline\n",
+        "generation/physx/tokens.py": "\nfrom scene_builder import serialize\n",
+    }
+    found = violations(broken)
+    for start in (
+        "layout.solver imports scene_builder.bench.clutter",
+        "exporters.mjcf imports layout.verify",
+        "scene_builder.frames imports perception.room",
+        "scene_builder.report imports generation",
+        "perception.room imports scene_builder.pipeline",
+        "generation.physx.tokens imports scene_builder.serialize",
+    ):
+        assert any(v.startswith(start + " ") for v in found), (start, found)
+    assert len(found) == len(broken), found
+
+
+def test_relative_imports_are_resolved():
+    src = "from . import protocol\nfrom .. import assembly\nfrom ..physx.tokens import encode\nfrom ..materials import material\n"
+    assert imported_modules(src, "generation.physx.vlm") == {"generation.physx.protocol", "generation.assembly", "generation.physx.tokens", "generation.materials"}
+    assert imported_modules("from .solver import solve_layout\nimport numpy\n", "layout", is_package=True) == {"layout.solver"}
+
+
+def test_no_scene_builder_module_over_800_lines():
+    sizes = {p.relative_to(ROOT).as_posix(): len(p.read_text().splitlines()) for p in (ROOT / "scene_builder").rglob("*.py")}
+    assert len(sizes) > 10
+    assert {p: n for p, n in sizes.items() if n > MAX_LINES} == {}, f"split these modules (at most {MAX_LINES} lines each)"
+
+
+def test_stage_packages_hold_no_benchmark_or_synthetic_modules():
+    named = [p.relative_to(ROOT).as_posix() for pkg in STAGES for p in (ROOT / pkg).rglob("*.py") if re.search("bench|synthetic", p.stem)]
+    assert named == [], f"benchmarks and synthetic data live in scene_builder/bench/, not in {named}"
