@@ -151,13 +151,13 @@ def build_support(
         min_face_area = DEFORMABLE_MIN_FACE_AREA * polygon_area(foot) if soft else 0.0
         lo_xy = foot.min(axis=0)
         hi_xy = foot.max(axis=0)
-        def search(drop_m: float) -> list[tuple[float, int, float, int, int]]:
+        def search(drop_m: float, objects: bool = True) -> list[tuple[float, int, float, int, int]]:
             candidates: list[tuple[float, float, int, int]] = []  # (height, overlap, -body, surface)
             n_placed = len(placed)
             near = np.nonzero(
                 np.all(placed_lo[:n_placed] <= hi_xy, axis=1) & np.all(placed_hi[:n_placed] >= lo_xy, axis=1)
             )[0]
-            for j in (placed[k] for k in near):
+            for j in (placed[k] for k in near if objects):
                 s = bodies[j]
                 if not soft and s.asset.kind is AssetKind.DEFORMABLE:
                     # A soft body sags under a rigid load and tips it (a chair on a cushion tilted 11 deg
@@ -196,7 +196,8 @@ def build_support(
             # Nothing seen within reach under it, and the camera could not see under it either:
             # whatever holds it up is hidden (a nightstand behind the bed, a bed's own frame).
             # It keeps its height and stands on legs down to the highest support below.
-            options = search(HIDDEN_MAX_DROP_M)
+            # (Not onto another object: a hidden support under it would be seen beside it.)
+            options = search(HIDDEN_MAX_DROP_M, objects=False)
             hidden_under = bool(options)
         if options:
             _, _, h, j, k = min(options)

@@ -400,15 +400,24 @@ def settled_scene(scene: Scene, verdict: PhysicsVerdict) -> Scene:
 adopt_settled = settled_scene
 
 
+#: A movable object overlapping anything by more than this at t = 0 cannot stand where it was put.
+START_PENETRATION_LIMIT_M = 1e-3
+
+
 def unstable_objects(verdict: PhysicsVerdict, scene: Scene, config: LayoutConfig) -> dict[str, str]:
-    """The movable objects that did not stay at rest in the settle simulation, with one line
-    saying how they moved (object name -> reason)."""
+    """The movable objects that did not stay at rest in the settle simulation, or that started
+    it overlapping something by more than START_PENETRATION_LIMIT_M, with one line saying why
+    (object name -> reason)."""
     out = {}
     for v in verdict.objects:
         if v.fixed:
             continue
         o = scene.object(v.name)
-        if o.asset.kind is AssetKind.DEFORMABLE:
+        if v.start_penetration_m > START_PENETRATION_LIMIT_M:
+            # Overlapping at t = 0 (with static geometry the solver could not move it clear of,
+            # e.g. collision legs over an object left where seen): not physically standing there.
+            out[v.name] = f"reached {v.start_penetration_m * 1000:.0f} mm into its neighbours at the start of the settle simulation"
+        elif o.asset.kind is AssetKind.DEFORMABLE:
             if v.drift_m > max(config.stable_drift_m, DEFORMABLE_SAG_FRACTION * float(o.asset.size_m[2])):
                 out[v.name] = f"slid {v.drift_m * 100:.0f} cm in the {config.settle_s:g} s settle simulation"
         elif v.drift_m > config.stable_drift_m or v.rotation_deg > config.stable_rotation_deg:
