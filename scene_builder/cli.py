@@ -15,10 +15,11 @@ from pathlib import Path
 COMMANDS = ("build", "demo", "bench", "check", "view", "models")
 
 _DESCRIPTION = """\
-Turn one photo of a room into a simulation-ready digital twin: every visible object as a
-watertight, metric, physically parameterised asset, placed where it stands in the photo with
-nothing interpenetrating, exported as MJCF (MuJoCo), USD with UsdPhysics, URDF and glTF, with a
-rerun recording to inspect it.
+Turn one photo of a room into a simulation-ready digital twin: every visible movable object as a
+watertight, metric, physically parameterised asset textured with the photo, placed where it was
+seen with nothing interpenetrating; everything else the camera saw as one static, photo-textured
+background it rests on. Exported as MJCF (MuJoCo), USD with UsdPhysics (--usdz packs it), URDF
+and glTF, with a rerun recording to inspect it.
 
   scene-builder room.jpg                      plain photo (depth estimated)
   scene-builder build room.jpg --depth d.png  RGB-D (uint16 PNG in millimetres)

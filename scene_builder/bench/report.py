@@ -230,7 +230,8 @@ def render(paths: list[Path], extras: tuple[ExtraRun, ...] = ()) -> str:
     ]
     for d in docs:
         s = d["summary"]
-        out += [f"## Suite `{d['suite']}`: {s['scenes']} scenes ({s['failed_scenes']} failed)", ""]
+        models = " with the offline models of `$SCENE_BUILDER_MODELS`" if "SCENE_BUILDER_MODELS=" in str(d["command"]) else ""
+        out += [f"## Suite `{d['suite']}`{models}: {s['scenes']} scenes ({s['failed_scenes']} failed)", ""]
         out += [f"- command: `{d['command']}`", f"- machine: {_machine(d['machine'])}", f"- date: {d['date']}", ""]
         out += ["| metric | pipeline | naive baseline |", "|---|---:|---:|"]
         for row in SUMMARY_ROWS:

@@ -554,6 +554,8 @@ def run_bench(
     config = config or BuildConfig(seed=seed, export=ExportConfig(viz="off"))
     out_json = Path(out_json)
     command = f"scene-builder bench --suite {suite}" + (f" --rooms {rooms}" if suite == "synthetic" else "") + (f" --data {data_dir}" if data_dir else "") + f" --json {out_json} --seed {seed}"
+    if os.environ.get("SCENE_BUILDER_MODELS"):  # the models dir changes which backends answer
+        command = f"SCENE_BUILDER_MODELS={os.environ['SCENE_BUILDER_MODELS']} {command}"
     tmp = Path(tempfile.mkdtemp(prefix="scene-builder-bench-")) if keep_dir is None else Path(keep_dir)
     tmp.mkdir(parents=True, exist_ok=True)
     scenes: list[SceneResult] = []
