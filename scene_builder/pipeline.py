@@ -221,7 +221,7 @@ def build(
                 )
             files = dataclasses.replace(files, rerun=rrd)
         log.timings.append(("total", time.perf_counter() - total_start))
-        report = build_report(inputs, config, perceived, layout, scene, verdict, fidelity, tuple(log.timings))
+        report = build_report(inputs, config, perceived, layout, scene, verdict, fidelity, tuple(log.timings), generated)
         write_report(staging, scene, report)
         write_marker(staging, inputs)
         # Checked again: the build took a while, and someone may have put a file in out_dir.

@@ -12,7 +12,7 @@ import numpy as np
 from scene_builder import __version__
 from scene_builder.config import BuildConfig, InputSpec
 from scene_builder.frames import yaw_of
-from scene_builder.model import Fidelity, LayoutResult, Perception, PhysicsVerdict, Scene
+from scene_builder.model import Fidelity, GeneratedAsset, LayoutResult, Perception, PhysicsVerdict, Scene
 from scene_builder.serialize import scene_to_json
 
 REPORT_FORMAT = "scene-builder/report"
@@ -31,8 +31,13 @@ def build_report(
     verdict: PhysicsVerdict,
     fidelity: Fidelity | None,
     timings_s: tuple[tuple[str, float], ...],
+    generated: tuple[GeneratedAsset, ...] = (),
 ) -> dict:
-    """The report as JSON-ready data (the file format; not passed between stages)."""
+    """The report as JSON-ready data (the file format; not passed between stages).
+
+    ``generated`` (the generation stage's output) lets ``generation_failures`` name every object
+    the preferred generator failed on, also those the layout later kept as static background
+    (``became_background``); without it only the objects in ``scene`` are listed."""
     k = perception.observation.intrinsics
     perceived = {o.name: o for o in perception.objects}
     verdicts = {v.name: v for v in verdict.objects}
@@ -81,18 +86,24 @@ def build_report(
             }
         )
     # Objects that could not stand where they were seen and became static background.
+    made = {g.asset.name: g.asset for g in generated}
     for p in layout.placements:
         if p.became_background:
             obs = perceived.get(p.name)
+            asset = made.get(p.name)
             objects.append({"name": p.name, "label": obs.label if obs else None, "became_background": True, "support": "none",
-                            "displacement_m": 0.0, "moved_because": p.reason})
+                            "displacement_m": 0.0, "moved_because": p.reason,
+                            "generator": asset.backend if asset else None,
+                            "generator_fallback_reason": (asset.fallback_reason or None) if asset else None})
     moved = [p.displacement_m for p in layout.placements if not p.became_background]
     lowered = sum(1 for p in layout.placements if p.lowered_m > 0.10)
     timings = {name: _r(s, 3) for name, s in timings_s}
+    background = {p.name for p in layout.placements if p.became_background}
+    assets = list(made.values()) or [o.asset for o in scene.objects]
     failures = [
-        {"object": o.asset.name, "answered_by": o.asset.backend, "reason": o.asset.fallback_reason}
-        for o in scene.objects
-        if o.asset.fallback_reason
+        {"object": a.name, "answered_by": a.backend, "reason": a.fallback_reason, "became_background": a.name in background}
+        for a in sorted(assets, key=lambda a: a.name)
+        if a.fallback_reason
     ]
     return {
         "format": REPORT_FORMAT,
