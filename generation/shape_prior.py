@@ -21,9 +21,9 @@ import numpy as np
 from scene_builder.config import GenerationConfig
 from scene_builder.frames import pose, transform_points
 from generation.visibility import FreeSpace, surface_samples
-from scene_builder.model import AssetKind, GeneratedAsset, PerceivedObject, Perception
+from scene_builder.model import AssetKind, GeneratedAsset, Inertial, ObjectAsset, PerceivedObject, Perception
 
-__all__ = ["ShapePriorGenerator", "BACKEND_NAME", "complete_box", "depth_to_walls"]
+__all__ = ["ShapePriorGenerator", "BACKEND_NAME", "complete_box", "depth_to_walls", "with_structure_mass"]
 
 BACKEND_NAME = "shape-prior"
 # a face seen head-on spans less than this fraction of the expected depth: complete the depth
@@ -107,6 +107,32 @@ def _thin(points_m: np.ndarray, spacing_m: float) -> np.ndarray:
     return np.asarray(points_m)[np.sort(first)]
 
 
+def with_structure_mass(asset: ObjectAsset, structure_mass_kg: float) -> ObjectAsset:
+    """``asset`` (an observed shape completed where its category's prior did not fit) with the
+    mass of the category's structure at the same size.
+
+    A completed shape fills the hidden space inside its observed outline: a chair seen from the
+    front becomes a block from the seat to the floor, a shelf a solid box, several times the
+    material of the real object, whose legs or boards leave that space empty. The prior fitted to
+    the same box says how much material the structure has; the completed solid gets the effective
+    density (material density x prior mass / solid mass) that gives it that mass. Density scales
+    mass and inertia alike and leaves the centre of mass where it is, so the inertials are scaled
+    rather than integrated again. ``structure_mass_kg`` > 0 and below the asset's mass.
+    """
+    ratio = structure_mass_kg / asset.mass_kg
+    if not 0.0 < ratio < 1.0:
+        raise ValueError(f"with_structure_mass: structure mass {structure_mass_kg} kg is not below {asset.mass_kg} kg")
+    parts = []
+    for part in asset.parts:
+        m = part.material
+        material = replace(m, density_kg_m3=m.density_kg_m3 * ratio,
+                           source=f"{m.source}; effective density: {ratio:.2f} of the solid, the mass of the {asset.label}'s structure".lstrip("; "))
+        inertial = Inertial(part.inertial.mass_kg * ratio, part.inertial.com_m, part.inertial.inertia_kg_m2 * ratio)
+        parts.append(replace(part, material=material, inertial=inertial))
+    description = f"{asset.description}; effective density {ratio:.2f} x {asset.parts[0].material.name} (mass of the category's structure)"
+    return replace(asset, parts=tuple(parts), description=description)
+
+
 def _median_rgba(colors_rgb: np.ndarray) -> tuple[float, float, float, float]:
     c = np.median(np.asarray(colors_rgb, dtype=np.float64), axis=0) / 255.0
     return (float(c[0]), float(c[1]), float(c[2]), 1.0)
@@ -186,6 +212,7 @@ class ShapePriorGenerator:
             # asset coordinates = box coordinates + shift
             return GeneratedAsset(asset, fit.world_from_box @ pose(np.eye(3), -shift), obj.points_world_m)
 
+        structure_mass_kg = None  # the mass of the category's structure, when its prior is not used
         if specs is not None:
             generated = assemble(specs, kind, soft, description, cfg)
             samples = transform_points(generated.world_from_asset, surface_samples([q.visual for q in generated.asset.parts], VIOLATION_SAMPLES, seed))
@@ -196,6 +223,7 @@ class ShapePriorGenerator:
             what = "articulation template" if label in ARTICULATED_LABELS else "shape prior"
             why = f"filled {share:.0%} seen free space" if share > MAX_FREE_SPACE_SHARE else f"reached {behind * 100:.0f} cm into a wall"
             description = f"{label}: the {what} {why}; " + description.split("; ")[0]
+            structure_mass_kg = generated.asset.mass_kg
             kind, soft = None, None
             size = fit.size_m.copy()
 
@@ -252,4 +280,6 @@ class ShapePriorGenerator:
             return transform_points(box_from_world, space.snap(transform_points(fit.world_from_box, v_box), SNAP_VOXELS * voxel_m))
 
         out = assemble(specs, None, None, description, config, snap)
+        if structure_mass_kg is not None and out.asset.mass_kg > structure_mass_kg:
+            out = replace(out, asset=with_structure_mass(out.asset, structure_mass_kg))
         return replace(out, asset=replace(out.asset, observed_shape=True))
