@@ -430,6 +430,9 @@ def validate_sdf(path: Path, scene: Scene, command: list[str] | None = None) -> 
         got_mass = sum(link["mass"] for m in got for link in m["links"])
         if not np.isclose(got_mass, want_mass, rtol=1e-6):
             raise ExportError(f"{path.name}: libsdformat reads {got_mass:.6g} kg of objects, the scene has {want_mass:.6g} kg")
+        invalid = [f"{m['name']}::{link['name']}" for m in got for link in m["links"] if not link["inertia_valid"]]
+        if invalid:
+            raise ExportError(f"{path.name}: libsdformat finds physically invalid mass properties in link {invalid[0]}")
         if not any(c for m in report["models"] for link in m["links"] for c in link["cameras"]):
             raise ExportError(f"{path.name}: libsdformat finds no camera sensor")
     return report
