@@ -138,6 +138,12 @@ def object_model_names(scene: Scene) -> dict[str, str]:
     return {placed.name: ids(placed.name) for placed in scene.objects}
 
 
+def part_link_names(asset: ObjectAsset) -> dict[str, str]:
+    """The SDF link name of every part of ``asset`` (part name -> link name) in its model."""
+    ids = _Ids()
+    return {p.name: ids(p.name) for p in asset.parts}
+
+
 def _world_settings(world: ET.Element) -> None:
     _sub(world, "gravity", (0.0, 0.0, -9.81))
     physics = _sub(world, "physics", name="default", type="ode")
@@ -290,8 +296,8 @@ def _add_object(world: ET.Element, placed: PlacedObject, model_name: str) -> Non
         _sub(model, "static", "true")
     t = placed.world_from_asset
     _pose(model, t[:3, 3], rpy_from_matrix(t[:3, :3]))
-    ids = _Ids()
-    links = {p.name: ids(p.name) for p in asset.parts}
+    links = part_link_names(asset)
+    ids = _Ids(tuple(links.values()))  # joint and extra link names, never a part's link name
     for part in asset.parts:  # the root part first: ObjectAsset keeps it where the generator put it
         _link(model, links[part.name], asset, part)
     if asset.is_fixed and moving_parts:
