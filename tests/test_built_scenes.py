@@ -109,7 +109,7 @@ def test_per_object_urdfs_load_with_the_mjcf_masses(built):
     assert (placements["background"] is not None) == (built.scene.room.background is not None)
     for entry in placements["objects"]:
         placed = built.scene.object(entry["name"])
-        robot = yourdfpy.URDF.load(str(folder / entry["urdf"]), load_meshes=False, build_scene_graph=False)
+        robot = yourdfpy.URDF.load(str(folder / entry["urdf"]), load_meshes=False, build_scene_graph=True)
         assert robot.base_link == placed.name and all(j.type != "floating" for j in robot.robot.joints)
         urdf_mj = _mjcf_masses(folder / entry["urdf"])
         for part in placed.asset.parts:
