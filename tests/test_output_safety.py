@@ -1,7 +1,7 @@
 """Output safety and determinism on real builds (issue 12): a build replaces only its own output,
 respects the umask, leaves the previous output intact when interrupted, and two builds of one
-input give byte-identical scene.json, MJCF, USD, SDF, per-object URDFs, glTF and meshes; logs without a terminal
-are not wrapped; a photo of 500 small objects builds in bounded time."""
+input give byte-identical scene.json, MJCF, USD, SDF, per-object URDFs, glTF and meshes; logs
+without a terminal are not wrapped; a photo of 500 small objects builds in bounded time."""
 
 from __future__ import annotations
 
