@@ -1,9 +1,9 @@
-"""Exporters: MJCF (MjSpec), USD with UsdPhysics, URDF, glTF binary, a rerun recording, and a
-checker of an output folder. Importing this package is cheap: every heavy library is imported
+"""Exporters: MJCF (MjSpec), USD with UsdPhysics, URDF (per object; the scene as an option), SDF
+(SDFormat 1.9), glTF binary, a rerun recording, and a checker of an output folder. Importing this package is cheap: every heavy library is imported
 inside the function that uses it.
 
 Each writer validates its own output with its consumer (MuJoCo, ``pxr.UsdValidation``,
-MuJoCo's URDF importer, trimesh) and raises :class:`scene_builder.errors.ExportError` naming the
+MuJoCo's URDF importer, libsdformat when its checker is built, trimesh) and raises :class:`scene_builder.errors.ExportError` naming the
 object the consumer rejects.
 """
 
@@ -18,7 +18,10 @@ from scene_builder.model import ExportedFiles, Scene
 if TYPE_CHECKING:  # pragma: no cover
     from scene_builder.model import Fidelity, LayoutResult, Perception, PhysicsVerdict
 
-__all__ = ["check_output", "export_scene", "record_scene", "write_gltf", "write_mjcf", "write_urdf", "write_usd"]
+__all__ = [
+    "check_output", "export_scene", "record_scene", "write_gltf", "write_mjcf", "write_object_urdfs", "write_sdf", "write_urdf",
+    "write_usd",
+]
 
 
 def write_mjcf(scene: Scene, out_dir: Path) -> Path:
@@ -38,6 +41,20 @@ def write_usd(scene: Scene, out_dir: Path) -> Path:
 def write_urdf(scene: Scene, out_dir: Path) -> Path:
     """Write ``out_dir/scene.urdf`` (+ ``meshes/``); see :mod:`exporters.urdf`."""
     from exporters.urdf import write_urdf as _write
+
+    return _write(scene, Path(out_dir))
+
+
+def write_object_urdfs(scene: Scene, out_dir: Path) -> Path:
+    """Write ``out_dir/urdf/<object>.urdf`` per object (+ ``placements.json``); see :mod:`exporters.urdf`."""
+    from exporters.urdf import write_object_urdfs as _write
+
+    return _write(scene, Path(out_dir))
+
+
+def write_sdf(scene: Scene, out_dir: Path) -> Path:
+    """Write ``out_dir/scene.sdf`` (SDFormat 1.9); see :mod:`exporters.sdf`."""
+    from exporters.sdf import write_sdf as _write
 
     return _write(scene, Path(out_dir))
 
@@ -65,8 +82,10 @@ def export_scene(scene: Scene, out_dir: Path, config: ExportConfig) -> ExportedF
     return ExportedFiles(
         mjcf=write_mjcf(scene, out_dir) if config.mjcf else None,
         usd=usd,
-        urdf=write_urdf(scene, out_dir) if config.urdf else None,
+        urdf=write_urdf(scene, out_dir) if config.scene_urdf else None,
         gltf=write_gltf(scene, out_dir) if config.gltf else None,
+        sdf=write_sdf(scene, out_dir) if config.sdf else None,
+        object_urdfs=write_object_urdfs(scene, out_dir) if config.urdf else None,
     )
 
 

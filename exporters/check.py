@@ -2,7 +2,9 @@
 
 Checks: ``scene.xml`` compiles and steps stably for 1 s (finite state, no MuJoCo warnings, no
 free body faster than ``MAX_SPEED_M_S``); ``scene.usda`` passes every registered UsdValidation
-validator; every file referenced by the MJCF, URDF and USD exists inside the folder;
+validator; every file referenced by the MJCF, URDFs (``scene.urdf``, ``urdf/*.urdf``), SDF and
+USD exists inside the folder; no per-object URDF has a floating joint; ``scene.sdf`` passes the
+structural check of :mod:`exporters.sdf` and libsdformat's when its checker is found;
 ``scene.glb`` loads; ``report.json`` (when present) has ``timings_s``, ``objects``,
 ``layout.max_penetration_m`` and ``layout.settle_max_drift_m`` and names the same objects as the
 scene.
@@ -38,6 +40,10 @@ def check_output(out_dir: Path) -> tuple[str, ...]:
         _check_usd(out_dir / "scene.usda", problems)
     if (out_dir / "scene.urdf").exists():
         _check_urdf(out_dir / "scene.urdf", problems)
+    for path in sorted((out_dir / "urdf").glob("*.urdf")):
+        _check_urdf(path, problems, per_object=True)
+    if (out_dir / "scene.sdf").exists():
+        _check_sdf(out_dir / "scene.sdf", problems)
     if (out_dir / "scene.glb").exists():
         _check_glb(out_dir / "scene.glb", problems)
     if (out_dir / "scene.json").exists():
@@ -126,14 +132,39 @@ def _check_usd(path: Path, problems: list[str]) -> None:
         problems.append(f"{path.name}: no default prim")
 
 
-def _check_urdf(path: Path, problems: list[str]) -> None:
-    root = ET.parse(path).getroot()
+def _check_urdf(path: Path, problems: list[str], per_object: bool = False) -> None:
+    """Every mesh a relative path to a file inside the output folder; a per-object URDF
+    (``urdf/NAME.urdf``) has no ``floating`` joint."""
+    out_dir = path.parent.parent if per_object else path.parent
+    what = f"{path.parent.name}/{path.name}" if per_object else path.name
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as err:
+        problems.append(f"{what} is not readable XML: {err}")
+        return
     for el in root.iter("mesh"):
         name = el.get("filename", "")
         if name.startswith("package://") or name.startswith("file://"):
-            problems.append(f"{path.name} references {name}: use paths relative to the folder")
+            problems.append(f"{what} references {name}: use paths relative to the folder")
             continue
-        _inside(path.parent, path.parent / name, path.name, problems)
+        _inside(out_dir, path.parent / name, what, problems)
+    if per_object and any(j.get("type") == "floating" for j in root.iter("joint")):
+        problems.append(f"{what} has a floating joint, which most URDF consumers reject")
+
+
+def _check_sdf(path: Path, problems: list[str]) -> None:
+    """The structural check of :mod:`exporters.sdf`, then libsdformat's when its checker is found."""
+    from exporters.sdf import run_checker, structural_problems
+    from scene_builder.errors import ExportError
+
+    found = structural_problems(path)
+    problems.extend(f"{path.name}: {p}" for p in found)
+    if found:
+        return
+    try:
+        run_checker(path)
+    except ExportError as err:
+        problems.append(str(err))
 
 
 def _check_glb(path: Path, problems: list[str]) -> None:

@@ -1,6 +1,11 @@
-"""URDF export: ``scene.urdf`` with one tree rooted at a ``world`` link.
+"""URDF export: one URDF per object, ``urdf/<object>.urdf`` (:func:`write_object_urdfs`, the
+default), and optionally the whole scene as ``scene.urdf``, one tree rooted at a ``world`` link
+(:func:`write_urdf`, ``build --scene-urdf``).
 
-* Every object's root part is a link named ``NAME`` attached to ``world`` by a ``floating``
+* Per-object files are what URDF tools expect (many reject ``floating`` joints and a ``world``
+  link): the object's links and joints as below, in the asset frame, root link first; the
+  background is ``urdf/background.urdf``; ``urdf/placements.json`` gives each file's world pose.
+* In ``scene.urdf`` every object's root part is a link named ``NAME`` attached to ``world`` by a ``floating``
   joint ``NAME/free`` (free objects) or a ``fixed`` joint ``NAME/fixed`` (fixed furniture), at
   ``world_from_asset``. Other parts are links ``NAME/PART`` under their parent by
   ``revolute`` / ``prismatic`` / ``fixed`` / ``floating`` joints named ``NAME/PART/joint``.
@@ -23,6 +28,7 @@ Validated by parsing with MuJoCo's URDF importer and with yourdfpy (tests).
 
 from __future__ import annotations
 
+import json
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -32,7 +38,7 @@ from exporters import names
 from exporters.mjcf import MESH_DIR, background_meshes, mesh_files, part_rgba, write_part_meshes
 from exporters.textures import TEXTURE_DIR, texture_file
 from scene_builder.errors import ExportError
-from scene_builder.model import Background, JointType, ObjectAsset, Part, PlacedObject, Scene
+from scene_builder.model import Background, JointType, ObjectAsset, Part, PlacedObject, Room, Scene
 
 
 def _fmt(values) -> str:
@@ -50,9 +56,7 @@ def write_urdf(scene: Scene, out_dir: Path) -> Path:
     """Write ``out_dir/scene.urdf`` (meshes under ``out_dir/meshes``), load it with MuJoCo's URDF
     importer and raise :class:`ExportError` naming the object when it is rejected."""
     out_dir = Path(out_dir)
-    robot = ET.Element("robot", name="scene")
-    mj = ET.SubElement(robot, "mujoco")
-    ET.SubElement(mj, "compiler", discardvisual="false", strippath="false", fusestatic="false", balanceinertia="false")
+    robot = _robot("scene")
     ET.SubElement(robot, "link", name="world")
     if scene.room.background is not None:
         _add_background(robot, scene.room.background, out_dir)
@@ -60,19 +64,78 @@ def write_urdf(scene: Scene, out_dir: Path) -> Path:
     for placed in scene.objects:
         write_part_meshes(placed.asset, out_dir)
         _add_object(robot, placed)
-    ET.indent(robot)
-    path = out_dir / "scene.urdf"
-    path.write_text('<?xml version="1.0"?>\n' + ET.tostring(robot, encoding="unicode") + "\n")
+    path = _write(robot, out_dir / "scene.urdf")
     validate_urdf(path, scene)
     return path
+
+
+#: Folder of the per-object URDFs, inside the output folder.
+URDF_DIR = "urdf"
+PLACEMENTS_FILE = "placements.json"
+
+
+def _robot(name: str) -> ET.Element:
+    robot = ET.Element("robot", name=name)
+    mj = ET.SubElement(robot, "mujoco")
+    ET.SubElement(mj, "compiler", discardvisual="false", strippath="false", fusestatic="false", balanceinertia="false")
+    return robot
+
+
+def _write(robot: ET.Element, path: Path) -> Path:
+    ET.indent(robot)
+    path.write_text('<?xml version="1.0"?>\n' + ET.tostring(robot, encoding="unicode") + "\n")
+    return path
+
+
+def object_urdf_files(scene: Scene) -> dict[str, str]:
+    """File name (under ``urdf/``) of every object's URDF: object name -> ``<file_stem>.urdf``."""
+    return {placed.name: names.file_stem(placed.name) + ".urdf" for placed in scene.objects}
+
+
+def write_object_urdfs(scene: Scene, out_dir: Path) -> Path:
+    """Write one URDF per object, ``out_dir/urdf/<object>.urdf``, the form most URDF consumers
+    expect (one robot, its root link first, no ``world`` link and no ``floating`` joint):
+    links and joints as in ``scene.urdf``, in the asset frame. The static background, when there
+    is one, is ``urdf/background.urdf`` (one link). ``urdf/placements.json`` gives each file's
+    pose in the world (``position_m``, ``quat_wxyz``, ``rpy_rad``) and whether it is welded
+    there (``fixed``). Meshes and textures are the shared ``meshes/`` and ``textures/`` files
+    (``../`` relative paths). Each file is loaded with MuJoCo's URDF importer; returns the folder."""
+    from scene_builder.frames import quat_wxyz_from_matrix
+
+    out_dir = Path(out_dir)
+    folder = out_dir / URDF_DIR
+    folder.mkdir(parents=True, exist_ok=True)
+    placements = []
+    files = object_urdf_files(scene)
+    for placed in scene.objects:
+        write_part_meshes(placed.asset, out_dir)
+        robot = _robot(placed.name)
+        _add_object(robot, placed.asset, up="../")
+        path = _write(robot, folder / files[placed.name])
+        validate_urdf(path, Scene(scene.camera, Room(), (placed,)))
+        t = placed.world_from_asset
+        placements.append({
+            "name": placed.name, "urdf": files[placed.name], "fixed": bool(placed.asset.is_fixed),
+            "position_m": t[:3, 3].tolist(), "quat_wxyz": quat_wxyz_from_matrix(t[:3, :3]).tolist(),
+            "rpy_rad": rpy_from_matrix(t[:3, :3]).tolist(),
+        })
+    doc = {"format": "scene-builder/urdf-placements", "version": 1, "objects": placements, "background": None}
+    if scene.room.background is not None:
+        robot = _robot("background")
+        _add_background(robot, scene.room.background, out_dir, up="../", weld=False)
+        validate_urdf(_write(robot, folder / "background.urdf"), Scene(scene.camera, Room(), ()))
+        doc["background"] = "background.urdf"
+    (folder / PLACEMENTS_FILE).write_text(json.dumps(doc, indent=1) + "\n")
+    return folder
 
 
 def _origin(parent: ET.Element, xyz, rpy=(0.0, 0.0, 0.0)) -> None:
     ET.SubElement(parent, "origin", xyz=_fmt(xyz), rpy=_fmt(rpy))
 
 
-def _link(robot: ET.Element, asset: ObjectAsset, part: Part, frame_m: np.ndarray) -> None:
-    """A link whose frame is at ``frame_m`` (asset frame point) with asset-frame axes."""
+def _link(robot: ET.Element, asset: ObjectAsset, part: Part, frame_m: np.ndarray, up: str = "") -> None:
+    """A link whose frame is at ``frame_m`` (asset frame point) with asset-frame axes. ``up``: the
+    output folder seen from the URDF file (``""`` or ``"../"``), the prefix of mesh and texture paths."""
     link = ET.SubElement(robot, "link", name=names.body_name(asset, part))
     inertial = ET.SubElement(link, "inertial")
     _origin(inertial, part.inertial.com_m - frame_m)
@@ -83,18 +146,19 @@ def _link(robot: ET.Element, asset: ObjectAsset, part: Part, frame_m: np.ndarray
     vis_file, col_files = mesh_files(asset, part)
     visual = ET.SubElement(link, "visual", name=f"{names.body_name(asset, part)}/visual")
     _origin(visual, -frame_m)
-    ET.SubElement(ET.SubElement(visual, "geometry"), "mesh", filename=f"{MESH_DIR}/{vis_file}")
+    ET.SubElement(ET.SubElement(visual, "geometry"), "mesh", filename=f"{up}{MESH_DIR}/{vis_file}")
     mat = ET.SubElement(visual, "material", name=f"{asset.name}/{part.name}/{part.material.name}")
     ET.SubElement(mat, "color", rgba=_fmt(part_rgba(part)))
     if part.visual.texture is not None:
-        ET.SubElement(mat, "texture", filename=f"{TEXTURE_DIR}/{texture_file(part.visual.texture)}")
+        ET.SubElement(mat, "texture", filename=f"{up}{TEXTURE_DIR}/{texture_file(part.visual.texture)}")
     for k, fname in enumerate(col_files):
         col = ET.SubElement(link, "collision", name=f"{names.body_name(asset, part)}/collision_{k}")
         _origin(col, -frame_m)
-        ET.SubElement(ET.SubElement(col, "geometry"), "mesh", filename=f"{MESH_DIR}/{fname}")
+        ET.SubElement(ET.SubElement(col, "geometry"), "mesh", filename=f"{up}{MESH_DIR}/{fname}")
 
 
-def _add_background(robot: ET.Element, bg: Background, out_dir: Path) -> None:
+def _add_background(robot: ET.Element, bg: Background, out_dir: Path, up: str = "", weld: bool = True) -> None:
+    """The ``background`` link (and, with ``weld``, its fixed joint to ``world``)."""
     visuals, pieces = background_meshes(bg, out_dir)
     link = ET.SubElement(robot, "link", name="background")
     inertial = ET.SubElement(link, "inertial")
@@ -104,41 +168,47 @@ def _add_background(robot: ET.Element, bg: Background, out_dir: Path) -> None:
     for name, fname, mesh in visuals:
         visual = ET.SubElement(link, "visual", name=name)
         _origin(visual, (0.0, 0.0, 0.0))
-        ET.SubElement(ET.SubElement(visual, "geometry"), "mesh", filename=f"{MESH_DIR}/{fname}")
+        ET.SubElement(ET.SubElement(visual, "geometry"), "mesh", filename=f"{up}{MESH_DIR}/{fname}")
         mat = ET.SubElement(visual, "material", name=f"{name}/material")
         if mesh.texture is not None:
-            ET.SubElement(mat, "texture", filename=f"{TEXTURE_DIR}/{texture_file(mesh.texture)}")
+            ET.SubElement(mat, "texture", filename=f"{up}{TEXTURE_DIR}/{texture_file(mesh.texture)}")
         else:
             ET.SubElement(mat, "color", rgba="0.7 0.7 0.7 1")
     for k, fname in enumerate(pieces):
         col = ET.SubElement(link, "collision", name=f"background/piece/{k}")
         _origin(col, (0.0, 0.0, 0.0))
-        ET.SubElement(ET.SubElement(col, "geometry"), "mesh", filename=f"{MESH_DIR}/{fname}")
+        ET.SubElement(ET.SubElement(col, "geometry"), "mesh", filename=f"{up}{MESH_DIR}/{fname}")
     for k in range(bg.box_count):
         col = ET.SubElement(link, "collision", name=f"background/box/{k}")
         _origin(col, bg.box_centers_m[k], (0.0, 0.0, float(bg.box_yaws_rad[k])))
         ET.SubElement(ET.SubElement(col, "geometry"), "box", size=_fmt(2.0 * bg.box_half_extents_m[k]))
+    if not weld:
+        return
     j = ET.SubElement(robot, "joint", name="background/fixed", type="fixed")
     _origin(j, (0.0, 0.0, 0.0))
     ET.SubElement(j, "parent", link="world")
     ET.SubElement(j, "child", link="background")
 
 
-def _add_object(robot: ET.Element, placed: PlacedObject) -> None:
-    asset = placed.asset
-    t = placed.world_from_asset
+def _add_object(robot: ET.Element, placed: PlacedObject | ObjectAsset, up: str = "") -> None:
+    """The links and joints of an object. A :class:`PlacedObject` is attached to ``world`` at its
+    pose (``floating``, or ``fixed`` for fixed furniture); a bare :class:`ObjectAsset` is not (its
+    root link is the tree's root: the per-object URDF)."""
+    asset = placed.asset if isinstance(placed, PlacedObject) else placed
     frames = {p.name: (np.zeros(3) if p.joint is None else p.joint.anchor_m) for p in asset.parts}
-    _link(robot, asset, asset.root, frames[asset.root.name])
-    kind = "fixed" if asset.is_fixed else "floating"
-    jname = f"{asset.name}/fixed" if asset.is_fixed else names.free_joint_name(asset)
-    j = ET.SubElement(robot, "joint", name=jname, type=kind)
-    _origin(j, t[:3, 3], rpy_from_matrix(t[:3, :3]))
-    ET.SubElement(j, "parent", link="world")
-    ET.SubElement(j, "child", link=asset.name)
+    _link(robot, asset, asset.root, frames[asset.root.name], up)
+    if isinstance(placed, PlacedObject):
+        t = placed.world_from_asset
+        kind = "fixed" if asset.is_fixed else "floating"
+        jname = f"{asset.name}/fixed" if asset.is_fixed else names.free_joint_name(asset)
+        j = ET.SubElement(robot, "joint", name=jname, type=kind)
+        _origin(j, t[:3, 3], rpy_from_matrix(t[:3, :3]))
+        ET.SubElement(j, "parent", link="world")
+        ET.SubElement(j, "child", link=asset.name)
     for part in asset.parts:
         if part.joint is None:
             continue
-        _link(robot, asset, part, frames[part.name])
+        _link(robot, asset, part, frames[part.name], up)
         _add_joint(robot, asset, part, frames[part.parent] if part.parent else np.zeros(3))
 
 
@@ -181,8 +251,12 @@ def _add_joint(robot: ET.Element, asset: ObjectAsset, part: Part, parent_frame: 
 
 def validate_urdf(path: Path, scene: Scene) -> None:
     """Load the URDF with MuJoCo's importer (which resolves every mesh) and check that every
-    object's links are there."""
+    object's links are there; a per-object URDF (no ``world`` link) must have no ``floating`` joint."""
     import mujoco
+
+    root = ET.parse(path).getroot()
+    if root.find("link[@name='world']") is None and root.find("joint[@type='floating']") is not None:
+        raise ExportError(f"{path.name} has a floating joint, which most URDF consumers reject")
 
     try:
         model = mujoco.MjModel.from_xml_path(str(path))

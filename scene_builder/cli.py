@@ -18,7 +18,8 @@ _DESCRIPTION = """\
 Turn one photo of a room into a simulation-ready digital twin: every visible movable object as a
 watertight, metric, physically parameterised asset textured with the photo, placed where it was
 seen with nothing interpenetrating; everything else the camera saw as one static, photo-textured
-background it rests on. Exported as MJCF (MuJoCo), USD with UsdPhysics (--usdz packs it), URDF
+background it rests on. Exported as MJCF (MuJoCo), USD with UsdPhysics (--usdz packs it), SDF
+(SDFormat 1.9, for Gazebo), URDF (one file per object; --scene-urdf adds the scene as one URDF)
 and glTF, with a rerun recording to inspect it.
 
   scene-builder room.jpg                      plain photo (depth estimated)
@@ -108,7 +109,14 @@ def _add_build_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--adopt-settled", action="store_true", help="write the poses after the settle simulation instead of the solved ones")
     p.add_argument("--no-usd", action="store_true", help="skip scene.usda")
     p.add_argument("--usdz", action="store_true", help="also package the USD stage and its textures as one scene.usdz file for hand-off")
-    p.add_argument("--no-urdf", action="store_true", help="skip scene.urdf")
+    p.add_argument("--no-urdf", action="store_true", help="skip the per-object URDFs (OUT/urdf/<object>.urdf)")
+    p.add_argument(
+        "--scene-urdf",
+        action="store_true",
+        help="also write the whole scene as one URDF, OUT/scene.urdf (objects on floating joints to a world link, "
+        "which many URDF tools reject)",
+    )
+    p.add_argument("--no-sdf", action="store_true", help="skip scene.sdf (SDFormat 1.9 world)")
     p.add_argument("--no-gltf", action="store_true", help="skip scene.glb")
     p.add_argument("-q", "--quiet", action="store_true", help="no per-stage lines")
 
@@ -215,7 +223,8 @@ def _cmd_build(args: argparse.Namespace) -> int:
             segmentation_backend=args.segmentation_backend,
         ),
         layout=replace(LayoutConfig(), settle_s=args.settle_s, adopt_settled=args.adopt_settled),
-        export=ExportConfig(usd=not args.no_usd, usdz=args.usdz and not args.no_usd, urdf=not args.no_urdf, gltf=not args.no_gltf, viz=args.viz),
+        export=ExportConfig(usd=not args.no_usd, usdz=args.usdz and not args.no_usd, urdf=not args.no_urdf,
+                            scene_urdf=args.scene_urdf, sdf=not args.no_sdf, gltf=not args.no_gltf, viz=args.viz),
     )
     out = args.out or default_out_dir(args.image)
     if args.image.is_file():  # no download before a missing photo is reported (by build, below)

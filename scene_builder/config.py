@@ -145,12 +145,16 @@ class LayoutConfig:
 @dataclass(frozen=True)
 class ExportConfig:
     """Which outputs to write. usdz: also package the USD stage and its textures as one
-    scene.usdz. viz: "save" (OUT/scene.rrd), "spawn" (open the viewer too) or "off"."""
+    scene.usdz. urdf: one URDF per object (OUT/urdf/); scene_urdf: also the whole scene as one
+    URDF (OUT/scene.urdf, objects on floating joints). sdf: OUT/scene.sdf. viz: "save"
+    (OUT/scene.rrd), "spawn" (open the viewer too) or "off"."""
 
     mjcf: bool = True
     usd: bool = True
     usdz: bool = False
     urdf: bool = True
+    scene_urdf: bool = False
+    sdf: bool = True
     gltf: bool = True
     viz: str = "save"
 

@@ -747,13 +747,16 @@ class LayoutResult:
 
 @dataclass(frozen=True)
 class ExportedFiles:
-    """Paths of the files the exporters wrote (None for a format that was switched off)."""
+    """Paths of the files the exporters wrote (None for a format that was switched off).
+    urdf: the scene as one URDF (scene.urdf); object_urdfs: the folder of per-object URDFs."""
 
     mjcf: Path | None = None
     usd: Path | None = None
     urdf: Path | None = None
     gltf: Path | None = None
     rerun: Path | None = None
+    sdf: Path | None = None
+    object_urdfs: Path | None = None
 
 
 # The results of the physics check and render-and-compare live in scene_builder.checks (to keep

@@ -6,7 +6,7 @@
     write_mjcf      scene -> OUT/scene.xml (MuJoCo)
     verify_scene    MuJoCo: penetration over all pairs, settle drift, render-and-compare
     make_background objects that do not stay at rest -> static background (then verify again)
-    export_scene    scene -> OUT/scene.usda, scene.urdf, scene.glb
+    export_scene    scene -> OUT/scene.usda, urdf/ (+ scene.urdf), scene.sdf, scene.glb
     record_scene    everything -> OUT/scene.rrd (rerun)
     write_report    OUT/scene.json, OUT/report.json
 

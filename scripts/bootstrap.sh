@@ -5,8 +5,9 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 # System libraries: MuJoCo's offscreen renderer needs EGL (Mesa llvmpipe);
-# rerun's headless screenshot needs Mesa's Vulkan driver.
-pkgs=(libegl1 libgl1 libglx-mesa0 libegl-mesa0 libgles2 mesa-vulkan-drivers libvulkan1)
+# rerun's headless screenshot needs Mesa's Vulkan driver; the SDF checker (scripts/sdf_check.cc)
+# is built against libsdformat (Debian has no `gz sdf` command line tool).
+pkgs=(libegl1 libgl1 libglx-mesa0 libegl-mesa0 libgles2 mesa-vulkan-drivers libvulkan1 libsdformat-dev g++ pkg-config)
 missing=()
 for p in "${pkgs[@]}"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
 if [ ${#missing[@]} -gt 0 ]; then
@@ -27,4 +28,11 @@ if [ ! -f "$stamp" ]; then
   .venv/bin/python -m pip install -q -e '.[test]'
   rm -f .venv/.installed-*
   touch "$stamp"
+fi
+
+# The SDFormat checker, beside the interpreter, where exporters/sdf.py finds it: every scene.sdf
+# written is then loaded by libsdformat. Rebuilt when its source changes.
+checker=.venv/bin/scene-builder-sdf-check
+if [ ! -x "$checker" ] || [ scripts/sdf_check.cc -nt "$checker" ]; then
+  g++ -O1 -o "$checker" scripts/sdf_check.cc $(pkg-config --cflags --libs sdformat12)
 fi

@@ -101,3 +101,31 @@ def load_newton_model(newton, usd_path: Path):
     builder = newton.ModelBuilder()
     builder.add_usd(str(usd_path))
     return builder.finalize(device="cpu")
+
+
+SDF_CHECK_SOURCE = REPO / "scripts" / "sdf_check.cc"
+
+
+@pytest.fixture(scope="session")
+def sdf_checker(tmp_path_factory) -> list[str]:
+    """The libsdformat checker (``scripts/sdf_check.cc``) compiled once per session with g++ and
+    pkg-config: the command that loads an SDF file with the SDFormat library. Skips (fails under
+    ``CI=true``, where ``scripts/bootstrap.sh`` installs libsdformat-dev) when it cannot be built."""
+    import shutil
+    import subprocess
+
+    reason = None
+    if shutil.which("g++") is None or shutil.which("pkg-config") is None:
+        reason = "g++ and pkg-config are needed to build the SDFormat checker"
+    else:
+        flags = subprocess.run(["pkg-config", "--cflags", "--libs", "sdformat12"], capture_output=True, text=True)
+        if flags.returncode != 0:
+            reason = "libsdformat is not installed (apt-get install libsdformat-dev)"
+    if reason is not None:
+        if in_ci():
+            pytest.fail(f"CI=true: {reason}", pytrace=False)
+        pytest.skip(reason)
+    exe = tmp_path_factory.mktemp("sdf_check") / "sdf_check"
+    build = subprocess.run(["g++", "-O1", "-o", str(exe), str(SDF_CHECK_SOURCE), *flags.stdout.split()], capture_output=True, text=True)
+    assert build.returncode == 0, build.stderr
+    return [str(exe)]

@@ -2,7 +2,9 @@
 one procedural room with an articulated cabinet.
 
 Each output folder passes ``check_output``; the USD passes every registered UsdValidation
-validator; the URDF loads in yourdfpy and MuJoCo with the MJCF's masses; the GLB loads in trimesh
+validator; the scene URDF (``--scene-urdf``) and the per-object URDFs load in yourdfpy and MuJoCo
+with the MJCF's masses (no floating joint in the per-object ones); libsdformat loads the SDF with
+the MJCF's masses, centres of mass and joints, the background and the camera; the GLB loads in trimesh
 with a node per part; the rerun recording holds every entity, hides collision pieces in the
 blueprint, looks from the input camera and is deterministic. Newton (marked ``newton``) loads
 the USD with the MJCF's masses (1e-4 relative) and joint ranges (1e-6), and a built cabinet's door
@@ -35,7 +37,7 @@ def _build(src: Path, out: Path):
     cam = json.loads((src / "camera.json").read_text())
     rgb = src / ("rgb.jpg" if (src / "rgb.jpg").exists() else "rgb.png")
     inputs = InputSpec(rgb, src / "depth.png", 0.001, (cam["fx"], cam["fy"], cam["cx"], cam["cy"]))
-    return build(inputs, out, BuildConfig(export=ExportConfig(viz="save")))
+    return build(inputs, out, BuildConfig(export=ExportConfig(viz="save", scene_urdf=True)))
 
 
 @pytest.fixture(scope="module")
@@ -95,6 +97,61 @@ def test_urdf_loads_in_yourdfpy_and_mujoco_with_the_mjcf_masses(built):
             name = o.name if part.parent is None else f"{o.name}/{part.name}"
             assert links[name].inertial.mass == pytest.approx(part.inertial.mass_kg, rel=1e-6), name
             assert urdf_mj[name] == pytest.approx(mj[name], rel=1e-6), name
+
+
+def test_per_object_urdfs_load_with_the_mjcf_masses(built):
+    import yourdfpy
+
+    mj = _mjcf_masses(built.out_dir / "scene.xml")
+    folder = built.out_dir / "urdf"
+    placements = json.loads((folder / "placements.json").read_text())
+    assert sorted(p["name"] for p in placements["objects"]) == sorted(o.name for o in built.scene.objects)
+    assert (placements["background"] is not None) == (built.scene.room.background is not None)
+    for entry in placements["objects"]:
+        placed = built.scene.object(entry["name"])
+        robot = yourdfpy.URDF.load(str(folder / entry["urdf"]), load_meshes=False, build_scene_graph=True)
+        assert robot.base_link == placed.name and all(j.type != "floating" for j in robot.robot.joints)
+        urdf_mj = _mjcf_masses(folder / entry["urdf"])
+        for part in placed.asset.parts:
+            name = placed.name if part.parent is None else f"{placed.name}/{part.name}"
+            if placed.asset.deformable is None:
+                assert urdf_mj[name] == pytest.approx(mj[name], rel=1e-6), name
+            assert robot.link_map[name].inertial.mass == pytest.approx(part.inertial.mass_kg, rel=1e-6), name
+
+
+def test_sdf_loads_in_libsdformat_with_the_mjcf_masses_and_joints(built, sdf_checker):
+    import mujoco
+
+    from exporters.sdf import object_model_names, part_link_names, validate_sdf
+
+    path = built.out_dir / "scene.sdf"
+    report = validate_sdf(path, built.scene, sdf_checker)  # structure, libsdformat, total mass, camera
+    models = {m["name"]: m for m in report["models"]}
+    model = mujoco.MjModel.from_xml_path(str(built.out_dir / "scene.xml"))
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    kinds = {"revolute": mujoco.mjtJoint.mjJNT_HINGE, "prismatic": mujoco.mjtJoint.mjJNT_SLIDE}
+    for name, model_name in object_model_names(built.scene).items():
+        placed = built.scene.object(name)
+        if placed.asset.deformable is not None:
+            continue
+        m = models[model_name]
+        links = {link["name"]: link for link in m["links"]}
+        for part in placed.asset.parts:
+            body = model.body(name if part.parent is None else f"{name}/{part.name}").id
+            link = links[part_link_names(placed.asset)[part.name]]
+            assert link["mass"] == pytest.approx(model.body_mass[body], rel=1e-6)
+            np.testing.assert_allclose(link["com"], data.xipos[body], atol=1e-6)
+        for kind, mj_type in kinds.items():
+            mj_joints = [i for i in range(model.njnt) if model.jnt_type[i] == mj_type and model.joint(i).name.startswith(f"{name}/")]
+            assert sum(j["type"] == kind for j in m["joints"]) == len(mj_joints), (name, kind)
+    bg = built.scene.room.background
+    room = {link["name"]: link for link in models["room"]["links"]}
+    if bg is not None:
+        assert room["background"]["collisions"] == bg.box_count + len(bg.static_pieces)
+    k = built.scene.camera.intrinsics
+    (cam,) = models["input_camera"]["links"][0]["cameras"]
+    assert (cam["width"], cam["height"], cam["fx"], cam["fy"]) == (k.width_px, k.height_px, pytest.approx(k.fx_px), pytest.approx(k.fy_px))
 
 
 def test_glb_loads_with_a_node_per_part(built):

@@ -125,5 +125,5 @@ def test_report_keys_written_by_a_real_build(tmp_path: Path):
         assert key in report
     assert report["timings_s"]["total"] > 0
     assert {"max_penetration_m", "settle_max_drift_m"} <= set(report["layout"])
-    for name in ("scene.xml", "scene.usda", "scene.json", "scene.urdf", "scene.glb"):
+    for name in ("scene.xml", "scene.usda", "scene.json", "scene.sdf", "urdf/placements.json", "scene.glb"):
         assert (out / name).is_file(), name

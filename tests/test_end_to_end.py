@@ -34,7 +34,7 @@ def test_real_sample_builds_a_valid_stable_scene(sample: Path, tmp_path: Path):
 
     result = _build(sample, tmp_path / "out")
     out = tmp_path / "out"
-    for name in ("scene.xml", "scene.usda", "scene.json", "report.json", "scene.urdf", "scene.glb"):
+    for name in ("scene.xml", "scene.usda", "scene.json", "report.json", "scene.sdf", "urdf/placements.json", "scene.glb"):
         assert (out / name).is_file(), name
     model = mujoco.MjModel.from_xml_path(str(out / "scene.xml"))
     data = mujoco.MjData(model)

@@ -17,8 +17,9 @@ from tests.fixtures_scenes import mixed_scene, pillow_scene
 def good(tmp_path_factory):
     scene = mixed_scene()
     out = tmp_path_factory.mktemp("good")
-    files = export_scene(scene, out, ExportConfig(viz="off"))
-    assert all(p is not None and p.is_file() for p in (files.mjcf, files.usd, files.urdf, files.gltf))
+    files = export_scene(scene, out, ExportConfig(viz="off", scene_urdf=True))
+    assert all(p is not None and p.is_file() for p in (files.mjcf, files.usd, files.urdf, files.gltf, files.sdf))
+    assert files.object_urdfs is not None and len(list(files.object_urdfs.glob("*.urdf"))) == len(scene.objects)
     report = {
         "timings_s": {"export": 0.5},
         "objects": [{"name": o.name} for o in scene.objects],
@@ -50,6 +51,28 @@ def test_missing_mesh_is_reported(good, tmp_path):
     problems = check_output(out)
     assert any("cabinet__door__collision_0.obj" in p and "scene.xml" in p for p in problems)
     assert any("cabinet__door__collision_0.obj" in p and "scene.urdf" in p for p in problems)
+    assert any("cabinet__door__collision_0.obj" in p and "urdf/cabinet.urdf" in p for p in problems)
+    assert any("cabinet__door__collision_0.obj" in p and "scene.sdf" in p for p in problems)
+
+
+def test_floating_joint_in_a_per_object_urdf_is_reported(good, tmp_path):
+    out = _copy(good[1], tmp_path / "o")
+    path = out / "urdf" / "cabinet.urdf"
+    path.write_text(path.read_text().replace('type="revolute"', 'type="floating"'))
+    assert any("urdf/cabinet.urdf" in p and "floating" in p for p in check_output(out))
+
+
+def test_broken_sdf_is_reported(good, tmp_path, sdf_checker, monkeypatch):
+    from exporters.sdf import CHECKER_ENV
+
+    monkeypatch.setenv(CHECKER_ENV, sdf_checker[0])
+    out = _copy(good[1], tmp_path / "o")
+    assert check_output(out) == ()  # libsdformat passes the good one
+    sdf = out / "scene.sdf"
+    sdf.write_text(sdf.read_text().replace("<mass>", "<weight>1</weight><mass>", 1))
+    assert any("libsdformat rejects scene.sdf" in p and "weight" in p for p in check_output(out))
+    sdf.write_text(sdf.read_text().replace("<child>door</child>", "<child>lid</child>", 1))
+    assert any("scene.sdf" in p and "lid" in p for p in check_output(out))
 
 
 def test_mesh_outside_the_folder_is_reported(good, tmp_path):

@@ -33,7 +33,7 @@ def exported(tmp_path_factory):
     textured = photo_textured(GeneratedAsset(asset, world_from_asset, board.points_world_m), board, obs, cam)
     scene = Scene(cam, Room((tf.wall(),), bg), (PlacedObject(textured.asset, textured.world_from_asset),))
     out = tmp_path_factory.mktemp("textured")
-    files = export_scene(scene, out, ExportConfig(usdz=True, viz="off"))
+    files = export_scene(scene, out, ExportConfig(usdz=True, viz="off", scene_urdf=True))
     return scene, out, files, obs, board
 
 
@@ -111,10 +111,29 @@ def test_urdf_and_gltf_carry_the_background_and_textures(exported):
     urdf = yourdfpy.URDF.load(str(files.urdf), build_scene_graph=False, load_meshes=False)
     assert "background" in urdf.link_map and urdf.joint_map["background/fixed"].type == "fixed"
     assert len(urdf.link_map["background"].collisions) == scene.room.background.box_count + len(scene.room.background.static_pieces)
+    # The per-object files: the background on its own (one link, no world), the board textured.
+    alone = yourdfpy.URDF.load(str(files.object_urdfs / "background.urdf"), build_scene_graph=False, load_meshes=False)
+    assert list(alone.link_map) == ["background"] and not alone.robot.joints
+    assert len(alone.link_map["background"].collisions) == len(urdf.link_map["background"].collisions)
+    board = yourdfpy.URDF.load(str(files.object_urdfs / "board_1.urdf"), build_scene_graph=False, load_meshes=False)
+    assert (files.object_urdfs / board.link_map["board_1"].visuals[0].material.texture.filename).resolve() == (out / "textures" / "board_1.png").resolve()
     glb = trimesh.load(str(files.gltf), force="scene")
     surface = glb.geometry["background"]
     assert isinstance(surface.visual, trimesh.visual.TextureVisuals)
     assert surface.visual.material.baseColorTexture.size == (tf.W, tf.H)
+
+
+def test_sdf_carries_the_background_and_textures(exported):
+    import xml.etree.ElementTree as ET
+
+    scene, out, files, obs, board = exported
+    root = ET.parse(files.sdf).getroot()
+    bg = root.find("world/model[@name='room']/link[@name='background']")
+    assert len(bg.findall("collision")) == scene.room.background.box_count + len(scene.room.background.static_pieces)
+    maps = {v.get("name"): v.findtext("material/pbr/metal/albedo_map") for v in bg.findall("visual")}
+    assert maps["background_surface"] == "textures/background.png"
+    board_map = root.find("world/model[@name='board_1']/link/visual/material/pbr/metal/albedo_map").text
+    assert (out / board_map).resolve() == (out / "textures" / "board_1.png").resolve()
 
 
 def test_rerun_shows_the_textured_background(exported, tmp_path):

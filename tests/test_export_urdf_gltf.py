@@ -1,12 +1,16 @@
 """URDF (read by yourdfpy and MuJoCo's URDF importer) and GLB (read by trimesh): the same bodies at
-the same poses with the same masses and joint limits as the MJCF."""
+the same poses with the same masses and joint limits as the MJCF. The per-object URDFs
+(``urdf/<object>.urdf``): one robot each, root link first, no world link and no floating joint,
+placed by ``placements.json`` where the MJCF has them, joints with the asset's dynamics."""
 
 from __future__ import annotations
+
+import json
 
 import numpy as np
 import pytest
 
-from exporters import write_gltf, write_mjcf, write_urdf
+from exporters import write_gltf, write_mjcf, write_object_urdfs, write_urdf
 from exporters.gltf import GLTF_FROM_WORLD
 from scene_builder.frames import pose
 from tests.fixtures_scenes import DOOR_RANGE_RAD, DRAWER_RANGE_M, mixed_scene
@@ -98,3 +102,60 @@ def test_glb_nodes_have_world_poses_and_colours(exported):
         assert mesh.visual.kind == "vertex" and mesh.visual.vertex_colors.shape == (len(mesh.vertices), 4)
     # glTF is Y-up: the scene's height (world Z) is along glTF +Y.
     assert loaded.bounds[1][1] == pytest.approx(max(o.world_from_asset[2, 3] + o.asset.size_m[2] for o in scene.objects), abs=1e-6)
+
+
+@pytest.fixture(scope="module")
+def per_object(exported):
+    scene, mjcf, urdf, _ = exported
+    return scene, mjcf, write_object_urdfs(scene, urdf.parent)
+
+
+def test_per_object_urdfs_have_no_floating_joint_and_the_root_link_first(per_object):
+    import yourdfpy
+
+    scene, _, folder = per_object
+    placements = json.loads((folder / "placements.json").read_text())
+    assert [p["name"] for p in placements["objects"]] == [o.name for o in scene.objects]
+    assert sorted(p.name for p in folder.glob("*.urdf")) == sorted(p["urdf"] for p in placements["objects"])
+    for placed, entry in zip(scene.objects, placements["objects"]):
+        asset = placed.asset
+        path = folder / entry["urdf"]
+        robot = yourdfpy.URDF.load(str(path), load_meshes=True, build_collision_scene_graph=True, load_collision_meshes=True)
+        assert robot.validate()
+        assert robot.base_link == asset.name == robot.robot.links[0].name
+        assert all(j.type != "floating" for j in robot.robot.joints) and "world" not in robot.link_map
+        assert entry["fixed"] == asset.is_fixed
+        # Real inertials and every collision piece.
+        assert sum(link.inertial.mass for link in robot.robot.links) == pytest.approx(asset.mass_kg, rel=1e-8)
+        assert sum(len(link.collisions) for link in robot.robot.links) == sum(len(p.collision) for p in asset.parts)
+        for part in asset.parts:
+            if part.joint is None:
+                continue
+            j = robot.joint_map[f"{asset.name}/{part.name}/joint"]
+            assert j.type == part.joint.type.value
+            assert (j.limit.lower, j.limit.upper) == pytest.approx((part.joint.lower, part.joint.upper))
+            assert (float(j.dynamics.damping), float(j.dynamics.friction)) == pytest.approx((part.joint.damping, part.joint.friction))
+
+
+def test_per_object_urdfs_placed_by_placements_match_the_mjcf(per_object):
+    import mujoco
+
+    from scene_builder.frames import matrix_from_quat_wxyz
+
+    scene, mjcf, folder = per_object
+    ref, ref_model = _mj_poses(mjcf)
+    placements = {p["name"]: p for p in json.loads((folder / "placements.json").read_text())["objects"]}
+    for placed in scene.objects:
+        entry = placements[placed.name]
+        world_from_root = pose(matrix_from_quat_wxyz(entry["quat_wxyz"]), entry["position_m"])
+        np.testing.assert_allclose(world_from_root, ref[placed.name], atol=1e-9)
+        # MuJoCo's URDF importer puts the object's root at the origin: its bodies' centres of
+        # mass, moved by the placement, are the MJCF's.
+        got, model = _mj_poses(folder / entry["urdf"])
+        for part in placed.asset.parts:
+            name = placed.name if part.parent is None else f"{placed.name}/{part.name}"
+            i, j = model.body(name).id, ref_model.body(name).id
+            assert model.body_mass[i] == pytest.approx(ref_model.body_mass[j], rel=1e-6)
+            com = world_from_root[:3, :3] @ (got[name][:3, :3] @ model.body_ipos[i] + got[name][:3, 3]) + world_from_root[:3, 3]
+            np.testing.assert_allclose(com, ref[name][:3, :3] @ ref_model.body_ipos[j] + ref[name][:3, 3], atol=1e-6)
+        assert not any(model.jnt_type[k] == mujoco.mjtJoint.mjJNT_FREE for k in range(model.njnt))

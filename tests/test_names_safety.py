@@ -77,7 +77,7 @@ def test_hostile_names_export_to_files_inside_the_output(tmp_path: Path):
     scene = Scene(base.camera, base.room, tuple(objects))
 
     out = tmp_path / "out"
-    files = export_scene(scene, out, ExportConfig(mjcf=True, usd=True, urdf=True, gltf=True, viz="off"))
+    files = export_scene(scene, out, ExportConfig(mjcf=True, usd=True, urdf=True, scene_urdf=True, sdf=True, gltf=True, viz="off"))
     written = sorted(p for p in tmp_path.rglob("*") if p.is_file())
     assert all(out in p.parents for p in written), [str(p) for p in written if out not in p.parents]
     n_meshes = sum(1 + len(p.collision) for o in scene.objects for p in o.asset.parts)
@@ -90,3 +90,13 @@ def test_hostile_names_export_to_files_inside_the_output(tmp_path: Path):
     assert sorted(p.GetDisplayName() for p in cab_prims) == sorted(renamed.values())
     joints = [p for p in stage.Traverse() if p.IsA(UsdPhysics.Joint) and "/Joints/" in str(p.GetPath())]
     assert len(joints) == 2 + 0  # door 1 and door_1 (the cabinet is not fixed: no world weld)
+    # One URDF per object (no overwrites) and an SDF with distinct model, link and joint names.
+    assert len(list(files.object_urdfs.glob("*.urdf"))) == len(scene.objects)
+    import xml.etree.ElementTree as ET
+
+    world = ET.parse(files.sdf).getroot().find("world")
+    models = [m.get("name") for m in world.findall("model")]
+    assert len(set(models)) == len(models) == len(scene.objects) + 2  # + room and input_camera
+    for m in world.findall("model"):
+        siblings = [e.get("name") for e in m if e.tag in ("link", "joint")]
+        assert len(set(siblings)) == len(siblings) and not any("::" in n or n.startswith("__") for n in siblings)

@@ -1,7 +1,7 @@
 """Output safety and determinism on real builds (issue 12): a build replaces only its own output,
 respects the umask, leaves the previous output intact when interrupted, and two builds of one
-input give byte-identical scene.json, MJCF, USD, URDF, glTF and meshes; logs without a terminal
-are not wrapped; a photo of 500 small objects builds in bounded time."""
+input give byte-identical scene.json, MJCF, USD, SDF, per-object URDFs, glTF and meshes; logs
+without a terminal are not wrapped; a photo of 500 small objects builds in bounded time."""
 
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ from scene_builder.pipeline import MARKER
 from .conftest import REPO
 
 CLI = [sys.executable, "-m", "scene_builder.cli"]
-DETERMINISTIC = ("scene.json", "scene.xml", "scene.usda", "scene.urdf", "scene.glb")
+DETERMINISTIC = ("scene.json", "scene.xml", "scene.usda", "scene.sdf", "scene.glb")
 
 
 @pytest.fixture(scope="module")
@@ -37,7 +37,7 @@ def room(tmp_path_factory) -> tuple[Path, list[str]]:
 
 
 def _files(out: Path) -> dict[str, bytes]:
-    names = [*DETERMINISTIC, *(f"meshes/{p.name}" for p in sorted((out / "meshes").iterdir()))]
+    names = [*DETERMINISTIC, *(f"{d}/{p.name}" for d in ("meshes", "urdf") for p in sorted((out / d).iterdir()))]
     return {n: (out / n).read_bytes() for n in names}
 
 
