@@ -345,12 +345,15 @@ def _lock(out_root: Path):
     return handle
 
 
-def _check_roots(source: Path, out_root: Path) -> None:
+def _check_roots(source: Path, items: tuple[BatchItem, ...], out_root: Path) -> None:
+    """Refuse an output root that is, holds or lies inside the input (the folder, or the folders
+    of a list's photos), a file, or a folder with content but no manifest."""
     src = Path(source).resolve()
     out = Path(out_root).resolve()
-    root = src if src.is_dir() else src.parent
-    if out == root or root in out.parents:
-        raise InputError(f"output root {out_root} is inside the input {root}; pass -o with a folder outside it")
+    roots = {src} if src.is_dir() else {Path(it.image_path).resolve().parent for it in items}
+    for root in sorted(roots):
+        if out == root or root in out.parents or out in root.parents:
+            raise InputError(f"output root {out_root} overlaps the input folder {root}; pass -o with a folder outside it")
     if out.exists() and not out.is_dir():
         raise InputError(f"output root {out_root} is a file; pass -o with a folder")
     if out.is_dir() and not (out / MANIFEST).exists() and any(not p.name.startswith(".") for p in out.iterdir()):
@@ -372,8 +375,8 @@ def run_batch(source: Path, out_root: Path, config: BuildConfig = BuildConfig(),
     from scene_builder.batch_progress import BatchProgress
 
     out_root = Path(out_root)
-    _check_roots(source, out_root)
     items = find_items(Path(source))
+    _check_roots(source, items, out_root)
     out_root.mkdir(parents=True, exist_ok=True)
     lock = _lock(out_root)
     manifest = Manifest(out_root / MANIFEST)
@@ -407,8 +410,11 @@ class _Result:
 
 def _drive(manifest: Manifest, run: int, todo: list[BatchItem], out_root: Path, options: BatchOptions, job: WorkerJob, bar):
     """Feed the pool, record every outcome, retry an item whose worker died."""
-    queue = deque(ItemTask(it.name, Path(it.image_path), it.depth_path, out_root / it.name, 1) for it in todo)
-    attempts = {it.name: manifest.rows()[it.name]["attempts"] for it in todo}
+    # Absolute paths: a Ray worker's current folder is not the coordinator's.
+    queue = deque(
+        ItemTask(it.name, Path(it.image_path).absolute(), None if it.depth_path is None else Path(it.depth_path).absolute(), (out_root / it.name).absolute(), 1)
+        for it in todo
+    )
     pool, _slots = _make_pool(options, job)
     started: dict[str, tuple[int, float]] = {}
     results: list[_Result] = []
@@ -427,7 +433,6 @@ def _drive(manifest: Manifest, run: int, todo: list[BatchItem], out_root: Path, 
                     t = outcome.task
                     queue.append(ItemTask(t.name, t.image_path, t.depth_path, t.out_dir, t.attempt + 1))
                     continue
-                attempts[outcome.task.name] += 1
                 results.append(_Result(outcome, item_s))
                 bar.advance(outcome)
     finally:
