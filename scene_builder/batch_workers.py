@@ -142,7 +142,11 @@ def _die_with_parent(parent_pid: int) -> None:
 
 
 def _worker_main(conn: Connection, job: WorkerJob, parent_pid: int) -> None:
-    """A local worker: warm up, say so, then build each task the coordinator sends until None."""
+    """A local worker: warm up, say so, then build each task the coordinator sends until None.
+    Ctrl-C is the coordinator's to handle (it stops the workers; the manifest keeps the rest)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     _die_with_parent(parent_pid)
     warm_s = warm_up(job)
     conn.send(("ready", warm_s))

@@ -117,6 +117,47 @@ def test_output_root_inside_the_input_or_a_foreign_folder_is_refused(tmp_path):
     assert (tmp_path / "mine" / "thesis.tex").read_text() == "keep me"
 
 
+def test_resume_adopts_a_complete_output_rebuilds_an_interrupted_item_and_clears_its_staging(tmp_path):
+    from scene_builder.batch import Manifest, _remove_stale_staging, plan
+    from scene_builder.batch_workers import ItemTask
+    from scene_builder.pipeline import write_marker
+
+    src, out = tmp_path / "in", tmp_path / "out"
+    for name in ("a", "b", "c"):
+        (src / name).mkdir(parents=True)
+        (src / name / "rgb.jpg").write_bytes(b"")
+    out.mkdir()
+    items = find_items(src)
+    manifest = Manifest(out / MANIFEST)
+    manifest.add(items, out)
+    run = manifest.start_run("local", 2)
+    for it in items[:2]:  # a and b were running when the coordinator was killed
+        manifest.start(run, ItemTask(it.name, it.image_path, None, out / it.name, 1))
+    # a's build had renamed its folder into place; b's had only its staging folder.
+    (out / "a").mkdir()
+    (out / "a" / "report.json").write_text(json.dumps({"version": __version__}))
+    write_marker(out / "a", InputSpec(src / "a" / "rgb.jpg"))
+    (out / ".b.tmp-k2j4").mkdir()
+    (out / ".b.tmp-k2j4" / "scene.xml").write_text("<mujoco/>")
+    assert _remove_stale_staging(out, {it.name for it in items}) == 1 and not (out / ".b.tmp-k2j4").exists()
+    todo, skipped = plan(manifest, items, out, BatchOptions())
+    assert [it.name for it in todo] == ["b", "c"] and skipped == 1
+    rows = manifest.rows()
+    assert (rows["a"]["state"], rows["a"]["version"]) == ("done", __version__)
+    assert rows["b"]["state"] == "pending" and rows["c"]["state"] == "pending"
+    assert [(a["state"], a["note"].split(":")[0]) for a in _attempts_of(manifest, "a")] == [("done", "adopted")]
+    assert [(a["state"], a["note"].split(":")[0]) for a in _attempts_of(manifest, "b")] == [("interrupted", "interrupted")]
+    # An output made by an older version is kept unless --since-version asks for newer.
+    manifest.db.execute("UPDATE items SET version = '0.0.9' WHERE name = 'a'")
+    assert [it.name for it in plan(manifest, items, out, BatchOptions())[0]] == ["b", "c"]
+    assert [it.name for it in plan(manifest, items, out, BatchOptions(since_version="0.1.0"))[0]] == ["a", "b", "c"]
+    manifest.close()
+
+
+def _attempts_of(manifest, name: str) -> list:
+    return list(manifest.db.execute("SELECT * FROM attempts WHERE name = ? ORDER BY id", (name,)))
+
+
 def _wait_for(out: Path, proc: subprocess.Popen, done: int, timeout_s: float = 600) -> None:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
