@@ -25,6 +25,7 @@ from multiprocessing.connection import Connection, wait
 from pathlib import Path
 
 from scene_builder.config import BuildConfig, InputSpec
+from scene_builder.errors import SceneBuilderError
 
 
 @dataclass(frozen=True)
@@ -99,8 +100,8 @@ def _rss_mb() -> tuple[float, float]:
     """(current, peak) resident memory of this process in MB."""
     import psutil
 
-    peak_kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # kilobytes on Linux
-    return psutil.Process().memory_info().rss / 1e6, peak_kb / 1e3
+    peak_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # KiB on Linux
+    return psutil.Process().memory_info().rss / 1e6, peak_kib * 1024 / 1e6
 
 
 def run_item(task: ItemTask, job: WorkerJob) -> ItemOutcome:
@@ -246,6 +247,11 @@ class LocalPool:
                 continue
             if slot.process.sentinel in ready or not slot.process.is_alive():
                 self.stats.crashed += 1
+                if slot.warm_s is None:
+                    raise SceneBuilderError(
+                        f"a batch worker exited (status {slot.process.exitcode}) before it was ready; its error is above. From a "
+                        "script, call run_batch under `if __name__ == '__main__':` (workers are spawned and import the main module)"
+                    )
                 if slot.task is not None:
                     reason = f"worker process died (exit status {slot.process.exitcode}) while building it; restarted"
                     out.append(ItemOutcome(slot.task, "failed", reason, retryable=True, worker=str(slot.process.pid)))

@@ -139,29 +139,33 @@ def _print(args, samples: list[Path], rows, full: tuple[float, float | None] | N
         return
     full_s, full_rss = full
     one = next((s for label, w, s, *_ in rows if w == 1 and "local" in label), None)
-    best = max(rows, key=lambda r: r[2].scenes_per_min)
     if one is None or one.median_build_s is None:
         return
+    best_label, _, best, *_ = max(rows, key=lambda r: r[2].scenes_per_min)
+    cores = os.cpu_count() or 2
     small_s = one.median_build_s
-    per_worker = best[2].scenes_per_min / best[1]  # scenes per minute per worker at the small size
-    efficiency = per_worker / one.scenes_per_min if one.scenes_per_min else float("nan")
-    # At full size a build takes full_s instead of small_s; per-item overhead stays what it was.
+    scale = full_s / small_s  # a full-size build costs this many small ones (both alone, 1 worker)
+    node_rate = best.scenes_per_min / scale  # full-size scenes per minute of one node, as measured here
+    minutes = 10_000 / (100 * node_rate)
     overhead = statistics.median([s.overhead_s for _, _, s, *_ in rows if s.overhead_s is not None] or [0.0])
-    item_s = full_s / efficiency + overhead
-    cores = 100 * (os.cpu_count() or 2)
-    hours = 10_000 * item_s / cores / 3600
+    ideal_rate = cores * 60.0 / (full_s + overhead)  # every core a worker at the 1-worker speed
+    peak = max((s.peak_worker_rss_mb or 0) for _, _, s, *_ in rows)
     print(
-        f"\nOne full-size photo ({samples[0].name}, alone, 1 worker): {full_s:.1f} s of build (here {small_s:.1f} s at "
-        f"{args.width} px). **10,000 photos on 100 nodes like this one** ({os.cpu_count()} cores, one worker per core, "
-        f"{cores} workers): the best configuration above ran at {per_worker:.2f} scenes/min per worker, "
-        f"{efficiency:.2f} of the 1-worker rate ({one.scenes_per_min:.2f}/min), so a full-size item costs "
-        f"{full_s:.1f} / {efficiency:.2f} + {overhead:.2f} s overhead = {item_s:.1f} worker-seconds; 10,000 x {item_s:.1f} s / "
-        f"{cores} workers = {hours * 60:.0f} min ({hours:.2f} h) of wall time, {10_000 * item_s / 3600:.0f} core-hours, plus "
-        f"one warm-up of about {_fmt(one.warm_s, '.0f')} s per worker. Memory: a worker peaked at "
-        f"{_fmt(max((s.peak_worker_rss_mb or 0) for _, _, s, *_ in rows), '.0f')} MB at {args.width} px and "
-        f"{_fmt(full_rss, '.0f')} MB on the full-size photo: a node needs about that much per worker."
+        f"\nOne full-size photo ({samples[0].name}, alone, 1 worker): {full_s:.1f} s of build, {scale:.2f} x the "
+        f"{small_s:.2f} s of a {args.width} px photo, peak worker memory {_fmt(full_rss, '.0f')} MB.\n\n"
+        f"**10,000 photos on 100 nodes like this one** ({cores} cores each). As measured here: the best configuration "
+        f"({best_label}) built {best.scenes_per_min:.2f} scenes/min at {args.width} px, so {best.scenes_per_min:.2f} / "
+        f"{scale:.2f} = {node_rate:.2f} full-size scenes/min per node; 100 nodes make {100 * node_rate:.0f} scenes/min and "
+        f"10,000 photos take 10,000 / {100 * node_rate:.0f} = {minutes:.0f} min ({100 * minutes / 60:.0f} node-hours). "
+        f"On dedicated nodes where each core runs one worker at the 1-worker speed measured here (an upper bound: that "
+        f"worker had the torch threads of every core, and the 2-worker runs above did not reach it on this shared machine): {cores} x 60 / ({full_s:.1f} + {overhead:.2f} s overhead) = "
+        f"{ideal_rate:.2f} scenes/min per node, 10,000 / {100 * ideal_rate:.0f} = {10_000 / (100 * ideal_rate):.0f} min. "
+        f"Per item, the batch adds {overhead:.2f} s ({100 * overhead / full_s:.1f} % of a full-size build) and each worker "
+        f"loads for about {_fmt(one.warm_s, '.0f')} s once; the coordinator records "
+        f"{100 * node_rate / 60:.1f} items/s, one SQLite transaction each. Memory: a worker reached {peak:.0f} MB "
+        f"after 20 photos in a row, so budget about {peak / 1000:.0f} GB per worker (or cap it with --max-worker-memory-gb / "
+        "--max-items-per-worker)."
     )
-
 
 if __name__ == "__main__":
     main()
