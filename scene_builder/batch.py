@@ -385,7 +385,8 @@ def run_batch(source: Path, out_root: Path, config: BuildConfig = BuildConfig(),
         _remove_stale_staging(out_root, {it.name for it in items})
         todo, skipped = plan(manifest, items, out_root, options)
         limit = None if options.max_worker_memory_gb is None else int(options.max_worker_memory_gb * 1e9)
-        threads = max(1, (os.cpu_count() or 1) // max(1, options.workers or 1))
+        # Local workers share this machine's cores; a Ray task has one CPU of its node.
+        threads = 1 if options.ray is not None else max(1, (os.cpu_count() or 1) // max(1, options.workers))
         job = WorkerJob(config, options.overwrite, threads, limit)
         mode = "local" if options.ray is None else f"ray:{options.ray}"
         start = time.perf_counter()

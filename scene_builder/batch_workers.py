@@ -87,6 +87,7 @@ def warm_up(job: WorkerJob) -> float:
     if _WARM_S is not None:
         return 0.0
     start = time.perf_counter()
+    os.environ.setdefault("MUJOCO_GL", "egl")  # as the CLI sets it; a Ray node's worker may not have it
     if job.threads > 0:
         os.environ.setdefault("OMP_NUM_THREADS", str(job.threads))
     from scene_builder.pipeline import load_stages
