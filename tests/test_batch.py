@@ -117,6 +117,27 @@ def test_output_root_inside_the_input_or_a_foreign_folder_is_refused(tmp_path):
     assert (tmp_path / "mine" / "thesis.tex").read_text() == "keep me"
 
 
+def test_cli_errors_are_one_line_with_the_input_exit_status(tmp_path, capsys):
+    from scene_builder.batch import _lock
+    from scene_builder.cli import main
+
+    assert main(["batch", str(tmp_path / "nowhere"), "-o", str(tmp_path / "out"), "--offline"]) == 3
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error: ") and "does not exist" in err and "\n" not in err
+    (tmp_path / "in" / "a").mkdir(parents=True)
+    (tmp_path / "in" / "a" / "rgb.jpg").write_bytes(b"")
+    (tmp_path / "out").mkdir()
+    held = _lock(tmp_path / "out")  # another coordinator holds OUT_ROOT
+    try:
+        assert main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "out"), "--offline", "-q"]) == 3
+        assert "another batch is running" in capsys.readouterr().err
+    finally:
+        held.close()
+    with pytest.raises(SystemExit) as usage:
+        main(["batch", str(tmp_path / "in"), "-o", str(tmp_path / "out"), "--workers", "0"])
+    assert usage.value.code == 2 and "expected 1 or more" in capsys.readouterr().err
+
+
 def test_resume_adopts_a_complete_output_rebuilds_an_interrupted_item_and_clears_its_staging(tmp_path):
     from scene_builder.batch import Manifest, _remove_stale_staging, plan
     from scene_builder.batch_workers import ItemTask
