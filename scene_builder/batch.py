@@ -157,7 +157,9 @@ def find_items(source: Path) -> tuple[BatchItem, ...]:
             rel = photo.absolute().relative_to(root.absolute())
         except ValueError:
             rel = Path(photo.name)
-        parts = rel.parent.parts if sample and rel.parent.parts else (*rel.parent.parts, rel.stem)
+        parts = rel.parent.parts if sample else (*rel.parent.parts, rel.stem)
+        if not parts:  # a list of one sample folder: its root is that folder
+            parts = (photo.absolute().parent.name,)
         name = "__".join(parts)
         if name in seen:
             name = "__".join((*rel.parent.parts, rel.name.replace(".", "_")))

@@ -98,6 +98,8 @@ def test_names_are_unique_when_every_frame_is_rgb_jpg(tmp_path):
     listing = tmp_path / "list.txt"
     listing.write_text("# two samples and a photo\nin/scans/a\nin/scans/b/rgb.jpg\n\nin/photos/kitchen.jpg\n")
     assert [it.name for it in find_items(listing)] == ["scans__a", "scans__b", "photos__kitchen"]
+    (tmp_path / "one.txt").write_text("in/scans/b\n")
+    assert [(it.name, it.depth_path) for it in find_items(tmp_path / "one.txt")] == [("b", tmp_path / "in/scans/b/depth.png")]
     (tmp_path / "bad.txt").write_text("in/photos\n")
     with pytest.raises(InputError, match="holds no rgb.jpg"):
         find_items(tmp_path / "bad.txt")
