@@ -20,8 +20,6 @@ import json
 import os
 import statistics
 import tempfile
-import time
-from dataclasses import replace
 from pathlib import Path
 
 __all__ = ["main", "write_small_sample", "rgbd_samples"]
