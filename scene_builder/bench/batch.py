@@ -148,6 +148,8 @@ def _print(args, samples: list[Path], rows, full: tuple[float, float | None] | N
     overhead = statistics.median([s.overhead_s for _, _, s, *_ in rows if s.overhead_s is not None] or [0.0])
     ideal_rate = cores * 60.0 / (full_s + overhead)  # every core a worker at the 1-worker speed
     peak = max((s.peak_worker_rss_mb or 0) for _, _, s, *_ in rows)
+    slower = any(w > 1 and s.scenes_per_min < one.scenes_per_min * w for _, w, s, *_ in rows)
+    caveat = ", and the runs with more workers above did not reach it on this shared machine" if slower else ""
     print(
         f"\nOne full-size photo ({samples[0].name}, alone, 1 worker): {full_s:.1f} s of build, {scale:.2f} x the "
         f"{small_s:.2f} s of a {args.width} px photo, peak worker memory {_fmt(full_rss, '.0f')} MB.\n\n"
@@ -156,12 +158,12 @@ def _print(args, samples: list[Path], rows, full: tuple[float, float | None] | N
         f"{scale:.2f} = {node_rate:.2f} full-size scenes/min per node; 100 nodes make {100 * node_rate:.0f} scenes/min and "
         f"10,000 photos take 10,000 / {100 * node_rate:.0f} = {minutes:.0f} min ({100 * minutes / 60:.0f} node-hours). "
         f"On dedicated nodes where each core runs one worker at the 1-worker speed measured here (an upper bound: that "
-        f"worker had the torch threads of every core, and the 2-worker runs above did not reach it on this shared machine): {cores} x 60 / ({full_s:.1f} + {overhead:.2f} s overhead) = "
+        f"worker had the torch threads of every core{caveat}): {cores} x 60 / ({full_s:.1f} + {overhead:.2f} s overhead) = "
         f"{ideal_rate:.2f} scenes/min per node, 10,000 / {100 * ideal_rate:.0f} = {10_000 / (100 * ideal_rate):.0f} min. "
         f"Per item, the batch adds {overhead:.2f} s ({100 * overhead / full_s:.1f} % of a full-size build) and each worker "
         f"loads for about {_fmt(one.warm_s, '.0f')} s once; the coordinator records "
         f"{100 * node_rate / 60:.1f} items/s, one SQLite transaction each. Memory: a worker reached {peak:.0f} MB "
-        f"after 20 photos in a row, so budget about {peak / 1000:.0f} GB per worker (or cap it with --max-worker-memory-gb / "
+        f"after {args.n} photos in a row, so budget about {peak / 1000:.0f} GB per worker (or cap it with --max-worker-memory-gb / "
         "--max-items-per-worker)."
     )
 
