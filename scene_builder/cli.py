@@ -12,7 +12,7 @@ import os
 import sys
 from pathlib import Path
 
-COMMANDS = ("build", "demo", "bench", "check", "view", "models")
+COMMANDS = ("build", "batch", "demo", "bench", "check", "view", "models")
 
 _DESCRIPTION = """\
 Turn one photo of a room into a simulation-ready digital twin: every visible movable object as a
@@ -24,6 +24,7 @@ and glTF, with a rerun recording to inspect it.
 
   scene-builder room.jpg                      plain photo (depth estimated)
   scene-builder build room.jpg --depth d.png  RGB-D (uint16 PNG in millimetres)
+  scene-builder batch photos/ -o scenes/      many photos, resumable (--workers N, --ray auto)
   scene-builder demo                          render a procedural room and rebuild it
   scene-builder check room_scene              re-validate an output folder
   scene-builder view room_scene               open the rerun viewer on a saved scene
@@ -84,6 +85,11 @@ def _add_build_options(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="replace the output folder even if scene-builder did not write it (its content is deleted)",
     )
+    _add_scene_options(p)
+
+
+def _add_scene_options(p: argparse.ArgumentParser) -> None:
+    """The options of a build shared by ``build`` and ``batch`` (all but the output folder)."""
     p.add_argument("--seed", type=int, default=0, help="random seed; the output is deterministic for a given input and seed (default 0)")
     p.add_argument(
         "--viz",
@@ -162,6 +168,8 @@ def make_parser() -> argparse.ArgumentParser:
     )
     _add_build_options(b)
 
+    _add_batch_parser(sub)
+
     d = sub.add_parser("demo", help="render a procedural room with MuJoCo, rebuild it, and compare with the truth")
     d.add_argument("-o", "--out", type=Path, default=Path("demo_scene"), help="output folder (default demo_scene/)")
     d.add_argument("--overwrite", action="store_true", help="replace the output folder even if scene-builder did not write it")
@@ -194,6 +202,57 @@ def make_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _non_negative_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected 0 or more, got {v}")
+    return v
+
+
+def _positive_int(text: str) -> int:
+    v = _non_negative_int(text)
+    if v == 0:
+        raise argparse.ArgumentTypeError("expected 1 or more, got 0")
+    return v
+
+
+def _add_batch_parser(sub) -> None:
+    ba = sub.add_parser(
+        "batch",
+        help="build many photos into OUT_ROOT/<name>/, resumable, on local worker processes or a Ray cluster",
+        description="Build every photo of INPUT into OUT_ROOT/<name>/ exactly as `build` would. INPUT is a folder (searched "
+        "recursively) or a text file listing photos or sample folders, one a line. A photo's depth.png and camera.json in "
+        "its folder are used (the ../shared/data layout: rgb.jpg|png, depth.png in millimetres, camera.json); <name> is the "
+        "photo's path relative to INPUT with / written __ (a sample folder's rgb.* is named after the folder). "
+        "OUT_ROOT/manifest.sqlite records each item's state, attempts, timings, error and scene-builder version: a rerun "
+        "skips done items, resumes a killed run (an unfinished item is rebuilt, never built twice) and retries failed items "
+        "with --retry-failed. One bad photo fails alone.",
+        epilog="Exit status: 0 every item done, 1 some item failed (listed, and in the manifest), 2 usage error, 3 input error "
+        "(INPUT missing, OUT_ROOT inside INPUT or not a batch's, another batch running on OUT_ROOT).",
+    )
+    ba.add_argument("input", type=Path, metavar="INPUT_DIR_OR_LIST", help="folder of photos / sample folders, or a text file listing them")
+    ba.add_argument("-o", "--out", type=Path, required=True, metavar="OUT_ROOT", help="output root: one folder per photo and manifest.sqlite")
+    ba.add_argument("--workers", type=_positive_int, metavar="N", help="worker processes (default 1; with --ray: at most N tasks at once, default every CPU of the cluster)")
+    ba.add_argument(
+        "--ray",
+        metavar="ADDRESS",
+        help="run the items as Ray tasks: auto (the running cluster, `ray start`), local (start one here) or a cluster "
+        "address; every node needs scene-builder and the same paths (pip install 'scene-builder[ray]')",
+    )
+    ba.add_argument("--retry-failed", action="store_true", help="build again the items that failed in an earlier run")
+    ba.add_argument("--since-version", metavar="VERSION", help="rebuild done items made by a scene-builder older than VERSION")
+    ba.add_argument("--retries", type=_non_negative_int, default=1, metavar="N",
+                    help="extra attempts, in the same run, of an item whose worker died or went over the memory limit (default 1)")
+    ba.add_argument("--max-worker-memory-gb", type=_positive, default=8.0, metavar="GB",
+                    help="resident memory limit of one worker: a worker over it is killed and replaced, its item failed and retried (default 8)")
+    ba.add_argument("--max-items-per-worker", type=_positive_int, metavar="N", help="replace a worker after N photos (default never)")
+    ba.add_argument("--overwrite", action="store_true", help="replace OUT_ROOT/<name> even if scene-builder did not write it")
+    _add_scene_options(ba)
+
+
 def _version() -> str:
     from scene_builder import __version__
 
@@ -207,14 +266,13 @@ def _normalise_argv(argv: list[str]) -> list[str]:
     return argv
 
 
-def _cmd_build(args: argparse.Namespace) -> int:
+def _build_config(args: argparse.Namespace):
+    """The BuildConfig of the scene options (:func:`_add_scene_options`)."""
     from dataclasses import replace
 
-    from scene_builder.config import BuildConfig, ExportConfig, InputSpec, LayoutConfig, PerceptionConfig
-    from scene_builder.pipeline import build, default_out_dir
+    from scene_builder.config import BuildConfig, ExportConfig, LayoutConfig, PerceptionConfig
 
-    inputs = InputSpec(args.image, args.depth, args.depth_scale, args.intrinsics, args.fov_deg)
-    config = BuildConfig(
+    return BuildConfig(
         seed=args.seed,
         perception=replace(
             PerceptionConfig(),
@@ -226,11 +284,45 @@ def _cmd_build(args: argparse.Namespace) -> int:
         export=ExportConfig(usd=not args.no_usd, usdz=args.usdz and not args.no_usd, urdf=not args.no_urdf,
                             scene_urdf=args.scene_urdf, sdf=not args.no_sdf, gltf=not args.no_gltf, viz=args.viz),
     )
+
+
+def _cmd_build(args: argparse.Namespace) -> int:
+    from scene_builder.config import InputSpec
+    from scene_builder.pipeline import build, default_out_dir
+
+    inputs = InputSpec(args.image, args.depth, args.depth_scale, args.intrinsics, args.fov_deg)
+    config = _build_config(args)
     out = args.out or default_out_dir(args.image)
     if args.image.is_file():  # no download before a missing photo is reported (by build, below)
         _prepare_weights(config.perception, need_depth=args.depth is None, offline=args.offline, quiet=args.quiet)
     result = build(inputs, out, config, progress=not args.quiet, overwrite=args.overwrite, default_name=args.out is None)
     _print_summary(result)
+    return 0
+
+
+def _cmd_batch(args: argparse.Namespace) -> int:
+    from scene_builder.batch import BatchOptions, run_batch
+
+    config = _build_config(args)
+    if args.input.exists():
+        _prepare_weights(config.perception, need_depth=True, offline=args.offline, quiet=args.quiet)
+    options = BatchOptions(
+        workers=args.workers or 1 if args.ray is None else args.workers,
+        ray=args.ray,
+        retry_failed=args.retry_failed,
+        since_version=args.since_version,
+        retries=args.retries,
+        max_worker_memory_gb=args.max_worker_memory_gb,
+        max_items_per_worker=args.max_items_per_worker,
+        overwrite=args.overwrite,
+        progress=not args.quiet,
+    )
+    summary = run_batch(args.input, args.out, config, options)
+    print(summary.manifest)
+    if summary.failed_total:
+        name, error = summary.errors[0]
+        print(f"error: {summary.failed_total} of {summary.total} items failed (first: {name}: {_one_line(error)}); see {summary.manifest}", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -351,6 +443,7 @@ def main(argv: list[str] | None = None) -> int:
 
     handlers = {
         "build": _cmd_build,
+        "batch": _cmd_batch,
         "demo": _cmd_demo,
         "bench": _cmd_bench,
         "check": _cmd_check,

@@ -96,6 +96,15 @@ EXTRAS: tuple[Extra, ...] = (
         ("-m", "scene_builder.bench.detect"),
     ),
     Extra(
+        "Batch throughput: many photos on one machine and on Ray",
+        "`scene-builder batch` over 20 real RGB-D photos downscaled to 320 px wide (`scene_builder.bench.batch`) with 1 and "
+        "2 local workers and on a local Ray cluster: scenes per minute, overhead per item, worker warm-up, peak memory per "
+        "worker, the machine's load average; one full-size photo to scale up; what 10,000 photos cost on 100 nodes.",
+        ("-m", "scene_builder.bench.batch"),
+        markdown=True,
+        timeout_s=1800.0,
+    ),
+    Extra(
         "Parser fuzzing",
         "Every parser of outside data (`scene_builder.bench.fuzz`): PhysX geometry token decoders (strict and lenient), the "
         "PhysX text protocol, basic_info.json, scene.json, depth, camera.json and image files, on mutated real seeds. "
