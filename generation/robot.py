@@ -62,16 +62,15 @@ def load_robot(name: str, work_dir: Path, source: str = "auto", offline: bool = 
     Raises InputError for an unknown name or source, ModelUnavailableError when the only source
     asked for cannot answer.
     """
-    if name not in ROBOTS:
-        raise InputError(f"unknown robot {name!r}; choose one of {', '.join(robot_names())}")
-    if source not in SOURCES:
-        raise InputError(f"unknown robot source {source!r}; choose one of {', '.join(SOURCES)}")
+    check_robot_request(name, source, offline)
     entry = ROBOTS[name]
     why = ""
-    if source in ("auto", "menagerie") and entry.menagerie is not None and not offline:
+    if source in ("auto", "menagerie") and entry.menagerie is not None:
+        import mujoco_menagerie
+
         try:
-            return _from_menagerie(name, entry, cache)
-        except Exception as err:  # any failure of the download or the model: report it, then fall back
+            return _from_menagerie(name, entry, cache, download=not offline)
+        except (mujoco_menagerie.MenagerieError, OSError, ModelUnavailableError) as err:  # reported, then the fallback
             if source == "menagerie" or not entry.builtin:
                 raise ModelUnavailableError(
                     f"robot {name}: MuJoCo Menagerie's {entry.menagerie[0]} is not available ({_one_line(err)}); "
@@ -79,16 +78,21 @@ def load_robot(name: str, work_dir: Path, source: str = "auto", offline: bool = 
                     + (", or pass --robot-source built-in" if entry.builtin else "")
                 ) from err
             why = f"Menagerie unavailable: {_one_line(err)}"
-    elif source == "menagerie" and entry.menagerie is None:
-        raise InputError(f"robot {name} is not in MuJoCo Menagerie; pass --robot-source built-in (or auto)")
-    elif entry.menagerie is not None and offline:
-        why = "offline"
-    if not entry.builtin or source == "menagerie":
-        raise ModelUnavailableError(
-            f"robot {name} comes only from MuJoCo Menagerie ({entry.menagerie[0]}) and this build is offline; "
-            "drop --offline or set MENAGERIE_ROOT to a Menagerie checkout"
-        )
     return _from_builtin(name, entry, Path(work_dir), why)
+
+
+def check_robot_request(name: str, source: str = "auto", offline: bool = False) -> None:
+    """Raise InputError (one line) unless ``name`` from ``source`` can be asked for at all; the
+    pipeline calls it before the slow stages."""
+    if name not in ROBOTS:
+        raise InputError(f"unknown robot {name!r}; choose one of {', '.join(robot_names())}")
+    if source not in SOURCES:
+        raise InputError(f"unknown robot source {source!r}; choose one of {', '.join(SOURCES)}")
+    entry = ROBOTS[name]
+    if source == "menagerie" and entry.menagerie is None:
+        raise InputError(f"robot {name} is not in MuJoCo Menagerie; pass --robot-source built-in (or auto)")
+    if source == "built-in" and not entry.builtin:
+        raise InputError(f"robot {name} has no built-in model (MuJoCo Menagerie only); pass --robot-source auto")
 
 
 def _one_line(err: Exception) -> str:
@@ -96,11 +100,14 @@ def _one_line(err: Exception) -> str:
     return (text[0] if text else type(err).__name__)[:200]
 
 
-def _from_menagerie(name: str, entry: RobotEntry, cache) -> RobotModel:
+def _from_menagerie(name: str, entry: RobotEntry, cache, download: bool = True) -> RobotModel:
     import mujoco_menagerie
 
     registry_name, entry_point = entry.menagerie
     robot = mujoco_menagerie.get(registry_name)
+    cache = cache or mujoco_menagerie.Cache()
+    if not download and cache.root is None and not cache.is_cached(robot):
+        raise ModelUnavailableError(f"offline and {registry_name} is not in the Menagerie cache {cache.dir}")
     folder = robot.path(cache, progress=None)
     xml = folder / robot.entry(entry_point).file
     detail = (f"MuJoCo Menagerie {registry_name} ({robot.display_name}, licence {robot.license}, "

@@ -106,6 +106,19 @@ def _add_build_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--settle-s", type=_positive, default=3.0, help="seconds of simulation in the stability check (default 3)")
     p.add_argument("--adopt-settled", action="store_true", help="write the poses after the settle simulation instead of the solved ones")
+    p.add_argument(
+        "--robot",
+        metavar="NAME",
+        help="place a robot on a free floor spot facing a surface its arm reaches (MJCF and USD, prefix robot/): "
+        "panda (Franka Panda), mobile_panda (Panda on a holonomic base), tidybot (Stanford TidyBot, Menagerie only)",
+    )
+    p.add_argument(
+        "--robot-source",
+        choices=("auto", "menagerie", "built-in"),
+        default="auto",
+        help="where the robot model comes from: auto = MuJoCo Menagerie (downloaded once into its cache), "
+        "else the built-in model; --offline means built-in (default auto)",
+    )
     p.add_argument("--no-usd", action="store_true", help="skip scene.usda")
     p.add_argument("--usdz", action="store_true", help="also package the USD stage and its textures as one scene.usdz file for hand-off")
     p.add_argument("--no-urdf", action="store_true", help="skip scene.urdf")
@@ -202,7 +215,7 @@ def _normalise_argv(argv: list[str]) -> list[str]:
 def _cmd_build(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from scene_builder.config import BuildConfig, ExportConfig, InputSpec, LayoutConfig, PerceptionConfig
+    from scene_builder.config import BuildConfig, ExportConfig, InputSpec, LayoutConfig, PerceptionConfig, RobotConfig
     from scene_builder.pipeline import build, default_out_dir
 
     inputs = InputSpec(args.image, args.depth, args.depth_scale, args.intrinsics, args.fov_deg)
@@ -216,6 +229,7 @@ def _cmd_build(args: argparse.Namespace) -> int:
         ),
         layout=replace(LayoutConfig(), settle_s=args.settle_s, adopt_settled=args.adopt_settled),
         export=ExportConfig(usd=not args.no_usd, usdz=args.usdz and not args.no_usd, urdf=not args.no_urdf, gltf=not args.no_gltf, viz=args.viz),
+        robot=RobotConfig(args.robot, args.robot_source, args.offline),
     )
     out = args.out or default_out_dir(args.image)
     if args.image.is_file():  # no download before a missing photo is reported (by build, below)

@@ -171,6 +171,10 @@ def build(
     out_dir = Path(out_dir)
     check_paths(inputs)  # a missing photo is the first thing to say, before anything about the output
     check_out_dir(out_dir, inputs, overwrite=overwrite, default_name=default_name)
+    if config.robot.name:
+        from generation.robot import check_robot_request
+
+        check_robot_request(config.robot.name, config.robot.source, config.robot.offline)
     log = StageLog(progress)
     total_start = time.perf_counter()
     staging = _make_staging(out_dir)
@@ -205,6 +209,9 @@ def build(
                 scene = settled_scene(scene, verdict)
                 mjcf_path = write_mjcf(scene, staging)
                 verdict, fidelity = verify_scene(mjcf_path, scene, config.layout, perceived)
+        if config.robot.name:
+            with log.stage("robot", lambda: _robot_summary(scene, verdict)):
+                scene, mjcf_path, verdict = _add_robot(scene, staging, config)
         with log.stage("export", lambda: ", ".join(p.name for p in _paths(files))):
             files = export_scene(scene, staging, dataclasses.replace(config.export, mjcf=False, viz="off"))
             files = dataclasses.replace(files, mjcf=mjcf_path)
@@ -223,6 +230,7 @@ def build(
         log.timings.append(("total", time.perf_counter() - total_start))
         report = build_report(inputs, config, perceived, layout, scene, verdict, fidelity, tuple(log.timings))
         write_report(staging, scene, report)
+        shutil.rmtree(staging / ROBOT_WORK_DIR, ignore_errors=True)
         write_marker(staging, inputs)
         # Checked again: the build took a while, and someone may have put a file in out_dir.
         check_out_dir(out_dir, inputs, overwrite=overwrite, default_name=default_name)
@@ -232,6 +240,41 @@ def build(
         raise
     files = ExportedFiles(*[None if p is None else out_dir / p.name for p in dataclasses.astuple(files)])
     return BuildResult(perceived, layout, scene, verdict, fidelity, files, tuple(log.timings), out_dir, out_dir / "report.json")
+
+
+#: Where the built-in robot's MJCF is written during a build (removed before the output is in place).
+ROBOT_WORK_DIR = ".robot"
+
+
+def _add_robot(scene: Scene, staging: Path, config: BuildConfig) -> tuple[Scene, Path, PhysicsVerdict]:
+    """Load the robot, try its placements best first and keep the first whose geoms overlap
+    nothing in the written MJCF; then the physics check of the scene with the robot (its
+    fidelity stays the twin's: the robot was not in the photo)."""
+    from exporters import write_mjcf
+    from generation.robot import load_robot
+    from layout import verify_scene
+    from layout.robot import place_robot, robot_overlaps
+
+    model = load_robot(config.robot.name, staging / ROBOT_WORK_DIR, config.robot.source, config.robot.offline)
+    worst = 0.0
+    for placement in place_robot(scene, model):
+        with_robot = dataclasses.replace(scene, robot=placement)
+        mjcf_path = write_mjcf(with_robot, staging)
+        worst = robot_overlaps(mjcf_path)
+        if worst <= 0.0:
+            verdict, _ = verify_scene(mjcf_path, with_robot, config.layout)
+            return with_robot, mjcf_path, verdict
+    raise InputError(
+        f"--robot {model.name}: every free spot found overlaps the scene in MuJoCo (by {worst * 1000:.1f} mm at best); build without --robot"
+    )
+
+
+def _robot_summary(scene: Scene, verdict: PhysicsVerdict) -> str:
+    r = scene.robot
+    if r is None:
+        return ""
+    return (f"{r.model.name} ({r.model.source}) at ({r.position_m[0]:.2f}, {r.position_m[1]:.2f}) m facing {r.target_support}; "
+            f"{_verdict_summary(verdict)}")
 
 
 def _paths(files: ExportedFiles) -> list[Path]:
