@@ -142,7 +142,7 @@ def build_report(
             "mask_iou_mean": _r(fidelity.mask_iou_mean, 5),
             "mask_iou": {name: _r(iou, 4) for name, iou in fidelity.mask_iou},
         },
-        "robot": _robot_report(scene),
+        "robot": robot_report(scene),
         "machine": {"python": platform.python_version(), "platform": platform.platform()},
     }
 
@@ -158,7 +158,7 @@ def _generation_use(backend: str, scene: Scene) -> dict:
     return {"task": "generation", "backend": backend, "reason": reason}
 
 
-def _robot_report(scene: Scene) -> dict | None:
+def robot_report(scene: Scene) -> dict | None:
     """Where the robot stands and what drives it (MJCF names, with the ``robot/`` prefix)."""
     r = scene.robot
     if r is None:
