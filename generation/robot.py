@@ -69,7 +69,7 @@ def load_robot(name: str, work_dir: Path, source: str = "auto", offline: bool = 
         import mujoco_menagerie
 
         try:
-            return _from_menagerie(name, entry, cache, download=not offline)
+            return _from_menagerie(name, entry, Path(work_dir), cache, download=not offline)
         except (mujoco_menagerie.MenagerieError, OSError, ModelUnavailableError) as err:  # reported, then the fallback
             if source == "menagerie" or not entry.builtin:
                 raise ModelUnavailableError(
@@ -100,7 +100,7 @@ def _one_line(err: Exception) -> str:
     return (text[0] if text else type(err).__name__)[:200]
 
 
-def _from_menagerie(name: str, entry: RobotEntry, cache, download: bool = True) -> RobotModel:
+def _from_menagerie(name: str, entry: RobotEntry, work_dir: Path, cache, download: bool = True) -> RobotModel:
     import mujoco_menagerie
 
     registry_name, entry_point = entry.menagerie
@@ -112,7 +112,7 @@ def _from_menagerie(name: str, entry: RobotEntry, cache, download: bool = True) 
     xml = folder / robot.entry(entry_point).file
     detail = (f"MuJoCo Menagerie {registry_name} ({robot.display_name}, licence {robot.license}, "
               f"commit {mujoco_menagerie.commit()[:12]}, model {robot.oid[:12]})")
-    return measure_robot(name, "menagerie", detail, xml, entry)
+    return measure_robot(name, "menagerie", detail, _prepared(xml, entry, work_dir), entry)
 
 
 def _from_builtin(name: str, entry: RobotEntry, work_dir: Path, why: str) -> RobotModel:
@@ -121,6 +121,7 @@ def _from_builtin(name: str, entry: RobotEntry, work_dir: Path, why: str) -> Rob
     spec = BUILDERS[name]()
     work_dir.mkdir(parents=True, exist_ok=True)
     xml = work_dir / "robot.xml"
+    _ensure_site(spec, entry)
     xml.write_text(spec.to_xml())
     detail = "built-in: Franka Panda from Franka's published DH table, joint limits and link masses (capsule geometry)"
     if why:
@@ -128,14 +129,20 @@ def _from_builtin(name: str, entry: RobotEntry, work_dir: Path, why: str) -> Rob
     return measure_robot(name, "built-in", detail, xml, entry)
 
 
-def robot_spec(model: RobotModel):
-    """The robot's ``MjSpec`` as the exporters attach it: the file as loaded, plus site
-    ``tcp`` on the end-effector body when the model has no ``ee_site`` of its own."""
+def _prepared(xml: Path, entry: RobotEntry, work_dir: Path) -> Path:
+    """``work_dir/robot.xml``: the model as the exporters attach it, the file as loaded plus
+    site ``tcp`` on the end-effector body when it has no ``ee_site`` of its own; its mesh and
+    texture folders point back at the model's own folder (absolute), which stays untouched."""
     import mujoco
 
-    spec = mujoco.MjSpec.from_file(str(model.mjcf_path))
-    _ensure_site(spec, ROBOTS[model.name])
-    return spec
+    spec = mujoco.MjSpec.from_file(str(xml))
+    _ensure_site(spec, entry)
+    spec.meshdir = str((xml.parent / spec.meshdir).resolve())
+    spec.texturedir = str((xml.parent / spec.texturedir).resolve())
+    work_dir.mkdir(parents=True, exist_ok=True)
+    out = work_dir / "robot.xml"
+    out.write_text(spec.to_xml())
+    return out
 
 
 def _ensure_site(spec, entry: RobotEntry) -> None:
@@ -167,7 +174,6 @@ def measure_robot(name: str, source: str, detail: str, xml: Path, entry: RobotEn
     import mujoco
 
     spec = mujoco.MjSpec.from_file(str(xml))
-    _ensure_site(spec, entry)
     try:
         m = spec.compile()
     except ValueError as err:

@@ -8,12 +8,16 @@ projects to the convex hull of its vertices); walls are half-planes. Candidate s
 :data:`GRID_M` grid; a spot is free when the robot's footprint circle (measured on its model at
 the home pose) keeps :data:`CLEARANCE_M` from every obstacle and wall.
 
-Targets: the top of every object (and object left as background) that is at least
-:data:`MIN_TOP_AREA_M2` large, :data:`TARGET_INSET_M` in from its edge and away from whatever
-stands on it; the target point is :data:`TARGET_HEIGHT_M` above that top. A spot is reachable when
-that point, at its nearest, lies within :data:`REACH_FRACTION` of the arm's sampled reach from the
-shoulder. Spots are ranked by how comfortably they reach (distance near :data:`COMFORT_FRACTION`
-of the reach), then visibility from the input camera, then grid order (deterministic).
+Targets: a height map of the same collision geometry on :data:`CELL_M` cells; a cell is a
+target when its top (an object's, fixed furniture's or the background's) is flat within
+:data:`TOP_BAND_M` over :data:`TARGET_INSET_M` around it (away from its edges) and nothing rises
+above it within :data:`ON_TOP_CLEARANCE_M` (clear of what stands on it); the target point is
+:data:`TARGET_HEIGHT_M` above that top. A spot reaches a target when the point lies within
+:data:`REACH_FRACTION` of the arm's sampled reach from the shoulder. Each spot keeps its best
+target; spots are ranked by how comfortably they reach (distance near :data:`COMFORT_FRACTION` of
+the reach), standing on floor the camera saw (:func:`_seen_floor`), an object's top before the
+background's, visibility from the input camera, not
+standing between the camera and the target, then grid order (deterministic).
 
 :func:`robot_overlaps` measures the placed robot against the scene in MuJoCo (``mj_geomDistance``,
 home pose and start pose); the pipeline takes the first candidate with none.
@@ -30,19 +34,22 @@ from scene_builder.model import Scene
 from scene_builder.robot import RobotModel, RobotPlacement
 
 GRID_M = 0.05
+CELL_M = 0.04
 CLEARANCE_M = 0.05
 FLOOR_EPS_M = 0.003  # geometry lower than this is the floor itself (the robot's geoms start at 5 mm)
 TARGET_HEIGHT_M = 0.18
 TARGET_INSET_M = 0.08
 ON_TOP_CLEARANCE_M = 0.12
-MIN_TOP_AREA_M2 = 0.04
-MIN_TOP_M = 0.2
-TOP_BAND_M = 0.03
+MIN_TOP_M = 0.05
+TOP_BAND_M = 0.02
 REACH_FRACTION = 0.85
 COMFORT_FRACTION = 0.65
 MIN_HORIZONTAL_M = 0.25
 ROOM_MARGIN_M = 1.5
 CANDIDATES = 6
+CHUNK = 128
+SEEN_FLOOR_BAND_M = 0.03
+SEEN_FLOOR_WEIGHT = 1.0
 CANDIDATE_SPACING_M = 0.3
 
 
@@ -73,42 +80,55 @@ def _hull(xy: np.ndarray):
     return shapely.MultiPoint(xy.tolist()).convex_hull
 
 
-def _supports(scene: Scene, pieces: list[tuple[str, np.ndarray]], max_top_m: float) -> list[tuple[str, float, object]]:
-    """(name, top z, target region polygon) of each surface the arm could work above."""
+def _height_map(pieces: list[tuple[str, np.ndarray]]):
+    """Top of the collision geometry over the floor plan: (origin (2,), heights (X, Y), owner
+    index (X, Y) into the owners list, owners). A cell's height is the highest top of a piece
+    whose footprint covers the cell's centre (0 for the floor); the owner is that piece's."""
     import shapely
 
-    tops: list[tuple[str, list[np.ndarray]]] = []
-    for o in scene.objects:
-        verts = [v for owner, v in pieces if owner == o.name]
-        if verts:
-            tops.append((o.name, verts))
-    bg = scene.room.background
-    if bg is not None:
-        tops += [(f"background/object/{n}", [np.asarray(m.vertices_m)]) for n, m in zip(bg.static_names, bg.static_meshes)]
-    out = []
-    for name, verts in tops:
-        allv = np.concatenate(verts)
-        top = float(allv[:, 2].max())
-        if not MIN_TOP_M <= top <= max_top_m:
+    allxy = np.concatenate([v[:, :2] for _, v in pieces])
+    lo = np.floor(allxy.min(axis=0) / CELL_M) * CELL_M - CELL_M
+    shape = np.ceil((allxy.max(axis=0) + CELL_M - lo) / CELL_M).astype(int) + 1
+    heights = np.zeros(shape)
+    owner = np.full(shape, -1)
+    owners = sorted({o for o, _ in pieces})
+    index = {o: k for k, o in enumerate(owners)}
+    for name, v in pieces:
+        top = float(v[:, 2].max())
+        if top <= FLOOR_EPS_M:
             continue
-        band = allv[allv[:, 2] >= top - TOP_BAND_M]
-        if len(band) < 3:
-            continue
-        region = _hull(band[:, :2])
-        if region.area < MIN_TOP_AREA_M2:
-            continue
-        region = region.buffer(-TARGET_INSET_M)
-        # Whatever stands on this top (rises above it over its outline) is kept clear of.
-        for owner, v in pieces:
-            if owner == name or v[:, 2].max() <= top + 0.02 or v[:, 2].min() > top + TARGET_HEIGHT_M + 0.3:
-                continue
-            foot = _hull(v[:, :2])
-            if foot.intersects(region.buffer(ON_TOP_CLEARANCE_M)):
-                region = region.difference(foot.buffer(ON_TOP_CLEARANCE_M))
-        if not region.is_empty and region.area > 1e-4:
-            out.append((name, top, shapely.make_valid(region)))
-    out.sort(key=lambda s: s[0])
-    return out
+        i0, j0 = np.floor((v[:, :2].min(axis=0) - lo) / CELL_M).astype(int)
+        i1, j1 = np.ceil((v[:, :2].max(axis=0) - lo) / CELL_M).astype(int)
+        ii, jj = np.meshgrid(np.arange(i0, i1 + 1), np.arange(j0, j1 + 1), indexing="ij")
+        inside = shapely.contains_xy(_hull(v[:, :2]).buffer(1e-9), lo[0] + ii * CELL_M, lo[1] + jj * CELL_M)
+        ii, jj = ii[inside], jj[inside]
+        higher = heights[ii, jj] < top
+        heights[ii[higher], jj[higher]] = top
+        owner[ii[higher], jj[higher]] = index[name]
+    return lo, heights, owner, owners
+
+
+def _disk(radius_m: float) -> np.ndarray:
+    r = int(np.ceil(radius_m / CELL_M))
+    y, x = np.mgrid[-r : r + 1, -r : r + 1]
+    return (x * x + y * y) * CELL_M * CELL_M <= radius_m * radius_m + 1e-12
+
+
+def _targets(pieces: list[tuple[str, np.ndarray]], max_top_m: float) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Cells the arm may work above: (T, 3) target points (TARGET_HEIGHT_M over the top), (T,)
+    owner index and the owners' names. A cell qualifies when its top is between MIN_TOP_M and
+    ``max_top_m``, the top is flat within TOP_BAND_M over TARGET_INSET_M around it (away from
+    its edges) and nothing rises above it within ON_TOP_CLEARANCE_M (clear of what stands on it)."""
+    from scipy import ndimage
+
+    lo, h, owner, owners = _height_map(pieces)
+    flat = (ndimage.maximum_filter(h, footprint=_disk(TARGET_INSET_M), mode="constant", cval=0.0)
+            - ndimage.minimum_filter(h, footprint=_disk(TARGET_INSET_M), mode="constant", cval=0.0)) <= TOP_BAND_M
+    clear = ndimage.maximum_filter(h, footprint=_disk(ON_TOP_CLEARANCE_M), mode="constant", cval=0.0) <= h + TOP_BAND_M
+    ok = flat & clear & (h >= MIN_TOP_M) & (h <= max_top_m) & (owner >= 0)
+    ii, jj = np.nonzero(ok)
+    points = np.column_stack([lo[0] + ii * CELL_M, lo[1] + jj * CELL_M, h[ii, jj] + TARGET_HEIGHT_M])
+    return points, owner[ii, jj], owners
 
 
 def _candidate_grid(scene: Scene, pieces: list[tuple[str, np.ndarray]]) -> np.ndarray:
@@ -119,7 +139,28 @@ def _candidate_grid(scene: Scene, pieces: list[tuple[str, np.ndarray]]) -> np.nd
     xs = np.arange(np.floor(lo[0] / GRID_M) * GRID_M, hi[0] + 1e-9, GRID_M)
     ys = np.arange(np.floor(lo[1] / GRID_M) * GRID_M, hi[1] + 1e-9, GRID_M)
     gx, gy = np.meshgrid(xs, ys, indexing="ij")
-    return np.stack([gx.ravel(), gy.ravel()], axis=1)
+    return np.stack([gx.ravel(), gy.ravel()], axis=1), gx.shape
+
+
+def _seen_floor(scene: Scene, grid: np.ndarray, shape: tuple[int, int], radius_m: float) -> np.ndarray:
+    """(G,) share of the footprint disk around each spot where the camera saw the floor (the
+    background surface's measured vertices at floor height); all ones without a background."""
+    from scipy import ndimage
+
+    bg = scene.room.background
+    if bg is None or not len(bg.surface.vertices_m):
+        return np.ones(len(grid))
+    v = bg.surface.vertices_m[bg.surface_observed]
+    floor = v[np.abs(v[:, 2]) < SEEN_FLOOR_BAND_M, :2]
+    lo = grid[0]
+    idx = np.round((floor - lo) / GRID_M).astype(int)
+    keep = (idx >= 0).all(axis=1) & (idx[:, 0] < shape[0]) & (idx[:, 1] < shape[1])
+    seen = np.zeros(shape)
+    seen[idx[keep, 0], idx[keep, 1]] = 1.0
+    r = int(np.ceil(radius_m / GRID_M))
+    y, x = np.mgrid[-r : r + 1, -r : r + 1]
+    disk = ((x * x + y * y) <= r * r).astype(float)
+    return (ndimage.convolve(seen, disk, mode="constant", cval=0.0) / disk.sum()).ravel()
 
 
 def _in_view(scene: Scene, xy: np.ndarray, z_m: float) -> np.ndarray:
@@ -146,14 +187,14 @@ def place_robot(scene: Scene, model: RobotModel) -> tuple[RobotPlacement, ...]:
     radius = float(model.footprint_radius_m)
     mount_z = float(model.arm_mount_m[2])
     reach = REACH_FRACTION * float(model.reach_m)
-    supports = _supports(scene, pieces, mount_z + reach - 0.05 - TARGET_HEIGHT_M)
-    if not supports:
+    targets, target_owner, owners = _targets(pieces, mount_z + reach - 0.05)
+    if not len(targets):
         raise InputError(
-            f"--robot {model.name}: no surface in the scene for the arm to work above (tops {MIN_TOP_M:g} m to "
-            f"{mount_z + reach - TARGET_HEIGHT_M:.2f} m high, at least {MIN_TOP_AREA_M2:g} m2); build without --robot"
+            f"--robot {model.name}: no flat top in the scene for the arm to work above ({MIN_TOP_M:g} m to "
+            f"{mount_z + reach - 0.05:.2f} m high, {2 * TARGET_INSET_M:g} m across); build without --robot"
         )
     obstacles = [_hull(v[:, :2]) for _, v in pieces if v[:, 2].max() > FLOOR_EPS_M and v[:, 2].min() < model.height_m + 0.1]
-    grid = _candidate_grid(scene, pieces)
+    grid, shape = _candidate_grid(scene, pieces)
     points = shapely.points(grid)
     free = np.ones(len(grid), dtype=bool)
     clearance = np.full(len(grid), np.inf)
@@ -169,30 +210,32 @@ def place_robot(scene: Scene, model: RobotModel) -> tuple[RobotPlacement, ...]:
         raise InputError(f"--robot {model.name}: no free floor spot {2 * radius:.2f} m wide in the room; build without --robot")
     cam_xy = scene.camera.position_m[:2]
     visible = _in_view(scene, grid, 0.5 * model.height_m)
-    best_score = np.full(len(grid), -np.inf)
-    best_target = np.zeros((len(grid), 3))
-    best_support = np.full(len(grid), -1)
+    seen = _seen_floor(scene, grid, shape, radius)
     mount_r = float(np.linalg.norm(model.arm_mount_m[:2]))
-    for s, (_name, top, region) in enumerate(supports):
-        sel = np.flatnonzero(free)
-        lines = shapely.shortest_line(points[sel], region)
-        coords = shapely.get_coordinates(lines).reshape(-1, 2, 2)
-        target_xy = coords[:, 1]
-        away = target_xy - grid[sel]
-        h = np.linalg.norm(away, axis=1) - mount_r  # the shoulder sits mount_r towards the target
-        v = top + TARGET_HEIGHT_M - mount_z
-        dist = np.hypot(h, v)
+    on_object = np.array([owners[k] != "background" for k in target_owner])
+    best_score = np.full(len(grid), -np.inf)
+    best_target = np.full(len(grid), -1)
+    sel_all = np.flatnonzero(free)
+    seg = targets[:, :2] - cam_xy
+    seg_len2 = np.maximum(np.einsum("ij,ij->i", seg, seg), 1e-9)
+    for start in range(0, len(sel_all), CHUNK):
+        sel = sel_all[start : start + CHUNK]
+        away = targets[None, :, :2] - grid[sel, None, :]
+        h = np.linalg.norm(away, axis=2) - mount_r  # the shoulder sits mount_r towards the target
+        dist = np.hypot(h, targets[None, :, 2] - mount_z)
         ok = (h >= MIN_HORIZONTAL_M) & (dist <= reach)
-        # Ranked: comfort of the reach, then seen by the camera, then not in front of the target.
-        seg = target_xy - cam_xy
-        tpar = np.clip(np.einsum("ij,ij->i", grid[sel] - cam_xy, seg) / np.maximum(np.einsum("ij,ij->i", seg, seg), 1e-9), 0, 1)
-        blocks = np.linalg.norm(grid[sel] - (cam_xy + tpar[:, None] * seg), axis=1) < radius
-        score = -np.abs(dist - COMFORT_FRACTION * model.reach_m) + 0.2 * visible[sel] - 0.3 * blocks
+        # Ranked: on floor the camera saw (not behind furniture, where a wall may hide), comfort
+        # of the reach, an object's top over the background's, seen by the camera, not standing
+        # between the camera and the target.
+        tpar = np.clip(np.einsum("ftk,tk->ft", grid[sel, None, :] - cam_xy, seg) / seg_len2, 0.0, 1.0)
+        closest = cam_xy + tpar[:, :, None] * seg[None]
+        blocks = np.linalg.norm(grid[sel, None, :] - closest, axis=2) < radius
+        score = (-np.abs(dist - COMFORT_FRACTION * model.reach_m) + 0.1 * on_object[None] + 0.2 * visible[sel, None]
+                 + SEEN_FLOOR_WEIGHT * seen[sel, None] - 0.3 * blocks)
         score = np.where(ok, score, -np.inf)
-        better = score > best_score[sel]
-        best_score[sel[better]] = score[better]
-        best_target[sel[better]] = np.column_stack([target_xy[better], np.full(better.sum(), top + TARGET_HEIGHT_M)])
-        best_support[sel[better]] = s
+        k = np.argmax(score, axis=1)
+        best_score[sel] = score[np.arange(len(sel)), k]
+        best_target[sel] = k
     order = np.lexsort((np.arange(len(grid)), -np.round(best_score, 6)))
     chosen: list[RobotPlacement] = []
     for g in order:
@@ -200,14 +243,14 @@ def place_robot(scene: Scene, model: RobotModel) -> tuple[RobotPlacement, ...]:
             break
         if any(np.linalg.norm(c.position_m[:2] - grid[g]) < CANDIDATE_SPACING_M for c in chosen):
             continue
-        target = best_target[g]
+        target = targets[best_target[g]]
         yaw = float(np.arctan2(target[1] - grid[g][1], target[0] - grid[g][0]))
-        name = supports[int(best_support[g])][0]
+        name = owners[int(target_owner[best_target[g]])]
         chosen.append(RobotPlacement(model, np.array([grid[g][0], grid[g][1], 0.0]), yaw, target, name, TARGET_HEIGHT_M,
                                      float(clearance[g])))
     if not chosen:
         raise InputError(
-            f"--robot {model.name}: no free floor spot within reach of a surface ({', '.join(s[0] for s in supports[:4])}); "
+            f"--robot {model.name}: no free floor spot within reach of a flat top ({', '.join(sorted(set(owners))[:4])}); "
             "build without --robot or try another robot"
         )
     return tuple(chosen)
