@@ -3,11 +3,12 @@
     scene-builder build photo.jpg --depth depth.png --robot panda -o room
     python examples/robot_reach.py room --seconds 4 --video room_reach.mp4
 
-The controller is scripted, no learning: the tool centre point rises from the home pose to the
-target's height, then moves over the target that the layout chose (report.json ``robot``), with
-the tool's orientation held. Each 10 ms a damped-least-squares inverse kinematics step
-(``mj_jacSite``, a pull towards the home pose in the null space, joint limits respected) turns
-the next waypoint into joint targets for the robot's own position actuators. The video is drawn
+The controller is scripted, no learning (``layout.reach``, the path the build checked the
+placement with): the tool centre point rises from the home pose to the target's height, then
+moves over the target that the layout chose (report.json ``robot``), with the tool's orientation
+held. Each 10 ms a damped-least-squares inverse kinematics step (``mj_jacSite``, a pull towards
+the home pose in the null space, joint limits respected) turns the next waypoint into joint
+targets for the robot's own position actuators. The video is drawn
 with ``mujoco.Renderer`` from a camera looking at the robot and its target, and written with
 imageio's ffmpeg (MP4, H.264).
 
@@ -21,35 +22,21 @@ import argparse
 import json
 import os
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 CONTROL_DT_S = 0.01
-DAMPING = 0.05
-NULL_GAIN = 0.3
 REACH_TOL_M = 0.02
 
 
-@dataclass
-class Robot:
-    """What the controller needs of the robot in a loaded scene (MuJoCo ids)."""
-
-    site: int
-    arm_qpos: np.ndarray  # qpos addresses of the arm joints
-    arm_dof: np.ndarray  # dof addresses
-    arm_act: np.ndarray  # actuator driving each arm joint
-    lo: np.ndarray
-    hi: np.ndarray
-    home: np.ndarray
-    geoms: set[int] = field(default_factory=set)
-
-
 def load(out_dir: Path):
-    """(model, data, robot, target (3,), report['robot']) of a scene built with ``--robot``,
-    reset to keyframe ``robot/home``."""
+    """(model, data, arm ids, target (3,), report['robot']) of a scene built with ``--robot``,
+    reset to its home pose."""
     import mujoco
+
+    from layout.reach import arm_ids, reset_home
 
     report = json.loads((Path(out_dir) / "report.json").read_text())
     info = report.get("robot")
@@ -57,82 +44,22 @@ def load(out_dir: Path):
         raise SystemExit(f"{out_dir} was built without --robot; build it again with --robot panda")
     m = mujoco.MjModel.from_xml_path(str(Path(out_dir) / "scene.xml"))
     d = mujoco.MjData(m)
-    joints = [m.joint(n) for n in info["arm_joints"]]
-    act_of_joint = {int(m.actuator_trnid[a, 0]): a for a in range(m.nu) if int(m.actuator_trntype[a]) == int(mujoco.mjtTrn.mjTRN_JOINT)}
-    robot = Robot(
-        site=m.site(info["ee_site"]).id,
-        arm_qpos=np.array([int(j.qposadr[0]) for j in joints]),
-        arm_dof=np.array([int(j.dofadr[0]) for j in joints]),
-        arm_act=np.array([act_of_joint[j.id] for j in joints]),
-        lo=np.array([j.range[0] for j in joints]),
-        hi=np.array([j.range[1] for j in joints]),
-        home=np.array(info["home_qpos"]),
-        geoms={g for g in range(m.ngeom) if m.body(int(m.geom_bodyid[g])).name.startswith("robot/")},
-    )
-    key = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, "robot/home")
-    if key >= 0:
-        mujoco.mj_resetDataKeyframe(m, d, key)
-    else:  # a robot without a home keyframe: start from its measured home pose
-        d.qpos[robot.arm_qpos] = robot.home
-        d.ctrl[robot.arm_act] = robot.home
-    mujoco.mj_forward(m, d)
-    return m, d, robot, np.array(info["target_m"]), info
+    arm = arm_ids(m, info["ee_site"], info["arm_joints"], np.array(info["home_qpos"]))
+    reset_home(m, d, arm)
+    return m, d, arm, np.array(info["target_m"]), info
 
 
-def ik_step(m, scratch, robot: Robot, q: np.ndarray, pos: np.ndarray, rot: np.ndarray, iters: int = 5) -> np.ndarray:
-    """Arm joint targets that bring the tool site to ``pos`` with orientation ``rot`` (3x3),
-    starting from ``q``: damped least squares on the 6-D site Jacobian, the home pose pulled in
-    the null space, clipped to the joint limits. ``scratch`` is an MjData the kinematics use."""
-    import mujoco
-
-    jacp, jacr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
-    q = q.copy()
-    for _ in range(iters):
-        scratch.qpos[robot.arm_qpos] = q
-        mujoco.mj_kinematics(m, scratch)
-        mujoco.mj_comPos(m, scratch)
-        err_p = pos - scratch.site_xpos[robot.site]
-        cur = scratch.site_xmat[robot.site].reshape(3, 3)
-        err_r = 0.5 * (np.cross(cur[:, 0], rot[:, 0]) + np.cross(cur[:, 1], rot[:, 1]) + np.cross(cur[:, 2], rot[:, 2]))
-        mujoco.mj_jacSite(m, scratch, jacp, jacr, robot.site)
-        jac = np.vstack([jacp[:, robot.arm_dof], jacr[:, robot.arm_dof]])
-        err = np.concatenate([err_p, err_r])
-        jjt = jac @ jac.T + DAMPING**2 * np.eye(6)
-        dq = jac.T @ np.linalg.solve(jjt, err)
-        null = np.eye(len(q)) - np.linalg.pinv(jac) @ jac
-        dq += null @ (NULL_GAIN * (robot.home - q))
-        q = np.clip(q + dq, robot.lo, robot.hi)
-    return q
-
-
-def waypoints(start: np.ndarray, target: np.ndarray, seconds: float) -> callable:
-    """The tool path: up (or down) to the target's height during the first 40 %, then across to
-    the target until 85 %, then hold; minimum-jerk timing within each leg."""
-    mid = np.array([start[0], start[1], target[2]])
-
-    def smooth(s: float) -> float:
-        s = min(max(s, 0.0), 1.0)
-        return 10 * s**3 - 15 * s**4 + 6 * s**5
-
-    def at(t: float) -> np.ndarray:
-        s = t / seconds
-        if s < 0.4:
-            return start + smooth(s / 0.4) * (mid - start)
-        return mid + smooth((s - 0.4) / 0.45) * (target - mid)
-
-    return at
-
-
-def robot_contacts(m, d, robot: Robot) -> list[tuple[str, str, float]]:
+def robot_contacts(m, d, mine: set[int]) -> list[tuple[str, str, float]]:
     """(robot geom, other geom, distance) of every contact between the robot and the scene."""
     out = []
     for i in range(d.ncon):
         c = d.contact[i]
         a, b = int(c.geom[0]), int(c.geom[1])
-        if a < 0 or b < 0 or (a in robot.geoms) == (b in robot.geoms):
+        if a < 0 or b < 0 or (a in mine) == (b in mine):
             continue
-        mine, other = (a, b) if a in robot.geoms else (b, a)
-        out.append((m.geom(mine).name or f"geom {mine}", m.geom(other).name or f"geom {other}", float(c.dist)))
+        mine_g, other = (a, b) if a in mine else (b, a)
+        out.append((m.geom(mine_g).name or f"geom {mine_g} of {m.body(int(m.geom_bodyid[mine_g])).name}",
+                    m.geom(other).name or f"geom {other}", float(c.dist)))
     return out
 
 
@@ -151,18 +78,21 @@ def run(out_dir: Path, seconds: float = 4.0, fps: int = 25, size: tuple[int, int
     """Simulate the scripted reach for ``seconds`` (model timestep), rendering at ``fps``."""
     import mujoco
 
-    m, d, robot, target, _info = load(out_dir)
+    from layout.reach import ik_step, tool_path
+
+    m, d, arm, target, _info = load(out_dir)
     scratch = mujoco.MjData(m)
     scratch.qpos[:] = d.qpos
-    start = d.site_xpos[robot.site].copy()
-    rot = d.site_xmat[robot.site].reshape(3, 3).copy()
-    path = waypoints(start, target, 0.8 * seconds)
-    q = d.qpos[robot.arm_qpos].copy()
+    start = d.site_xpos[arm.site].copy()
+    rot = d.site_xmat[arm.site].reshape(3, 3).copy()
+    path = tool_path(start, target, 0.8 * seconds)
+    q = d.qpos[arm.qpos].copy()
+    mine = {int(g) for g in range(m.ngeom) if m.body(int(m.geom_bodyid[g])).name.startswith("robot/")}
     renderer = cam = None
     if render:
         renderer = mujoco.Renderer(m, height=size[1], width=size[0])
         cam = mujoco.MjvCamera()
-        base = d.xpos[m.site_bodyid[robot.site]]
+        base = d.xpos[m.site_bodyid[arm.site]]
         cam.lookat[:] = 0.5 * (base + target)
         cam.distance = 2.2 + 0.5 * float(np.linalg.norm(base[:2] - target[:2]))
         cam.azimuth = float(np.degrees(np.arctan2(target[1] - base[1], target[0] - base[0]))) - 120.0
@@ -174,19 +104,19 @@ def run(out_dir: Path, seconds: float = 4.0, fps: int = 25, size: tuple[int, int
     min_err = np.inf
     for k in range(steps):
         if k % every == 0:
-            q = ik_step(m, scratch, robot, q, path(d.time), rot)
-            d.ctrl[robot.arm_act] = q
+            q = ik_step(m, scratch, arm, q, path(d.time), rot)
+            d.ctrl[arm.act] = q
         mujoco.mj_step(m, d)
-        for a, b, dist in robot_contacts(m, d, robot):
+        for a, b, dist in robot_contacts(m, d, mine):
             if len(contacts) < 20:
                 contacts.append((float(d.time), a, b, dist))
-        min_err = min(min_err, float(np.linalg.norm(d.site_xpos[robot.site] - target)))
+        min_err = min(min_err, float(np.linalg.norm(d.site_xpos[arm.site] - target)))
         if renderer is not None and k % frame_every == 0:
             renderer.update_scene(d, cam)
             frames.append(renderer.render().copy())
     if renderer is not None:
         renderer.close()
-    return Outcome(float(np.linalg.norm(d.site_xpos[robot.site] - target)), min_err, contacts, frames)
+    return Outcome(float(np.linalg.norm(d.site_xpos[arm.site] - target)), min_err, contacts, frames)
 
 
 def write_video(frames: list[np.ndarray], path: Path, fps: int) -> Path:

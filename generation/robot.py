@@ -197,7 +197,10 @@ def measure_robot(name: str, source: str, detail: str, xml: Path, entry: RobotEn
     for k, j in enumerate(arm):
         if m.jnt_limited[j]:
             home[k] = np.clip(home[k], *m.jnt_range[j])
-    # Footprint and height of the collision geometry at the home pose (robot frame = world here).
+    # Footprint and height of the collision geometry at the start pose (qpos0, how the scene
+    # starts; robot frame = world here). The home pose is checked in the scene by layout.reach.
+    mujoco.mj_resetData(m, d)
+    mujoco.mj_forward(m, d)
     geoms = np.flatnonzero((m.geom_contype != 0) | (m.geom_conaffinity != 0))
     rbound = m.geom_rbound[geoms]
     xy = np.linalg.norm(d.geom_xpos[geoms, :2], axis=1) + rbound

@@ -6,7 +6,7 @@ of the scene (objects, fixed furniture, the background's boxes and pieces) that 
 floor and starts below the robot's height is an obstacle, as its footprint (a convex piece
 projects to the convex hull of its vertices); walls are half-planes. Candidate spots lie on a
 :data:`GRID_M` grid; a spot is free when the robot's footprint circle (measured on its model at
-the home pose) keeps :data:`CLEARANCE_M` from every obstacle and wall.
+the start pose) keeps :data:`CLEARANCE_M` from every obstacle and wall.
 
 Targets: a height map of the same collision geometry on :data:`CELL_M` cells; a cell is a
 target when its top (an object's, fixed furniture's or the background's) is flat within
@@ -14,18 +14,17 @@ target when its top (an object's, fixed furniture's or the background's) is flat
 above it within :data:`ON_TOP_CLEARANCE_M` (clear of what stands on it); the target point is
 :data:`TARGET_HEIGHT_M` above that top. A spot reaches a target when the point lies within
 :data:`REACH_FRACTION` of the arm's sampled reach from the shoulder. Each spot keeps its best
-target; spots are ranked by how comfortably they reach (distance near :data:`COMFORT_FRACTION` of
+target whose floor-plan path from the spot passes :data:`PATH_CLEARANCE_M` under it over
+everything (:meth:`_Footprints.path_clear`: the arm comes in over the top); spots are ranked by how comfortably they reach (distance near :data:`COMFORT_FRACTION` of
 the reach), standing on floor the camera saw (:func:`_seen_floor`), an object's top before the
 background's, visibility from the input camera, not
 standing between the camera and the target, then grid order (deterministic).
 
-:func:`robot_overlaps` measures the placed robot against the scene in MuJoCo (``mj_geomDistance``,
-home pose and start pose); the pipeline takes the first candidate with none.
+:mod:`layout.reach` then measures each candidate in MuJoCo (overlap at the start and home poses,
+the scripted reach swept kinematically); the pipeline keeps the first that passes.
 """
 
 from __future__ import annotations
-
-from pathlib import Path
 
 import numpy as np
 
@@ -42,12 +41,16 @@ TARGET_INSET_M = 0.08
 ON_TOP_CLEARANCE_M = 0.12
 MIN_TOP_M = 0.05
 TOP_BAND_M = 0.02
-REACH_FRACTION = 0.85
-COMFORT_FRACTION = 0.65
+REACH_FRACTION = 0.75
+COMFORT_FRACTION = 0.55
 MIN_HORIZONTAL_M = 0.25
 ROOM_MARGIN_M = 1.5
-CANDIDATES = 6
+CANDIDATES = 8
 CHUNK = 128
+TARGETS_PER_SPOT = 24
+PATH_CLEARANCE_M = 0.1
+PATH_WIDTH_M = 0.06
+ARM_BAND_M = 0.5
 SEEN_FLOOR_BAND_M = 0.03
 SEEN_FLOOR_WEIGHT = 1.0
 CANDIDATE_SPACING_M = 0.3
@@ -114,14 +117,14 @@ def _disk(radius_m: float) -> np.ndarray:
     return (x * x + y * y) * CELL_M * CELL_M <= radius_m * radius_m + 1e-12
 
 
-def _targets(pieces: list[tuple[str, np.ndarray]], max_top_m: float) -> tuple[np.ndarray, np.ndarray, list[str]]:
+def _targets(height_map, max_top_m: float) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """Cells the arm may work above: (T, 3) target points (TARGET_HEIGHT_M over the top), (T,)
     owner index and the owners' names. A cell qualifies when its top is between MIN_TOP_M and
     ``max_top_m``, the top is flat within TOP_BAND_M over TARGET_INSET_M around it (away from
     its edges) and nothing rises above it within ON_TOP_CLEARANCE_M (clear of what stands on it)."""
     from scipy import ndimage
 
-    lo, h, owner, owners = _height_map(pieces)
+    lo, h, owner, owners = height_map
     flat = (ndimage.maximum_filter(h, footprint=_disk(TARGET_INSET_M), mode="constant", cval=0.0)
             - ndimage.minimum_filter(h, footprint=_disk(TARGET_INSET_M), mode="constant", cval=0.0)) <= TOP_BAND_M
     clear = ndimage.maximum_filter(h, footprint=_disk(ON_TOP_CLEARANCE_M), mode="constant", cval=0.0) <= h + TOP_BAND_M
@@ -129,6 +132,28 @@ def _targets(pieces: list[tuple[str, np.ndarray]], max_top_m: float) -> tuple[np
     ii, jj = np.nonzero(ok)
     points = np.column_stack([lo[0] + ii * CELL_M, lo[1] + jj * CELL_M, h[ii, jj] + TARGET_HEIGHT_M])
     return points, owner[ii, jj], owners
+
+
+class _Footprints:
+    """Floor-plan footprints of the collision pieces with their height ranges (an STRtree)."""
+
+    def __init__(self, pieces: list[tuple[str, np.ndarray]]) -> None:
+        import shapely
+
+        self.polys = [_hull(v[:, :2]) for _, v in pieces]
+        self.z = np.array([[v[:, 2].min(), v[:, 2].max()] for _, v in pieces])
+        self.tree = shapely.STRtree(self.polys)
+
+    def path_clear(self, spot_xy: np.ndarray, target: np.ndarray) -> bool:
+        """The arm comes in over the top: no piece within PATH_WIDTH_M of the floor-plan segment
+        from the spot to the target reaches into the band from PATH_CLEARANCE_M under the target
+        point to ARM_BAND_M above it (where the forearm and the elbow pass)."""
+        import shapely
+
+        line = shapely.LineString([spot_xy.tolist(), target[:2].tolist()]).buffer(PATH_WIDTH_M)
+        hits = self.tree.query(line, predicate="intersects")
+        z = self.z[hits]
+        return not bool(((z[:, 1] > target[2] - PATH_CLEARANCE_M) & (z[:, 0] < target[2] + ARM_BAND_M)).any())
 
 
 def _candidate_grid(scene: Scene, pieces: list[tuple[str, np.ndarray]]) -> np.ndarray:
@@ -187,7 +212,9 @@ def place_robot(scene: Scene, model: RobotModel) -> tuple[RobotPlacement, ...]:
     radius = float(model.footprint_radius_m)
     mount_z = float(model.arm_mount_m[2])
     reach = REACH_FRACTION * float(model.reach_m)
-    targets, target_owner, owners = _targets(pieces, mount_z + reach - 0.05)
+    height_map = _height_map(pieces)
+    footprints = _Footprints(pieces)
+    targets, target_owner, owners = _targets(height_map, mount_z + reach - 0.05)
     if not len(targets):
         raise InputError(
             f"--robot {model.name}: no flat top in the scene for the arm to work above ({MIN_TOP_M:g} m to "
@@ -213,8 +240,9 @@ def place_robot(scene: Scene, model: RobotModel) -> tuple[RobotPlacement, ...]:
     seen = _seen_floor(scene, grid, shape, radius)
     mount_r = float(np.linalg.norm(model.arm_mount_m[:2]))
     on_object = np.array([owners[k] != "background" for k in target_owner])
-    best_score = np.full(len(grid), -np.inf)
-    best_target = np.full(len(grid), -1)
+    keep = min(TARGETS_PER_SPOT, len(targets))
+    best_scores = np.full((len(grid), keep), -np.inf)
+    best_targets = np.zeros((len(grid), keep), dtype=int)
     sel_all = np.flatnonzero(free)
     seg = targets[:, :2] - cam_xy
     seg_len2 = np.maximum(np.einsum("ij,ij->i", seg, seg), 1e-9)
@@ -233,9 +261,10 @@ def place_robot(scene: Scene, model: RobotModel) -> tuple[RobotPlacement, ...]:
         score = (-np.abs(dist - COMFORT_FRACTION * model.reach_m) + 0.1 * on_object[None] + 0.2 * visible[sel, None]
                  + SEEN_FLOOR_WEIGHT * seen[sel, None] - 0.3 * blocks)
         score = np.where(ok, score, -np.inf)
-        k = np.argmax(score, axis=1)
-        best_score[sel] = score[np.arange(len(sel)), k]
-        best_target[sel] = k
+        top = np.argsort(-score, axis=1, kind="stable")[:, :keep]
+        best_scores[sel] = np.take_along_axis(score, top, axis=1)
+        best_targets[sel] = top
+    best_score = best_scores[:, 0]
     order = np.lexsort((np.arange(len(grid)), -np.round(best_score, 6)))
     chosen: list[RobotPlacement] = []
     for g in order:
@@ -243,9 +272,13 @@ def place_robot(scene: Scene, model: RobotModel) -> tuple[RobotPlacement, ...]:
             break
         if any(np.linalg.norm(c.position_m[:2] - grid[g]) < CANDIDATE_SPACING_M for c in chosen):
             continue
-        target = targets[best_target[g]]
+        options = [t for t, sc in zip(best_targets[g], best_scores[g]) if np.isfinite(sc)
+                   and footprints.path_clear(grid[g], targets[t])]
+        if not options:
+            continue
+        target = targets[options[0]]
         yaw = float(np.arctan2(target[1] - grid[g][1], target[0] - grid[g][0]))
-        name = owners[int(target_owner[best_target[g]])]
+        name = owners[int(target_owner[options[0]])]
         chosen.append(RobotPlacement(model, np.array([grid[g][0], grid[g][1], 0.0]), yaw, target, name, TARGET_HEIGHT_M,
                                      float(clearance[g])))
     if not chosen:
@@ -254,34 +287,4 @@ def place_robot(scene: Scene, model: RobotModel) -> tuple[RobotPlacement, ...]:
             "build without --robot or try another robot"
         )
     return tuple(chosen)
-
-
-def robot_overlaps(mjcf_path: Path) -> float:
-    """Deepest overlap (m, 0 when none) between a robot geom (bodies ``robot/...``) and any
-    other collision geom of the written scene, at the start pose and at keyframe ``robot/home``
-    (when the scene has it), measured with ``mj_geomDistance``."""
-    import mujoco
-
-    m = mujoco.MjModel.from_xml_path(str(mjcf_path))
-    d = mujoco.MjData(m)
-    robot_body = np.array([m.body(b).name.startswith("robot/") for b in range(m.nbody)])
-    geoms = np.flatnonzero((m.geom_contype != 0) | (m.geom_conaffinity != 0))
-    mine = [int(g) for g in geoms if robot_body[m.geom_bodyid[g]]]
-    others = [int(g) for g in geoms if not robot_body[m.geom_bodyid[g]]]
-    worst = 0.0
-    fromto = np.zeros(6)
-    key = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, "robot/home")
-    for k in ([-1, key] if key >= 0 else [-1]):
-        if k < 0:
-            mujoco.mj_resetData(m, d)
-        else:
-            mujoco.mj_resetDataKeyframe(m, d, k)
-        mujoco.mj_forward(m, d)
-        for a in mine:
-            for b in others:
-                if np.linalg.norm(d.geom_xpos[a] - d.geom_xpos[b]) > m.geom_rbound[a] + m.geom_rbound[b] and m.geom_rbound[b] > 0:
-                    continue
-                dist = float(mujoco.mj_geomDistance(m, d, a, b, 0.01, fromto))
-                worst = max(worst, -dist)
-    return worst
 

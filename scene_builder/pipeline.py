@@ -247,25 +247,33 @@ ROBOT_WORK_DIR = ".robot"
 
 
 def _add_robot(scene: Scene, staging: Path, config: BuildConfig) -> tuple[Scene, Path, PhysicsVerdict]:
-    """Load the robot, try its placements best first and keep the first whose geoms overlap
-    nothing in the written MJCF; then the physics check of the scene with the robot (its
-    fidelity stays the twin's: the robot was not in the photo)."""
+    """Load the robot and try its placements best first: keep the first whose geoms overlap
+    nothing in the written MJCF and whose scripted reach gets to the target clear of the scene;
+    then the physics check of the scene with the robot (its fidelity stays the twin's: the
+    robot was not in the photo)."""
     from exporters import write_mjcf
     from generation.robot import load_robot
     from layout import verify_scene
-    from layout.robot import place_robot, robot_overlaps
+    from layout.reach import REACH_TOL_M, SWEEP_CLEARANCE_M, check_reach, robot_overlaps
+    from layout.robot import place_robot
 
     model = load_robot(config.robot.name, staging / ROBOT_WORK_DIR, config.robot.source, config.robot.offline)
-    worst = 0.0
+    why = []
     for placement in place_robot(scene, model):
         with_robot = dataclasses.replace(scene, robot=placement)
         mjcf_path = write_mjcf(with_robot, staging)
-        worst = robot_overlaps(mjcf_path)
-        if worst <= 0.0:
-            verdict, _ = verify_scene(mjcf_path, with_robot, config.layout)
-            return with_robot, mjcf_path, verdict
+        overlap = robot_overlaps(mjcf_path, placement)
+        if overlap > 0.0:
+            why.append(f"overlap {overlap * 1000:.1f} mm")
+            continue
+        error, clearance = check_reach(mjcf_path, placement)
+        if error > REACH_TOL_M or clearance < SWEEP_CLEARANCE_M:
+            why.append(f"reach ends {error * 100:.1f} cm off, {clearance * 1000:.0f} mm clear")
+            continue
+        verdict, _ = verify_scene(mjcf_path, with_robot, config.layout)
+        return with_robot, mjcf_path, verdict
     raise InputError(
-        f"--robot {model.name}: every free spot found overlaps the scene in MuJoCo (by {worst * 1000:.1f} mm at best); build without --robot"
+        f"--robot {model.name}: no free spot found reaches its target clear of the scene ({'; '.join(why[:3])}); build without --robot"
     )
 
 

@@ -30,7 +30,7 @@ class RobotModel:
       and of the mobile base (empty for a fixed base). home_qpos: (len(arm_joints),) arm pose
       for the start of a task (within the joint limits).
     footprint_radius_m: radius around the robot frame's origin of its collision geometry
-      projected onto the floor at the home pose. height_m: top of that geometry.
+      projected onto the floor at the start pose (qpos0). height_m: top of that geometry.
     arm_mount_m: (3,) first arm joint's position in the robot frame (the shoulder).
     reach_m: largest distance from the shoulder that the tool centre point reaches, sampled over
       the joint limits.

@@ -206,14 +206,17 @@ def test_placement_is_free_inside_the_room_and_faces_a_reachable_top(name, make,
     lies above a support top within the arm's reach."""
     import mujoco
 
-    from layout.robot import place_robot, robot_overlaps
+    from layout.reach import check_reach, robot_overlaps
+    from layout.robot import place_robot
 
     model = _robot(name, tmp_path)
     scene0 = make()
     placement = place_robot(scene0, model)[0]
     scene = dataclasses.replace(scene0, robot=placement)
     path = _write_scene(scene, tmp_path / "out")
-    assert robot_overlaps(path) == 0.0
+    assert robot_overlaps(path, placement) == 0.0
+    error, clearance = check_reach(path, placement)
+    assert error < 0.01 and clearance > 0.01
     for wall in scene.room.walls:
         assert float(wall.signed_distance_m(placement.position_m[None])[0]) > model.footprint_radius_m
     to_target = placement.target_m[:2] - placement.position_m[:2]
