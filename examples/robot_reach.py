@@ -1,7 +1,7 @@
 """Load a scene built with ``--robot`` and run a scripted reach, writing a video.
 
     scene-builder build photo.jpg --depth depth.png --robot panda -o room
-    python examples/robot_reach.py room --seconds 4 --video room_reach.mp4
+    python examples/robot_reach.py room            # -> room_reach.mp4
 
 The controller is scripted, no learning (``layout.reach``, the path the build checked the
 placement with): the tool centre point rises from the home pose to the target's height, then
@@ -136,11 +136,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("scene", type=Path, help="output folder of `scene-builder build ... --robot NAME`")
     p.add_argument("--seconds", type=float, default=4.0, help="simulated seconds (default 4)")
     p.add_argument("--fps", type=int, default=25, help="video frame rate (default 25)")
-    p.add_argument("--video", type=Path, help="video file, .mp4 or .gif (default SCENE/robot_reach.mp4)")
+    p.add_argument("--video", type=Path, help="video file, .mp4 or .gif (default SCENE_reach.mp4 beside the folder)")
     args = p.parse_args(argv)
     os.environ.setdefault("MUJOCO_GL", "egl")
     outcome = run(args.scene, args.seconds, args.fps)
-    video = write_video(outcome.frames, args.video or args.scene / "robot_reach.mp4", args.fps)
+    # Beside the output folder, not in it: a build replaces only a folder holding what it wrote.
+    video = write_video(outcome.frames, args.video or Path(f"{args.scene}_reach.mp4"), args.fps)
     touched = f"{len(outcome.contacts)} contacts with the scene (first: {outcome.contacts[0]})" if outcome.contacts else "no contact with the scene"
     print(f"tool {outcome.final_error_m * 100:.1f} cm from the target at the end; {touched}; {len(outcome.frames)} frames -> {video}")
     return 0 if outcome.final_error_m <= REACH_TOL_M and not outcome.contacts else 1

@@ -62,6 +62,8 @@ __all__ = [
     "PlacedObject",
     "Placement",
     "Plane",
+    "RobotModel",
+    "RobotPlacement",
     "Room",
     "Scene",
     "SupportEdge",
@@ -73,7 +75,7 @@ __all__ = [
 
 
 from scene_builder.arrays import _check_rigid, _freeze, as_array  # noqa: E402  (re-exported: as_array is public)
-from scene_builder.robot import RobotPlacement  # noqa: E402
+from scene_builder.robot import RobotModel, RobotPlacement  # noqa: E402  (re-exported)
 
 
 # --------------------------------------------------------------------------------------------
