@@ -202,10 +202,12 @@ def measure_robot(name: str, source: str, detail: str, xml: Path, entry: RobotEn
     mujoco.mj_resetData(m, d)
     mujoco.mj_forward(m, d)
     geoms = np.flatnonzero((m.geom_contype != 0) | (m.geom_conaffinity != 0))
-    rbound = m.geom_rbound[geoms]
-    xy = np.linalg.norm(d.geom_xpos[geoms, :2], axis=1) + rbound
-    footprint = float(xy.max()) if len(geoms) else 0.1
-    height = float((d.geom_xpos[geoms, 2] + rbound).max()) if len(geoms) else 1.0
+    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=np.float64)
+    corners = np.concatenate([
+        (m.geom_aabb[g, :3] + signs * m.geom_aabb[g, 3:]) @ d.geom_xmat[g].reshape(3, 3).T + d.geom_xpos[g] for g in geoms
+    ]) if len(geoms) else np.zeros((1, 3))
+    footprint = float(np.linalg.norm(corners[:, :2], axis=1).max())
+    height = float(corners[:, 2].max())
     shoulder = d.xanchor[arm[0]].copy()
     rng = np.random.default_rng(0)
     lo = np.array([m.jnt_range[j][0] if m.jnt_limited[j] else -np.pi for j in arm])

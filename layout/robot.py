@@ -8,16 +8,19 @@ projects to the convex hull of its vertices); walls are half-planes. Candidate s
 :data:`GRID_M` grid; a spot is free when the robot's footprint circle (measured on its model at
 the start pose) keeps :data:`CLEARANCE_M` from every obstacle and wall.
 
-Targets: a height map of the same collision geometry on :data:`CELL_M` cells; a cell is a
-target when its top (an object's, fixed furniture's or the background's) is flat within
-:data:`TOP_BAND_M` over :data:`TARGET_INSET_M` around it (away from its edges) and nothing rises
-above it within :data:`ON_TOP_CLEARANCE_M` (clear of what stands on it); the target point is
-:data:`TARGET_HEIGHT_M` above that top. A spot reaches a target when the point lies within
+Targets: a height map of the same collision geometry on :data:`CELL_M` cells (each convex
+piece's exact top); a cell is a target when nothing rises above it within
+:data:`ON_TOP_CLEARANCE_M` (clear of what stands on it) and its top (an object's, fixed
+furniture's or the background's) is flat within :data:`TOP_BAND_M` over :data:`TARGET_INSET_M`
+around it (a table, away from its edges), or it is the highest cell of a movable object (where a
+gripper would come down on it); the target point is :data:`TARGET_HEIGHT_M` above that top. In
+rooms with neither within reach (tall, merged furniture), points beside a movable object over
+open floor (:data:`SIDE_GAP_M` from its outline, at half its height) are targets too. A spot reaches a target when the point lies within
 :data:`REACH_FRACTION` of the arm's sampled reach from the shoulder. Each spot keeps its best
 target whose floor-plan path from the spot passes :data:`PATH_CLEARANCE_M` under it over
 everything (:meth:`_Footprints.path_clear`: the arm comes in over the top); spots are ranked by how comfortably they reach (distance near :data:`COMFORT_FRACTION` of
-the reach), standing on floor the camera saw (:func:`_seen_floor`), an object's top before the
-background's, visibility from the input camera, not
+the reach), standing on floor the camera saw (:func:`_seen_floor`), a table before an object's
+top before its side (:data:`KIND_BONUS`), visibility from the input camera, not
 standing between the camera and the target, then grid order (deterministic).
 
 :mod:`layout.reach` then measures each candidate in MuJoCo (overlap at the start and home poses,
@@ -37,16 +40,21 @@ CELL_M = 0.04
 CLEARANCE_M = 0.05
 FLOOR_EPS_M = 0.003  # geometry lower than this is the floor itself (the robot's geoms start at 5 mm)
 TARGET_HEIGHT_M = 0.18
-TARGET_INSET_M = 0.08
+TARGET_INSET_M = 0.06
 ON_TOP_CLEARANCE_M = 0.12
 MIN_TOP_M = 0.05
-TOP_BAND_M = 0.02
+TOP_BAND_M = 0.03
 REACH_FRACTION = 0.75
 COMFORT_FRACTION = 0.55
 MIN_HORIZONTAL_M = 0.25
 ROOM_MARGIN_M = 1.5
 CANDIDATES = 8
 CHUNK = 128
+TOP, OBJECT_TOP, SIDE = 0, 1, 2
+KIND_BONUS = np.array([0.2, 0.1, 0.0])  # a table first, then above an object, then beside one
+SIDE_GAP_M = (0.10, 0.14)
+SIDE_HEIGHTS_M = (0.3, 0.7)
+SIDE_FLOOR_M = 0.05
 TARGETS_PER_SPOT = 24
 PATH_CLEARANCE_M = 0.1
 PATH_WIDTH_M = 0.06
@@ -97,18 +105,34 @@ def _height_map(pieces: list[tuple[str, np.ndarray]]):
     owners = sorted({o for o, _ in pieces})
     index = {o: k for k, o in enumerate(owners)}
     for name, v in pieces:
-        top = float(v[:, 2].max())
-        if top <= FLOOR_EPS_M:
+        if float(v[:, 2].max()) <= FLOOR_EPS_M:
             continue
         i0, j0 = np.floor((v[:, :2].min(axis=0) - lo) / CELL_M).astype(int)
         i1, j1 = np.ceil((v[:, :2].max(axis=0) - lo) / CELL_M).astype(int)
         ii, jj = np.meshgrid(np.arange(i0, i1 + 1), np.arange(j0, j1 + 1), indexing="ij")
-        inside = shapely.contains_xy(_hull(v[:, :2]).buffer(1e-9), lo[0] + ii * CELL_M, lo[1] + jj * CELL_M)
+        x, y = lo[0] + ii * CELL_M, lo[1] + jj * CELL_M
+        inside = shapely.contains_xy(_hull(v[:, :2]).buffer(1e-9), x, y)
         ii, jj = ii[inside], jj[inside]
+        top = _convex_top(v, x[inside], y[inside])
         higher = heights[ii, jj] < top
-        heights[ii[higher], jj[higher]] = top
+        heights[ii[higher], jj[higher]] = top[higher]
         owner[ii[higher], jj[higher]] = index[name]
     return lo, heights, owner, owners
+
+
+def _convex_top(v: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Height of the top of the convex piece with vertices ``v`` over points (x, y) inside its
+    footprint: the lowest of its upward faces' planes there (qhull's facet equations); a flat
+    piece qhull cannot take answers its highest vertex."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        eq = ConvexHull(v).equations
+    except (QhullError, ValueError):
+        return np.full(len(x), float(v[:, 2].max()))
+    up = eq[eq[:, 2] > 1e-6]
+    z = -(up[:, 3][None] + up[:, 0][None] * x[:, None] + up[:, 1][None] * y[:, None]) / up[:, 2][None]
+    return np.minimum(z.min(axis=1), float(v[:, 2].max()))
 
 
 def _disk(radius_m: float) -> np.ndarray:
@@ -117,21 +141,46 @@ def _disk(radius_m: float) -> np.ndarray:
     return (x * x + y * y) * CELL_M * CELL_M <= radius_m * radius_m + 1e-12
 
 
-def _targets(height_map, max_top_m: float) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """Cells the arm may work above: (T, 3) target points (TARGET_HEIGHT_M over the top), (T,)
-    owner index and the owners' names. A cell qualifies when its top is between MIN_TOP_M and
-    ``max_top_m``, the top is flat within TOP_BAND_M over TARGET_INSET_M around it (away from
-    its edges) and nothing rises above it within ON_TOP_CLEARANCE_M (clear of what stands on it)."""
+def _targets(height_map, max_top_m: float, movable: set[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
+    """Where the arm may go: (T, 3) target points, (T,) owner index, (T,) kind (TOP, OBJECT_TOP,
+    SIDE) and the owners' names. Over a top the point is TARGET_HEIGHT_M above it. A cell qualifies when its top is
+    between MIN_TOP_M and ``max_top_m`` and either nothing rises above it within
+    ON_TOP_CLEARANCE_M (clear of what stands on it) and the top is flat within TOP_BAND_M over TARGET_INSET_M around it (a
+    table, away from its edges), or it is the highest cell of a movable object (the point above
+    it from which a gripper would come down on the object; whatever stands close beside it is
+    left to :mod:`layout.reach`'s sweep)."""
     from scipy import ndimage
 
     lo, h, owner, owners = height_map
     flat = (ndimage.maximum_filter(h, footprint=_disk(TARGET_INSET_M), mode="constant", cval=0.0)
             - ndimage.minimum_filter(h, footprint=_disk(TARGET_INSET_M), mode="constant", cval=0.0)) <= TOP_BAND_M
     clear = ndimage.maximum_filter(h, footprint=_disk(ON_TOP_CLEARANCE_M), mode="constant", cval=0.0) <= h + TOP_BAND_M
-    ok = flat & clear & (h >= MIN_TOP_M) & (h <= max_top_m) & (owner >= 0)
+    usable = (h >= MIN_TOP_M) & (h <= max_top_m) & (owner >= 0)
+    ok = flat & clear & usable
+    for k, name in enumerate(owners):
+        if name in movable and (owner == k).any():
+            # Its highest cell; what stands close beside it is left to the sweep in MuJoCo.
+            cell = np.unravel_index(np.argmax(np.where(owner == k, h, -np.inf)), h.shape)
+            ok[cell] |= usable[cell]
     ii, jj = np.nonzero(ok)
-    points = np.column_stack([lo[0] + ii * CELL_M, lo[1] + jj * CELL_M, h[ii, jj] + TARGET_HEIGHT_M])
-    return points, owner[ii, jj], owners
+    points = [np.column_stack([lo[0] + ii * CELL_M, lo[1] + jj * CELL_M, h[ii, jj] + TARGET_HEIGHT_M])]
+    owned, kinds = [owner[ii, jj]], [np.where(flat[ii, jj], TOP, OBJECT_TOP)]
+    # Beside a movable object: over open floor SIDE_GAP_M from its outline, at half its height
+    # (within SIDE_HEIGHTS_M), where a hand would push it or grasp it from the side.
+    inner, outer = _disk(SIDE_GAP_M[0]), _disk(SIDE_GAP_M[1])
+    for k, name in enumerate(owners):
+        mask = owner == k
+        if name not in movable or not mask.any():
+            continue
+        z = float(np.clip(0.5 * h[mask].max(), *SIDE_HEIGHTS_M))
+        if z > max_top_m + TARGET_HEIGHT_M or z + 0.05 > h[mask].max():
+            continue
+        ring = ndimage.binary_dilation(mask, outer) & ~ndimage.binary_dilation(mask, inner) & (h <= SIDE_FLOOR_M)
+        ri, rj = np.nonzero(ring)
+        points.append(np.column_stack([lo[0] + ri * CELL_M, lo[1] + rj * CELL_M, np.full(len(ri), z)]))
+        owned.append(np.full(len(ri), k))
+        kinds.append(np.full(len(ri), SIDE))
+    return np.concatenate(points), np.concatenate(owned), np.concatenate(kinds), owners
 
 
 class _Footprints:
@@ -214,11 +263,12 @@ def place_robot(scene: Scene, model: RobotModel) -> tuple[RobotPlacement, ...]:
     reach = REACH_FRACTION * float(model.reach_m)
     height_map = _height_map(pieces)
     footprints = _Footprints(pieces)
-    targets, target_owner, owners = _targets(height_map, mount_z + reach - 0.05)
+    movable = {o.name for o in scene.objects if not o.asset.is_fixed}
+    targets, target_owner, target_kind, owners = _targets(height_map, mount_z + reach - 0.05, movable)
     if not len(targets):
         raise InputError(
-            f"--robot {model.name}: no flat top in the scene for the arm to work above ({MIN_TOP_M:g} m to "
-            f"{mount_z + reach - 0.05:.2f} m high, {2 * TARGET_INSET_M:g} m across); build without --robot"
+            f"--robot {model.name}: no flat top nor movable object in the scene for the arm to work above ({MIN_TOP_M:g} m to "
+            f"{mount_z + reach - 0.05:.2f} m high); build without --robot"
         )
     obstacles = [_hull(v[:, :2]) for _, v in pieces if v[:, 2].max() > FLOOR_EPS_M and v[:, 2].min() < model.height_m + 0.1]
     grid, shape = _candidate_grid(scene, pieces)
@@ -258,7 +308,8 @@ def place_robot(scene: Scene, model: RobotModel) -> tuple[RobotPlacement, ...]:
         tpar = np.clip(np.einsum("ftk,tk->ft", grid[sel, None, :] - cam_xy, seg) / seg_len2, 0.0, 1.0)
         closest = cam_xy + tpar[:, :, None] * seg[None]
         blocks = np.linalg.norm(grid[sel, None, :] - closest, axis=2) < radius
-        score = (-np.abs(dist - COMFORT_FRACTION * model.reach_m) + 0.1 * on_object[None] + 0.2 * visible[sel, None]
+        score = (-np.abs(dist - COMFORT_FRACTION * model.reach_m) + 0.1 * on_object[None] + KIND_BONUS[target_kind][None]
+                 + 0.2 * visible[sel, None]
                  + SEEN_FLOOR_WEIGHT * seen[sel, None] - 0.3 * blocks)
         score = np.where(ok, score, -np.inf)
         top = np.argsort(-score, axis=1, kind="stable")[:, :keep]
@@ -283,7 +334,7 @@ def place_robot(scene: Scene, model: RobotModel) -> tuple[RobotPlacement, ...]:
                                      float(clearance[g])))
     if not chosen:
         raise InputError(
-            f"--robot {model.name}: no free floor spot within reach of a flat top ({', '.join(sorted(set(owners))[:4])}); "
+            f"--robot {model.name}: no free floor spot within reach of a top or a movable object ({', '.join(sorted(set(owners))[:4])}); "
             "build without --robot or try another robot"
         )
     return tuple(chosen)
