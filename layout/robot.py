@@ -51,6 +51,7 @@ ROOM_MARGIN_M = 1.5
 CANDIDATES = 8
 CHUNK = 128
 TOP, OBJECT_TOP, SIDE = 0, 1, 2
+KIND_NAMES = ("top", "object_top", "side")
 KIND_BONUS = np.array([0.2, 0.1, 0.0])  # a table first, then above an object, then beside one
 SIDE_GAP_M = (0.10, 0.14)
 SIDE_HEIGHTS_M = (0.3, 0.7)
@@ -143,12 +144,12 @@ def _disk(radius_m: float) -> np.ndarray:
 
 def _targets(height_map, max_top_m: float, movable: set[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
     """Where the arm may go: (T, 3) target points, (T,) owner index, (T,) kind (TOP, OBJECT_TOP,
-    SIDE) and the owners' names. Over a top the point is TARGET_HEIGHT_M above it. A cell qualifies when its top is
-    between MIN_TOP_M and ``max_top_m`` and either nothing rises above it within
-    ON_TOP_CLEARANCE_M (clear of what stands on it) and the top is flat within TOP_BAND_M over TARGET_INSET_M around it (a
-    table, away from its edges), or it is the highest cell of a movable object (the point above
-    it from which a gripper would come down on the object; whatever stands close beside it is
-    left to :mod:`layout.reach`'s sweep)."""
+    SIDE) and the owners' names. Over a top the point is TARGET_HEIGHT_M above it; a cell
+    qualifies when its top is between MIN_TOP_M and ``max_top_m`` and either nothing rises above it within
+    ON_TOP_CLEARANCE_M (clear of what stands on it) and the top is flat within TOP_BAND_M over
+    TARGET_INSET_M around it (a table, away from its edges), or it is the highest cell of a
+    movable object (the point above it from which a gripper would come down on the object;
+    whatever stands close beside it is left to :mod:`layout.reach`'s sweep)."""
     from scipy import ndimage
 
     lo, h, owner, owners = height_map
@@ -330,8 +331,8 @@ def place_robot(scene: Scene, model: RobotModel) -> tuple[RobotPlacement, ...]:
         target = targets[options[0]]
         yaw = float(np.arctan2(target[1] - grid[g][1], target[0] - grid[g][0]))
         name = owners[int(target_owner[options[0]])]
-        chosen.append(RobotPlacement(model, np.array([grid[g][0], grid[g][1], 0.0]), yaw, target, name, TARGET_HEIGHT_M,
-                                     float(clearance[g])))
+        kind = KIND_NAMES[int(target_kind[options[0]])]
+        chosen.append(RobotPlacement(model, np.array([grid[g][0], grid[g][1], 0.0]), yaw, target, name, kind, float(clearance[g])))
     if not chosen:
         raise InputError(
             f"--robot {model.name}: no free floor spot within reach of a top or a movable object ({', '.join(sorted(set(owners))[:4])}); "

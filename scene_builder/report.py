@@ -173,7 +173,7 @@ def robot_report(scene: Scene) -> dict | None:
         "clearance_m": _r(r.clearance_m, 4),
         "target_m": [_r(float(v), 4) for v in r.target_m],
         "target_support": r.target_support,
-        "target_height_m": r.target_height_m,
+        "target_kind": r.target_kind,
         "ee_site": f"robot/{m.ee_site}",
         "arm_joints": [f"robot/{j}" for j in m.arm_joints],
         "base_joints": [f"robot/{j}" for j in m.base_joints],

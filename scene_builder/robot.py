@@ -62,16 +62,18 @@ class RobotModel:
 class RobotPlacement:
     """Where the layout stood the robot. position_m: (3,) robot frame origin in the world (on
     the floor); yaw_rad: heading about +Z (the robot's +X looks at the target).
-    target_m: (3,) a point the arm should reach, ``target_height_m`` above the top of
-    ``target_support`` (an object's name, or ``background/object/NAME``). clearance_m: distance
-    from the robot's footprint to the nearest obstacle on the floor plan."""
+    target_m: (3,) a point the arm should reach near ``target_support`` (an object's name, or
+    ``background``); target_kind: ``"top"`` (above a flat top, a table's), ``"object_top"``
+    (above a movable object's highest point) or ``"side"`` (beside a movable object, over open
+    floor). clearance_m: distance from the robot's footprint to the nearest obstacle on the
+    floor plan."""
 
     model: RobotModel
     position_m: np.ndarray
     yaw_rad: float
     target_m: np.ndarray
     target_support: str
-    target_height_m: float
+    target_kind: str
     clearance_m: float
 
     def __post_init__(self) -> None:

@@ -224,7 +224,8 @@ def test_placement_is_free_inside_the_room_and_faces_a_reachable_top(name, make,
     support = scene.object(placement.target_support)
     top = max((p.vertices_m @ support.world_from_asset[:3, :3].T + support.world_from_asset[:3, 3])[:, 2].max()
               for part in support.asset.parts for p in part.collision)
-    assert placement.target_m[2] == pytest.approx(top + 0.18)
+    assert placement.target_kind in ("top", "object_top")  # the fixture rooms have tops in reach
+    assert placement.target_m[2] == pytest.approx(top + 0.18, abs=1e-6)
     m = mujoco.MjModel.from_xml_path(str(path))
     assert m.camera("input_camera").id >= 0 and m.key("robot/home").id >= 0
     assert m.nu == (8 + 3 * model.mobile) and all(m.actuator(a).name.startswith("robot/") for a in range(m.nu))
