@@ -31,6 +31,7 @@ from scene_builder.frames import quat_wxyz_from_matrix
 from scene_builder.robot import RobotPlacement
 
 ROOT = "/World/Robot"
+UNBOUNDED = 1.0e6  # the range of a free axis without limits (metres or degrees)
 
 
 def _mat(q: np.ndarray) -> np.ndarray:
@@ -222,6 +223,12 @@ def _add_body_joint(stage, m, d, b: int, paths, joints, world: np.ndarray, drive
             token = ("rot" if t == hinge else "trans") + "XYZ"[k]
             free[token] = j
             dofs.append((j, token, token))
+            # A free axis carries its range too (UNBOUNDED without one): Newton reads a generic
+            # joint's axes from their LimitAPI.
+            lo, hi = m.jnt_range[j] if m.jnt_limited[j] else (-UNBOUNDED, UNBOUNDED)
+            lim = UsdPhysics.LimitAPI.Apply(joint.GetPrim(), token)
+            lim.CreateLowAttr(float(np.degrees(lo) if t == hinge and m.jnt_limited[j] else lo))
+            lim.CreateHighAttr(float(np.degrees(hi) if t == hinge and m.jnt_limited[j] else hi))
         for token in ("transX", "transY", "transZ", "rotX", "rotY", "rotZ"):
             if token not in free:
                 lim = UsdPhysics.LimitAPI.Apply(joint.GetPrim(), token)

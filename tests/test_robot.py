@@ -287,7 +287,10 @@ def test_usd_robot_is_a_valid_articulation_whose_joint_frames_agree(tmp_path):
         if name == "mobile_panda":
             base = stage.GetPrimAtPath("/World/Robot/Joints/base")
             assert base.HasAPI(UsdPhysics.DriveAPI, "transX") and base.HasAPI(UsdPhysics.DriveAPI, "rotZ")
-            assert base.HasAPI(UsdPhysics.LimitAPI, "transZ") and not base.HasAPI(UsdPhysics.LimitAPI, "transX")
+            locked = UsdPhysics.LimitAPI(base, "transZ")
+            assert locked.GetLowAttr().Get() > locked.GetHighAttr().Get()  # locked
+            free = UsdPhysics.LimitAPI(base, "transX")
+            assert free.GetLowAttr().Get() < -100 and free.GetHighAttr().Get() > 100
 
 
 # --------------------------------------------------------------------------------------------
@@ -372,7 +375,8 @@ def test_real_sample_panda_reaches_above_a_table_without_collision(real_with_pan
     """Every real sample with a movable object, built with --robot panda: the robot is in
     scene.xml and scene.usda, nothing overlaps at t = 0 (the physics check over all pairs,
     robot included), the objects stay at rest, input_camera is kept, and the scripted arm ends
-    within 2 cm of its target 18 cm above a support top, touching nothing on the way."""
+    within 2 cm of its target (18 cm above a table or a movable object's top; beside a movable
+    object where no top is in reach), touching nothing on the way."""
     import mujoco
 
     result = real_with_panda
@@ -399,3 +403,21 @@ def test_real_sample_mobile_manipulator_reaches_without_collision(tmp_path):
     assert result.scene.robot is not None and result.scene.robot.model.mobile
     assert result.verdict.max_penetration_m < 1e-3
     _assert_reaches(result.out_dir)
+
+
+@pytest.mark.newton
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["panda", "mobile_panda"])
+def test_newton_reads_the_robot_as_an_articulation(name, newton, tmp_path):
+    """An independent UsdPhysics consumer (NVIDIA Newton) loads scene.usda with the robot: its
+    bodies and degrees of freedom are the MJCF's (Panda: 7 arm + 2 finger joints; the mobile
+    base adds x, y and yaw), beside the three free boxes (6 each)."""
+    from exporters.usd import write_usd
+    from layout.robot import place_robot
+    from tests.conftest import load_newton_model
+
+    model = _robot(name, tmp_path)
+    scene = dataclasses.replace(boxes_scene(), robot=place_robot(boxes_scene(), model)[0])
+    built = load_newton_model(newton, write_usd(scene, tmp_path / "usd"))
+    assert built.joint_dof_count == 3 * 6 + 9 + 3 * model.mobile
+    assert built.body_count == 3 + 11 + model.mobile
