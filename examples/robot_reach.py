@@ -27,7 +27,6 @@ from pathlib import Path
 
 import numpy as np
 
-CONTROL_DT_S = 0.01
 REACH_TOL_M = 0.02
 
 
@@ -49,24 +48,9 @@ def load(out_dir: Path):
     return m, d, arm, np.array(info["target_m"]), info
 
 
-def robot_contacts(m, d, mine: set[int]) -> list[tuple[str, str, float]]:
-    """(robot geom, other geom, distance) of every contact between the robot and the scene."""
-    out = []
-    for i in range(d.ncon):
-        c = d.contact[i]
-        a, b = int(c.geom[0]), int(c.geom[1])
-        if a < 0 or b < 0 or (a in mine) == (b in mine):
-            continue
-        mine_g, other = (a, b) if a in mine else (b, a)
-        out.append((m.geom(mine_g).name or f"geom {mine_g} of {m.body(int(m.geom_bodyid[mine_g])).name}",
-                    m.geom(other).name or f"geom {other}", float(c.dist)))
-    return out
-
-
 @dataclass
 class Outcome:
-    """final_error_m: tool to target at the end; contacts: robot-scene contacts seen (first
-    few, with the time); frames: the rendered frames (H, W, 3) uint8."""
+    """What the reach did (``layout.reach.ReachResult``) and the rendered frames (H, W, 3) uint8."""
 
     final_error_m: float
     min_error_m: float
@@ -75,20 +59,16 @@ class Outcome:
 
 
 def run(out_dir: Path, seconds: float = 4.0, fps: int = 25, size: tuple[int, int] = (480, 360), render: bool = True) -> Outcome:
-    """Simulate the scripted reach for ``seconds`` (model timestep), rendering at ``fps``."""
+    """Simulate the scripted reach for ``seconds`` (model timestep), rendering at ``fps`` from a
+    camera looking at the robot and its target."""
     import mujoco
 
-    from layout.reach import ik_step, tool_path
+    from layout.reach import simulate_reach
 
     m, d, arm, target, _info = load(out_dir)
-    scratch = mujoco.MjData(m)
-    scratch.qpos[:] = d.qpos
-    start = d.site_xpos[arm.site].copy()
-    rot = d.site_xmat[arm.site].reshape(3, 3).copy()
-    path = tool_path(start, target, 0.8 * seconds)
-    q = d.qpos[arm.qpos].copy()
-    mine = {int(g) for g in range(m.ngeom) if m.body(int(m.geom_bodyid[g])).name.startswith("robot/")}
-    renderer = cam = None
+    frames: list[np.ndarray] = []
+    on_step = None
+    renderer = None
     if render:
         renderer = mujoco.Renderer(m, height=size[1], width=size[0])
         cam = mujoco.MjvCamera()
@@ -97,26 +77,19 @@ def run(out_dir: Path, seconds: float = 4.0, fps: int = 25, size: tuple[int, int
         cam.distance = 2.2 + 0.5 * float(np.linalg.norm(base[:2] - target[:2]))
         cam.azimuth = float(np.degrees(np.arctan2(target[1] - base[1], target[0] - base[0]))) - 120.0
         cam.elevation = -25.0
-    frames, contacts = [], []
-    steps = int(round(seconds / m.opt.timestep))
-    every = max(1, int(round(CONTROL_DT_S / m.opt.timestep)))
-    frame_every = max(1, int(round(1.0 / (fps * m.opt.timestep))))
-    min_err = np.inf
-    for k in range(steps):
-        if k % every == 0:
-            q = ik_step(m, scratch, arm, q, path(d.time), rot)
-            d.ctrl[arm.act] = q
-        mujoco.mj_step(m, d)
-        for a, b, dist in robot_contacts(m, d, mine):
-            if len(contacts) < 20:
-                contacts.append((float(d.time), a, b, dist))
-        min_err = min(min_err, float(np.linalg.norm(d.site_xpos[arm.site] - target)))
-        if renderer is not None and k % frame_every == 0:
-            renderer.update_scene(d, cam)
-            frames.append(renderer.render().copy())
-    if renderer is not None:
-        renderer.close()
-    return Outcome(float(np.linalg.norm(d.site_xpos[arm.site] - target)), min_err, contacts, frames)
+        frame_every = max(1, int(round(1.0 / (fps * m.opt.timestep))))
+
+        def on_step(k: int) -> None:
+            if k % frame_every == 0:
+                renderer.update_scene(d, cam)
+                frames.append(renderer.render().copy())
+
+    try:
+        result = simulate_reach(m, d, arm, target, seconds, on_step)
+    finally:
+        if renderer is not None:
+            renderer.close()
+    return Outcome(result.final_error_m, result.min_error_m, result.contacts, frames)
 
 
 def write_video(frames: list[np.ndarray], path: Path, fps: int) -> Path:

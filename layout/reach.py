@@ -29,6 +29,7 @@ RISE_SHARE = 0.4  # of the path's duration spent on the vertical leg
 #: sags under gravity by a few millimetres.
 SWEEP_CLEARANCE_M = 0.01
 REACH_TOL_M = 0.01
+CONTROL_DT_S = 0.01
 
 
 @dataclass
@@ -195,3 +196,57 @@ def check_reach(mjcf_path: Path, placement: RobotPlacement) -> tuple[float, floa
     d.qpos[arm.qpos] = q
     mujoco.mj_kinematics(m, d)
     return float(np.linalg.norm(d.site_xpos[arm.site] - placement.target_m)), float(clearance)
+
+
+def robot_contacts(m, d, mine: set[int]) -> list[tuple[str, str, float]]:
+    """(robot geom, other geom, distance) of every contact between the robot and the scene."""
+    out = []
+    for i in range(d.ncon):
+        c = d.contact[i]
+        a, b = int(c.geom[0]), int(c.geom[1])
+        if a < 0 or b < 0 or (a in mine) == (b in mine):
+            continue
+        own, other = (a, b) if a in mine else (b, a)
+        out.append((m.geom(own).name or f"geom {own} of {m.body(int(m.geom_bodyid[own])).name}",
+                    m.geom(other).name or f"geom {other}", float(c.dist)))
+    return out
+
+
+@dataclass
+class ReachResult:
+    """final_error_m: tool to target at the end; min_error_m: closest on the way; contacts:
+    (time s, robot geom, scene geom, distance m) of robot-scene contacts (the first 20)."""
+
+    final_error_m: float
+    min_error_m: float
+    contacts: list[tuple[float, str, str, float]]
+
+
+def simulate_reach(m, d, arm: ArmIds, target: np.ndarray, seconds: float, on_step: Callable[[int], None] | None = None) -> ReachResult:
+    """Run the scripted reach in simulation from the current state for ``seconds``: every
+    CONTROL_DT_S the next waypoint of :func:`tool_path` (over 80 % of the time, then held) goes
+    through :func:`ik_step` to the arm's position actuators; ``on_step(k)`` after each step."""
+    import mujoco
+
+    scratch = mujoco.MjData(m)
+    scratch.qpos[:] = d.qpos
+    start = d.site_xpos[arm.site].copy()
+    rot = d.site_xmat[arm.site].reshape(3, 3).copy()
+    path = tool_path(start, np.asarray(target, dtype=np.float64), 0.8 * seconds)
+    q = d.qpos[arm.qpos].copy()
+    mine = {int(g) for g in range(m.ngeom) if m.body(int(m.geom_bodyid[g])).name.startswith(PREFIX)}
+    every = max(1, int(round(CONTROL_DT_S / m.opt.timestep)))
+    contacts: list[tuple[float, str, str, float]] = []
+    min_err = np.inf
+    for k in range(int(round(seconds / m.opt.timestep))):
+        if k % every == 0:
+            q = ik_step(m, scratch, arm, q, path(d.time), rot)
+            d.ctrl[arm.act] = q
+        mujoco.mj_step(m, d)
+        for a, b, dist in robot_contacts(m, d, mine):
+            if len(contacts) < 20:
+                contacts.append((float(d.time), a, b, dist))
+        min_err = min(min_err, float(np.linalg.norm(d.site_xpos[arm.site] - target)))
+        if on_step is not None:
+            on_step(k)
+    return ReachResult(float(np.linalg.norm(d.site_xpos[arm.site] - target)), min_err, contacts)

@@ -371,7 +371,7 @@ def real_with_panda(request, tmp_path_factory):
 
 
 @pytest.mark.slow
-def test_real_sample_panda_reaches_above_a_table_without_collision(real_with_panda):
+def test_real_sample_panda_reaches_its_target_without_collision(real_with_panda):
     """Every real sample with a movable object, built with --robot panda: the robot is in
     scene.xml and scene.usda, nothing overlaps at t = 0 (the physics check over all pairs,
     robot included), the objects stay at rest, input_camera is kept, and the scripted arm ends
