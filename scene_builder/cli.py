@@ -232,6 +232,10 @@ def _cmd_build(args: argparse.Namespace) -> int:
         robot=RobotConfig(args.robot, args.robot_source, args.offline),
     )
     out = args.out or default_out_dir(args.image)
+    if args.robot:  # a mistyped robot is said before any download or stage
+        from generation.robot import check_robot_request
+
+        check_robot_request(args.robot, args.robot_source, args.offline)
     if args.image.is_file():  # no download before a missing photo is reported (by build, below)
         _prepare_weights(config.perception, need_depth=args.depth is None, offline=args.offline, quiet=args.quiet)
     result = build(inputs, out, config, progress=not args.quiet, overwrite=args.overwrite, default_name=args.out is None)

@@ -421,3 +421,21 @@ def test_newton_reads_the_robot_as_an_articulation(name, newton, tmp_path):
     built = load_newton_model(newton, write_usd(scene, tmp_path / "usd"))
     assert built.joint_dof_count == 3 * 6 + 9 + 3 * model.mobile
     assert built.body_count == 3 + 11 + model.mobile
+
+
+def test_cli_refuses_an_unknown_robot_before_building(tmp_path):
+    """`--robot r2d2` fails in one line with the input status (3) before any stage runs;
+    `--help` lists the robots and the sources."""
+    import subprocess
+
+    from PIL import Image
+
+    (tmp_path / "in").mkdir()
+    Image.new("RGB", (64, 48), (120, 110, 100)).save(tmp_path / "in" / "room.png")
+    cmd = [sys.executable, "-m", "scene_builder.cli", "build", str(tmp_path / "in" / "room.png"), "--robot", "r2d2", "-o", str(tmp_path / "out")]
+    done = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert done.returncode == 3, done.stderr
+    assert done.stderr.strip().splitlines()[-1] == "error: unknown robot 'r2d2'; choose one of mobile_panda, panda, tidybot"
+    assert not (tmp_path / "out").exists()
+    helped = subprocess.run([sys.executable, "-m", "scene_builder.cli", "build", "--help"], capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert "--robot NAME" in helped.stdout and "mobile_panda" in helped.stdout and "--robot-source" in helped.stdout
