@@ -124,6 +124,8 @@ def _from_builtin(name: str, entry: RobotEntry, work_dir: Path, why: str) -> Rob
     _ensure_site(spec, entry)
     xml.write_text(spec.to_xml())
     detail = "built-in: Franka Panda from Franka's published DH table, joint limits and link masses (capsule geometry)"
+    if name == "mobile_panda":
+        detail += ", on a holonomic base (planar x, y, yaw joints)"
     if why:
         detail += f"; {why}"
     return measure_robot(name, "built-in", detail, xml, entry)
