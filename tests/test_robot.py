@@ -390,6 +390,9 @@ def test_real_sample_panda_reaches_its_target_without_collision(real_with_panda)
     m = mujoco.MjModel.from_xml_path(str(result.files.mjcf))
     assert m.camera("input_camera").id >= 0 and m.body("robot/link0").id >= 0
     assert "/World/Robot" in result.files.usd.read_text()
+    from exporters import check_output
+
+    assert check_output(result.out_dir) == ()  # `scene-builder check` passes with the robot in
     _assert_reaches(result.out_dir)
 
 
