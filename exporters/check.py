@@ -99,7 +99,8 @@ def _check_mjcf(path: Path, problems: list[str]) -> list[str] | None:
     for w in (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL):
         if data.warning[w].number > 0:
             problems.append(f"{path.name}: MuJoCo warning {w.name} after {CHECK_SECONDS:g} s of simulation")
-    top = [model.body(i).name for i in range(1, model.nbody) if model.body_parentid[i] == 0]
+    # Top-level bodies are the scene's objects; the robot (``--robot``) hangs below ``robot/``.
+    top = [model.body(i).name for i in range(1, model.nbody) if model.body_parentid[i] == 0 and not model.body(i).name.startswith("robot/")]
     drift = np.linalg.norm(data.xpos[free_bodies] - start, axis=1)
     bad = [
         f"{model.body(b).name} (top speed {v:.2g} m/s, moved {d:.2g} m)"

@@ -96,6 +96,10 @@ def build_spec(scene: Scene, out_dir: Path, objects: tuple[PlacedObject, ...] | 
             _add_flex(spec, placed)
         else:
             _add_object(spec, placed, Path(out_dir), looks)
+    if scene.robot is not None and objects is scene.objects:
+        from exporters.robot import attach_robot
+
+        attach_robot(spec, scene.robot, Path(out_dir))
     return spec
 
 

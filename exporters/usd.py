@@ -13,6 +13,7 @@ Prim layout::
       Background/Collision/...      their convex pieces (convexHull) and the background's
                                     collision boxes (UsdGeom.Cube), static colliders
       InputCamera                   UsdGeom.Camera reproducing the photo's pinhole camera
+      Robot                         ``--robot``: an articulation (see exporters/usd_robot.py)
       Objects/<obj>                 Xform at world_from_asset, displayName = original name
         one rigid part:             RigidBodyAPI + MassAPI on <obj>; children Visual, Collision/piece_k
         articulated:                ArticulationRootAPI on <obj>; one Xform per part (identity
@@ -132,6 +133,10 @@ def build_stage(scene: Scene, path: Path | None = None):
             raise
         except Exception as err:  # pxr raises Tf.ErrorException; name the object, keep the cause
             raise ExportError(f"USD export failed at object {placed.name}: {err}") from err
+    if scene.robot is not None:
+        from exporters.usd_robot import add_robot
+
+        add_robot(stage, scene.robot)
     return stage
 
 

@@ -64,6 +64,10 @@ class _SceneIndex:
         # body id -> object name (every body of an object hangs below its root body).
         root_to_name = {bid: n for n, bid in self.root_body.items()}
         self.body_object = [root_to_name.get(int(m.body_rootid[b]), "") for b in range(m.nbody)]
+        # The robot (``--robot``, bodies ``robot/...``) is one owner: its links may touch each other.
+        for b in range(m.nbody):
+            if m.body(b).name.startswith("robot/"):
+                self.body_object[b] = "robot"
         self.flex_object = {fid: n for n, fid in self.flex.items()}
 
     def geom_object(self, m, geom: int) -> str:

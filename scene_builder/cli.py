@@ -113,6 +113,19 @@ def _add_scene_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--settle-s", type=_positive, default=3.0, help="seconds of simulation in the stability check (default 3)")
     p.add_argument("--adopt-settled", action="store_true", help="write the poses after the settle simulation instead of the solved ones")
+    p.add_argument(
+        "--robot",
+        metavar="NAME",
+        help="place a robot on a free floor spot facing a surface its arm reaches (MJCF and USD, prefix robot/): "
+        "panda (Franka Panda), mobile_panda (Panda on a holonomic base), tidybot (Stanford TidyBot, Menagerie only)",
+    )
+    p.add_argument(
+        "--robot-source",
+        choices=("auto", "menagerie", "built-in"),
+        default="auto",
+        help="where the robot model comes from: auto = MuJoCo Menagerie (downloaded once into its cache), "
+        "else the built-in model; --offline means built-in (default auto)",
+    )
     p.add_argument("--no-usd", action="store_true", help="skip scene.usda")
     p.add_argument("--usdz", action="store_true", help="also package the USD stage and its textures as one scene.usdz file for hand-off")
     p.add_argument("--no-urdf", action="store_true", help="skip the per-object URDFs (OUT/urdf/<object>.urdf)")
@@ -270,7 +283,7 @@ def _build_config(args: argparse.Namespace):
     """The BuildConfig of the scene options (:func:`_add_scene_options`)."""
     from dataclasses import replace
 
-    from scene_builder.config import BuildConfig, ExportConfig, LayoutConfig, PerceptionConfig
+    from scene_builder.config import BuildConfig, ExportConfig, LayoutConfig, PerceptionConfig, RobotConfig
 
     return BuildConfig(
         seed=args.seed,
@@ -283,6 +296,7 @@ def _build_config(args: argparse.Namespace):
         layout=replace(LayoutConfig(), settle_s=args.settle_s, adopt_settled=args.adopt_settled),
         export=ExportConfig(usd=not args.no_usd, usdz=args.usdz and not args.no_usd, urdf=not args.no_urdf,
                             scene_urdf=args.scene_urdf, sdf=not args.no_sdf, gltf=not args.no_gltf, viz=args.viz),
+        robot=RobotConfig(args.robot, args.robot_source, args.offline),
     )
 
 
@@ -293,6 +307,10 @@ def _cmd_build(args: argparse.Namespace) -> int:
     inputs = InputSpec(args.image, args.depth, args.depth_scale, args.intrinsics, args.fov_deg)
     config = _build_config(args)
     out = args.out or default_out_dir(args.image)
+    if args.robot:  # a mistyped robot is said before any download or stage
+        from generation.robot import check_robot_request
+
+        check_robot_request(args.robot, args.robot_source, args.offline)
     if args.image.is_file():  # no download before a missing photo is reported (by build, below)
         _prepare_weights(config.perception, need_depth=args.depth is None, offline=args.offline, quiet=args.quiet)
     result = build(inputs, out, config, progress=not args.quiet, overwrite=args.overwrite, default_name=args.out is None)

@@ -160,6 +160,17 @@ class ExportConfig:
 
 
 @dataclass(frozen=True)
+class RobotConfig:
+    """``--robot``: name (None: no robot; see ``generation.robot.ROBOTS``), source ("auto":
+    MuJoCo Menagerie, else the built-in model; "menagerie"; "built-in") and offline (never
+    download: the built-in model answers)."""
+
+    name: str | None = None
+    source: str = "auto"
+    offline: bool = False
+
+
+@dataclass(frozen=True)
 class BuildConfig:
     """Everything a build needs besides the input. ``seed`` makes the output deterministic."""
 
@@ -168,3 +179,4 @@ class BuildConfig:
     generation: GenerationConfig = field(default_factory=GenerationConfig)
     layout: LayoutConfig = field(default_factory=LayoutConfig)
     export: ExportConfig = field(default_factory=ExportConfig)
+    robot: RobotConfig = field(default_factory=RobotConfig)

@@ -62,6 +62,8 @@ __all__ = [
     "PlacedObject",
     "Placement",
     "Plane",
+    "RobotModel",
+    "RobotPlacement",
     "Room",
     "Scene",
     "SupportEdge",
@@ -73,6 +75,7 @@ __all__ = [
 
 
 from scene_builder.arrays import _check_rigid, _freeze, as_array  # noqa: E402  (re-exported: as_array is public)
+from scene_builder.robot import RobotModel, RobotPlacement  # noqa: E402  (re-exported)
 
 
 # --------------------------------------------------------------------------------------------
@@ -688,6 +691,7 @@ class Scene:
     camera: Camera
     room: Room
     objects: tuple[PlacedObject, ...]
+    robot: RobotPlacement | None = None  # ``--robot``: attached by the exporters as ``robot/``
 
     def __post_init__(self) -> None:
         names = [o.name for o in self.objects]

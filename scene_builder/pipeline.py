@@ -171,6 +171,10 @@ def build(
     out_dir = Path(out_dir)
     check_paths(inputs)  # a missing photo is the first thing to say, before anything about the output
     check_out_dir(out_dir, inputs, overwrite=overwrite, default_name=default_name)
+    if config.robot.name:
+        from generation.robot import check_robot_request
+
+        check_robot_request(config.robot.name, config.robot.source, config.robot.offline)
     log = StageLog(progress)
     total_start = time.perf_counter()
     staging = _make_staging(out_dir)
@@ -205,6 +209,9 @@ def build(
                 scene = settled_scene(scene, verdict)
                 mjcf_path = write_mjcf(scene, staging)
                 verdict, fidelity = verify_scene(mjcf_path, scene, config.layout, perceived)
+        if config.robot.name:
+            with log.stage("robot", lambda: _robot_summary(scene, verdict)):
+                scene, mjcf_path, verdict = _add_robot(scene, staging, config)
         with log.stage("export", lambda: ", ".join(p.name for p in _paths(files))):
             files = export_scene(scene, staging, dataclasses.replace(config.export, mjcf=False, viz="off"))
             files = dataclasses.replace(files, mjcf=mjcf_path)
@@ -223,6 +230,7 @@ def build(
         log.timings.append(("total", time.perf_counter() - total_start))
         report = build_report(inputs, config, perceived, layout, scene, verdict, fidelity, tuple(log.timings), generated)
         write_report(staging, scene, report)
+        shutil.rmtree(staging / ROBOT_WORK_DIR, ignore_errors=True)
         write_marker(staging, inputs)
         # Checked again: the build took a while, and someone may have put a file in out_dir.
         check_out_dir(out_dir, inputs, overwrite=overwrite, default_name=default_name)
@@ -232,6 +240,49 @@ def build(
         raise
     files = ExportedFiles(*[None if p is None else out_dir / p.name for p in dataclasses.astuple(files)])
     return BuildResult(perceived, layout, scene, verdict, fidelity, files, tuple(log.timings), out_dir, out_dir / "report.json")
+
+
+#: Where the built-in robot's MJCF is written during a build (removed before the output is in place).
+ROBOT_WORK_DIR = ".robot"
+
+
+def _add_robot(scene: Scene, staging: Path, config: BuildConfig) -> tuple[Scene, Path, PhysicsVerdict]:
+    """Load the robot and try its placements best first: keep the first whose geoms overlap
+    nothing in the written MJCF and whose scripted reach gets to the target clear of the scene;
+    then the physics check of the scene with the robot (its fidelity stays the twin's: the
+    robot was not in the photo)."""
+    from exporters import write_mjcf
+    from generation.robot import load_robot
+    from layout import verify_scene
+    from layout.reach import REACH_TOL_M, SWEEP_CLEARANCE_M, check_reach, robot_overlaps
+    from layout.robot import place_robot
+
+    model = load_robot(config.robot.name, staging / ROBOT_WORK_DIR, config.robot.source, config.robot.offline)
+    why = []
+    for placement in place_robot(scene, model):
+        with_robot = dataclasses.replace(scene, robot=placement)
+        mjcf_path = write_mjcf(with_robot, staging)
+        overlap = robot_overlaps(mjcf_path, placement)
+        if overlap > 0.0:
+            why.append(f"overlap {overlap * 1000:.1f} mm")
+            continue
+        error, clearance = check_reach(mjcf_path, placement)
+        if error > REACH_TOL_M or clearance < SWEEP_CLEARANCE_M:
+            why.append(f"reach ends {error * 100:.1f} cm off, {clearance * 1000:.0f} mm clear")
+            continue
+        verdict, _ = verify_scene(mjcf_path, with_robot, config.layout)
+        return with_robot, mjcf_path, verdict
+    raise InputError(
+        f"--robot {model.name}: no free spot found reaches its target clear of the scene ({'; '.join(why[:3])}); build without --robot"
+    )
+
+
+def _robot_summary(scene: Scene, verdict: PhysicsVerdict) -> str:
+    r = scene.robot
+    if r is None:
+        return ""
+    return (f"{r.model.name} ({r.model.source}) at ({r.position_m[0]:.2f}, {r.position_m[1]:.2f}) m facing {r.target_support}; "
+            f"{_verdict_summary(verdict)}")
 
 
 def _paths(files: ExportedFiles) -> list[Path]:

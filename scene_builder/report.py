@@ -118,7 +118,8 @@ def build_report(
         },
         "seed": config.seed,
         "backends": [{"task": b.task, "backend": b.backend, "reason": b.reason} for b in perception.backends]
-        + [_generation_use(b, scene) for b in sorted({o.asset.backend for o in scene.objects})],
+        + [_generation_use(b, scene) for b in sorted({o.asset.backend for o in scene.objects})]
+        + ([{"task": "robot", "backend": scene.robot.model.source, "reason": scene.robot.model.detail}] if scene.robot else []),
         "generation_failures": failures,
         "timings_s": timings,
         "objects": objects,
@@ -152,6 +153,7 @@ def build_report(
             "mask_iou_mean": _r(fidelity.mask_iou_mean, 5),
             "mask_iou": {name: _r(iou, 4) for name, iou in fidelity.mask_iou},
         },
+        "robot": robot_report(scene),
         "machine": {"python": platform.python_version(), "platform": platform.platform()},
     }
 
@@ -165,6 +167,31 @@ def _generation_use(backend: str, scene: Scene) -> dict:
     if fell_back:
         reason += f"; fallback for {len(fell_back)} the preferred generator failed on ({', '.join(fell_back)}; see generation_failures)"
     return {"task": "generation", "backend": backend, "reason": reason}
+
+
+def robot_report(scene: Scene) -> dict | None:
+    """Where the robot stands and what drives it (MJCF names, with the ``robot/`` prefix)."""
+    r = scene.robot
+    if r is None:
+        return None
+    m = r.model
+    return {
+        "name": m.name,
+        "source": m.source,
+        "detail": m.detail,
+        "position_m": [_r(float(v), 4) for v in r.position_m],
+        "yaw_rad": _r(r.yaw_rad, 5),
+        "clearance_m": _r(r.clearance_m, 4),
+        "target_m": [_r(float(v), 4) for v in r.target_m],
+        "target_support": r.target_support,
+        "target_kind": r.target_kind,
+        "ee_site": f"robot/{m.ee_site}",
+        "arm_joints": [f"robot/{j}" for j in m.arm_joints],
+        "base_joints": [f"robot/{j}" for j in m.base_joints],
+        "home_qpos": [_r(float(v), 5) for v in m.home_qpos],
+        "reach_m": _r(m.reach_m, 4),
+        "footprint_radius_m": _r(m.footprint_radius_m, 4),
+    }
 
 
 def write_report(out_dir: Path, scene: Scene, report: dict) -> Path:

@@ -114,6 +114,15 @@ EXTRAS: tuple[Extra, ...] = (
         markdown=True,
         timeout_s=5400.0,
     ),
+    Extra(
+        "A robot in the real scenes (`--robot panda`)",
+        "Every real RGB-D sample built with the built-in Franka Panda (`scene_builder.bench.robot`): the target the "
+        "placement chose, the robot's clearance, seconds of the `robot` stage and of the build, then 4 s of the scripted "
+        "reach in MuJoCo: the tool's final distance to the target and the robot-scene contacts.",
+        ("-m", "scene_builder.bench.robot"),
+        markdown=True,
+        timeout_s=1800.0,
+    ),
 )
 
 

@@ -1,0 +1,252 @@
+"""The placed robot in MuJoCo: overlap at the start, and whether its arm reaches the target.
+
+The reach is scripted, no learning: the tool centre point rises (or sinks) from the home pose to
+the target's height, then moves across to the target (minimum-jerk timing on each leg), its
+orientation held. Each waypoint becomes arm joint targets by damped least squares on the 6-D
+site Jacobian (``mj_jacSite``) with a pull towards the home pose in the null space, within the
+joint limits. :func:`check_reach` sweeps that path kinematically and measures the robot's
+distance to the scene (``mj_geomDistance``); the pipeline keeps a placement only when the arm
+gets there clear of everything. ``examples/robot_reach.py`` drives the same path through the
+robot's own position actuators in simulation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from scene_builder.robot import RobotPlacement
+
+PREFIX = "robot/"
+DAMPING = 0.05
+NULL_GAIN = 0.3
+SWEEP_STEPS = 60
+RISE_SHARE = 0.4  # of the path's duration spent on the vertical leg
+#: The kinematic sweep must keep this far from the scene: the simulated arm lags the plan and
+#: sags under gravity by a few millimetres.
+SWEEP_CLEARANCE_M = 0.01
+REACH_TOL_M = 0.01
+CONTROL_DT_S = 0.01
+
+
+@dataclass
+class ArmIds:
+    """MuJoCo ids of the robot in a compiled scene (names carry the ``robot/`` prefix)."""
+
+    site: int
+    qpos: np.ndarray  # qpos address of each arm joint
+    dof: np.ndarray
+    act: np.ndarray  # the actuator driving each arm joint
+    lo: np.ndarray
+    hi: np.ndarray
+    home: np.ndarray
+    geoms: np.ndarray  # the robot's collision geoms
+    moving: np.ndarray  # those the arm carries (its first joint's body and below)
+
+
+def arm_ids(m, ee_site: str, arm_joints: list[str] | tuple[str, ...], home: np.ndarray) -> ArmIds:
+    """Ids of the arm called ``arm_joints`` (full names) with tool site ``ee_site``."""
+    import mujoco
+
+    joints = [m.joint(n) for n in arm_joints]
+    act_of_joint = {int(m.actuator_trnid[a, 0]): a for a in range(m.nu) if int(m.actuator_trntype[a]) == int(mujoco.mjtTrn.mjTRN_JOINT)}
+    robot_body = np.array([m.body(b).name.startswith(PREFIX) for b in range(m.nbody)])
+    collides = (m.geom_contype != 0) | (m.geom_conaffinity != 0)
+    first = int(joints[0].bodyid[0])
+    carried = np.zeros(m.nbody, dtype=bool)
+    for b in range(m.nbody):
+        k = b
+        while k > 0 and k != first:
+            k = int(m.body_parentid[k])
+        carried[b] = k == first
+    return ArmIds(
+        site=m.site(ee_site).id,
+        qpos=np.array([int(j.qposadr[0]) for j in joints]),
+        dof=np.array([int(j.dofadr[0]) for j in joints]),
+        act=np.array([act_of_joint.get(j.id, -1) for j in joints]),
+        lo=np.array([j.range[0] for j in joints]),
+        hi=np.array([j.range[1] for j in joints]),
+        home=np.asarray(home, dtype=np.float64),
+        geoms=np.flatnonzero(collides & robot_body[m.geom_bodyid]),
+        moving=np.flatnonzero(collides & carried[m.geom_bodyid]),
+    )
+
+
+def reset_home(m, d, arm: ArmIds) -> None:
+    """Keyframe ``robot/home`` when the scene has it, else the arm's home pose."""
+    import mujoco
+
+    key = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, f"{PREFIX}home")
+    if key >= 0:
+        mujoco.mj_resetDataKeyframe(m, d, key)
+    else:
+        mujoco.mj_resetData(m, d)
+        d.qpos[arm.qpos] = arm.home
+        d.ctrl[arm.act[arm.act >= 0]] = arm.home[arm.act >= 0]
+    mujoco.mj_forward(m, d)
+
+
+def ik_step(m, scratch, arm: ArmIds, q: np.ndarray, pos: np.ndarray, rot: np.ndarray, iters: int = 5) -> np.ndarray:
+    """Arm joint values that bring the tool site to ``pos`` with orientation ``rot`` (3x3),
+    starting from ``q`` (damped least squares, home pulled in the null space, clipped to the
+    limits). ``scratch``: an MjData holding the rest of the state (kinematics only)."""
+    import mujoco
+
+    jacp, jacr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
+    q = q.copy()
+    for _ in range(iters):
+        scratch.qpos[arm.qpos] = q
+        mujoco.mj_kinematics(m, scratch)
+        mujoco.mj_comPos(m, scratch)
+        err_p = pos - scratch.site_xpos[arm.site]
+        cur = scratch.site_xmat[arm.site].reshape(3, 3)
+        err_r = 0.5 * sum(np.cross(cur[:, k], rot[:, k]) for k in range(3))
+        mujoco.mj_jacSite(m, scratch, jacp, jacr, arm.site)
+        jac = np.vstack([jacp[:, arm.dof], jacr[:, arm.dof]])
+        dq = jac.T @ np.linalg.solve(jac @ jac.T + DAMPING**2 * np.eye(6), np.concatenate([err_p, err_r]))
+        dq += (np.eye(len(q)) - np.linalg.pinv(jac) @ jac) @ (NULL_GAIN * (arm.home - q))
+        q = np.clip(q + dq, arm.lo, arm.hi)
+    return q
+
+
+def tool_path(start: np.ndarray, target: np.ndarray, seconds: float) -> Callable[[float], np.ndarray]:
+    """Tool position at time t: to the target's height over RISE_SHARE of ``seconds``, then
+    across to the target (minimum-jerk on each leg), then held."""
+    mid = np.array([start[0], start[1], target[2]])
+
+    def smooth(s: float) -> float:
+        s = min(max(s, 0.0), 1.0)
+        return 10 * s**3 - 15 * s**4 + 6 * s**5
+
+    def at(t: float) -> np.ndarray:
+        s = t / seconds
+        if s < RISE_SHARE:
+            return start + smooth(s / RISE_SHARE) * (mid - start)
+        return mid + smooth((s - RISE_SHARE) / (1.0 - RISE_SHARE)) * (target - mid)
+
+    return at
+
+
+def _min_distance(m, d, mine: np.ndarray, others: np.ndarray, cutoff: float) -> float:
+    """Smallest distance (negative: overlap) between geoms ``mine`` and ``others``, up to ``cutoff``."""
+    import mujoco
+
+    fromto = np.zeros(6)
+    best = cutoff
+    for a in mine:
+        near = others[np.linalg.norm(d.geom_xpos[others] - d.geom_xpos[a], axis=1) <= m.geom_rbound[a] + m.geom_rbound[others] + cutoff]
+        near = np.concatenate([near, others[m.geom_rbound[others] == 0]])  # planes have no bounding sphere
+        for b in near:
+            best = min(best, float(mujoco.mj_geomDistance(m, d, int(a), int(b), cutoff, fromto)))
+    return best
+
+
+def _scene_geoms(m, arm: ArmIds) -> np.ndarray:
+    collides = np.flatnonzero((m.geom_contype != 0) | (m.geom_conaffinity != 0))
+    return np.setdiff1d(collides, arm.geoms)
+
+
+def robot_overlaps(mjcf_path: Path, placement: RobotPlacement) -> float:
+    """Deepest overlap (m, 0 when none) between the robot's collision geoms and the scene's, at
+    the start pose and at the home pose."""
+    import mujoco
+
+    m = mujoco.MjModel.from_xml_path(str(mjcf_path))
+    d = mujoco.MjData(m)
+    arm = _arm(m, placement)
+    others = _scene_geoms(m, arm)
+    mujoco.mj_forward(m, d)
+    worst = _min_distance(m, d, arm.geoms, others, 0.0)
+    reset_home(m, d, arm)
+    worst = min(worst, _min_distance(m, d, arm.geoms, others, 0.0))
+    return max(0.0, -worst)
+
+
+def _arm(m, placement: RobotPlacement) -> ArmIds:
+    model = placement.model
+    return arm_ids(m, PREFIX + model.ee_site, [PREFIX + j for j in model.arm_joints], model.home_qpos)
+
+
+def check_reach(mjcf_path: Path, placement: RobotPlacement) -> tuple[float, float]:
+    """Sweep the scripted reach kinematically (SWEEP_STEPS waypoints): (tool's distance to the
+    target at the end, smallest distance between the arm's geoms and the scene on the way; the
+    base, which does not move, is measured by :func:`robot_overlaps`)."""
+    import mujoco
+
+    m = mujoco.MjModel.from_xml_path(str(mjcf_path))
+    d = mujoco.MjData(m)
+    arm = _arm(m, placement)
+    others = _scene_geoms(m, arm)
+    reset_home(m, d, arm)
+    start = d.site_xpos[arm.site].copy()
+    rot = d.site_xmat[arm.site].reshape(3, 3).copy()
+    path = tool_path(start, np.asarray(placement.target_m), 1.0)
+    q = d.qpos[arm.qpos].copy()
+    clearance = np.inf
+    for t in np.linspace(0.0, 1.0, SWEEP_STEPS + 1):
+        q = ik_step(m, d, arm, q, path(t), rot)
+        d.qpos[arm.qpos] = q
+        mujoco.mj_kinematics(m, d)
+        clearance = min(clearance, _min_distance(m, d, arm.moving, others, 0.05))
+    for _ in range(5):  # settle the last waypoint
+        q = ik_step(m, d, arm, q, path(1.0), rot)
+    d.qpos[arm.qpos] = q
+    mujoco.mj_kinematics(m, d)
+    return float(np.linalg.norm(d.site_xpos[arm.site] - placement.target_m)), float(clearance)
+
+
+def robot_contacts(m, d, mine: set[int]) -> list[tuple[str, str, float]]:
+    """(robot geom, other geom, distance) of every contact between the robot and the scene."""
+    out = []
+    for i in range(d.ncon):
+        c = d.contact[i]
+        a, b = int(c.geom[0]), int(c.geom[1])
+        if a < 0 or b < 0 or (a in mine) == (b in mine):
+            continue
+        own, other = (a, b) if a in mine else (b, a)
+        out.append((m.geom(own).name or f"geom {own} of {m.body(int(m.geom_bodyid[own])).name}",
+                    m.geom(other).name or f"geom {other}", float(c.dist)))
+    return out
+
+
+@dataclass
+class ReachResult:
+    """final_error_m: tool to target at the end; min_error_m: closest on the way; contacts:
+    (time s, robot geom, scene geom, distance m) of robot-scene contacts (the first 20)."""
+
+    final_error_m: float
+    min_error_m: float
+    contacts: list[tuple[float, str, str, float]]
+
+
+def simulate_reach(m, d, arm: ArmIds, target: np.ndarray, seconds: float, on_step: Callable[[int], None] | None = None) -> ReachResult:
+    """Run the scripted reach in simulation from the current state for ``seconds``: every
+    CONTROL_DT_S the next waypoint of :func:`tool_path` (over 80 % of the time, then held) goes
+    through :func:`ik_step` to the arm's position actuators; ``on_step(k)`` after each step."""
+    import mujoco
+
+    scratch = mujoco.MjData(m)
+    scratch.qpos[:] = d.qpos
+    start = d.site_xpos[arm.site].copy()
+    rot = d.site_xmat[arm.site].reshape(3, 3).copy()
+    path = tool_path(start, np.asarray(target, dtype=np.float64), 0.8 * seconds)
+    q = d.qpos[arm.qpos].copy()
+    mine = {int(g) for g in range(m.ngeom) if m.body(int(m.geom_bodyid[g])).name.startswith(PREFIX)}
+    every = max(1, int(round(CONTROL_DT_S / m.opt.timestep)))
+    contacts: list[tuple[float, str, str, float]] = []
+    min_err = np.inf
+    for k in range(int(round(seconds / m.opt.timestep))):
+        if k % every == 0:
+            q = ik_step(m, scratch, arm, q, path(d.time), rot)
+            d.ctrl[arm.act] = q
+        mujoco.mj_step(m, d)
+        for a, b, dist in robot_contacts(m, d, mine):
+            if len(contacts) < 20:
+                contacts.append((float(d.time), a, b, dist))
+        min_err = min(min_err, float(np.linalg.norm(d.site_xpos[arm.site] - target)))
+        if on_step is not None:
+            on_step(k)
+    return ReachResult(float(np.linalg.norm(d.site_xpos[arm.site] - target)), min_err, contacts)
