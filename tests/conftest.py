@@ -85,6 +85,20 @@ def real_samples(with_intrinsics: bool = True) -> list[Path]:
     return out
 
 
+def build_sample(src: Path, out: Path, viz: str = "off"):
+    """Build the RGB-D sample folder ``src`` (rgb.jpg or rgb.png, depth.png in millimetres,
+    camera.json) into ``out`` with the default configuration; returns the pipeline's BuildResult."""
+    import json
+
+    from scene_builder.config import BuildConfig, ExportConfig, InputSpec
+    from scene_builder.pipeline import build
+
+    cam = json.loads((src / "camera.json").read_text())
+    rgb = src / ("rgb.jpg" if (src / "rgb.jpg").exists() else "rgb.png")
+    inputs = InputSpec(rgb, src / "depth.png", 0.001, (cam["fx"], cam["fy"], cam["cx"], cam["cy"]))
+    return build(inputs, out, BuildConfig(export=ExportConfig(viz=viz)))
+
+
 @pytest.fixture(scope="session")
 def newton():
     """NVIDIA Newton, the independent UsdPhysics consumer (its kernels are cached under .cache/warp)."""

@@ -10,19 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from .conftest import real_samples
+from .conftest import build_sample, real_samples
 
 SAMPLES = real_samples(with_intrinsics=True)
-
-
-def _build(sample: Path, out: Path):
-    from scene_builder.config import BuildConfig, ExportConfig, InputSpec
-    from scene_builder.pipeline import build
-
-    cam = json.loads((sample / "camera.json").read_text())
-    rgb = sample / ("rgb.jpg" if (sample / "rgb.jpg").exists() else "rgb.png")
-    inputs = InputSpec(rgb, sample / "depth.png", 0.001, (cam["fx"], cam["fy"], cam["cx"], cam["cy"]))
-    return build(inputs, out, BuildConfig(export=ExportConfig(viz="off")))
 
 
 @pytest.mark.slow
@@ -32,7 +22,7 @@ def test_real_sample_builds_a_valid_stable_scene(sample: Path, tmp_path: Path):
     import mujoco
     from pxr import Usd, UsdValidation
 
-    result = _build(sample, tmp_path / "out")
+    result = build_sample(sample, tmp_path / "out")
     out = tmp_path / "out"
     for name in ("scene.xml", "scene.usda", "scene.json", "report.json", "scene.urdf", "scene.glb"):
         assert (out / name).is_file(), name
