@@ -10,7 +10,7 @@ Push (:func:`push_object`): a kinematic pusher, a mocap paddle added to the mode
 the robot's fingertip, which a real robot brings in from wherever it has room. It is driven at
 ``PUSH_SPEED_M_S`` horizontally into the object's side at its centre-of-mass height along one of
 the four horizontal face directions of its body frame (:func:`plan_push` picks the one with the
-most free space ahead, measured by rays over its front face, and with support under its centre
+most free space ahead, found by sliding its collision geometry there, and with support under its centre
 of mass after the push), advances ``PUSH_TRAVEL_M`` past first contact, is withdrawn, and the
 scene settles for ``POST_SETTLE_S``. Objects resting on the pushed one (directly or on each
 other, found from the contacts at rest: normal within 45 degrees of vertical) ride along: they are
@@ -33,7 +33,7 @@ import numpy as np
 from scene_builder.errors import ExportError, InputError
 from scene_builder.model import JointProbe, PushPlan, PushResult
 
-__all__ = ["interaction_problems", "joint_names", "load_probe_model", "open_joint", "plan_push", "probe_scene", "push_object"]
+__all__ = ["interaction_problems", "joint_names", "load_probe_model", "open_joint", "plan_push", "probe_lines", "probe_scene", "push_object"]
 
 PUSHER = "probe/pusher"
 PUSHER_BIT = 2  # contype bit of the pusher; only the pushed object's geoms get it in conaffinity
@@ -43,7 +43,10 @@ PUSH_SPEED_M_S = 0.05
 PUSH_TRAVEL_M = 0.06
 APPROACH_GAP_M = 0.01  # the pusher starts this far from the object's surface
 MIN_CLEARANCE_M = 0.10  # free space needed ahead: the push travel, the settle and a margin
-CLEARANCE_CAP_M = 1.0
+CLEARANCE_CAP_M = 0.3  # free space is measured up to this far
+CLEARANCE_STEP_M = 0.01
+BLOCK_DEPTH_M = 0.002
+DRAG_COS = 0.5  # a push must leave a side-touching neighbour at least 60 deg off its contact normal
 SUPPORT_DROP_M = 0.03  # under the centre of mass after the push, support within this below the bottom
 PRE_SETTLE_S = 0.5
 POST_SETTLE_S = 1.0
@@ -161,7 +164,7 @@ def _points(m, d, geoms: np.ndarray) -> np.ndarray:
     return np.concatenate(out) if out else np.zeros((0, 3))
 
 
-def _cast(m, d, objects: _Objects, pnt, vec, accept, cap: float = CLEARANCE_CAP_M) -> float:
+def _cast(m, d, objects: _Objects, pnt, vec, accept, cap: float) -> float:
     """Distance along the unit ``vec`` from ``pnt`` to the first colliding geom ``accept(g)``
     takes (rays pass through the others: visual geoms, the pushed object itself); inf if none
     within ``cap``."""
@@ -223,23 +226,63 @@ def _face_directions(d, root: int) -> list[np.ndarray]:
     return [x, y, -x, -y]
 
 
-def _clearance(m, d, objects: _Objects, pts: np.ndarray, direction: np.ndarray, skip: set[str]) -> float:
-    """Free space ahead of the points' front face along ``direction``: the shortest of rays over
-    a 4 x 4 grid of that face (2 cm above the bottom to 1 cm under the top)."""
-    perp = np.array([-direction[1], direction[0], 0.0])
-    front = float((pts @ direction).max()) + 1e-3
-    lat = pts @ perp
-    l0, l1 = float(lat.min()), float(lat.max())
-    z0, z1 = float(pts[:, 2].min()), float(pts[:, 2].max())
-    lats = np.linspace(l0 + 0.1 * (l1 - l0), l1 - 0.1 * (l1 - l0), 4)
-    zs = np.linspace(z0 + 0.02, z1 - 0.01, 4) if z1 - z0 > 0.04 else np.array([0.5 * (z0 + z1)])
-    accept = lambda g: objects.geom_object[g] not in skip  # noqa: E731
-    best = float("inf")
-    for lv in lats:
-        for z in zs:
-            origin = front * direction + lv * perp + np.array([0.0, 0.0, z])
-            best = min(best, _cast(m, d, objects, origin, direction, accept))
-    return min(best, CLEARANCE_CAP_M)
+def _clearance(m, d, objects: _Objects, movers: set[str], direction: np.ndarray) -> float:
+    """Free space ahead along the horizontal unit ``direction``: the pushed object and what rides
+    on it are slid there in CLEARANCE_STEP_M steps (kinematics and MuJoCo's own collision
+    detection on a copy of the state, no dynamics) until one of their collision geoms reaches
+    BLOCK_DEPTH_M into anything else with a contact normal more than 45 deg from vertical (a
+    wall, the background, a neighbour: resting contacts on the floor or a support do not block).
+    Exact for the real (non-convex, multi-piece) shapes, unlike rays over the front face."""
+    import mujoco
+
+    d2 = mujoco.MjData(m)
+    d2.qpos[:] = d.qpos
+    d2.mocap_pos[:] = d.mocap_pos
+    d2.mocap_quat[:] = d.mocap_quat
+    adrs = [int(m.jnt_qposadr[int(m.body_jntadr[objects.root[n]])]) for n in sorted(movers)]
+    moving = np.isin(objects.geom_object, sorted(movers))
+    s = 0.0
+    while s < CLEARANCE_CAP_M - 1e-9:
+        s = min(s + CLEARANCE_STEP_M, CLEARANCE_CAP_M)
+        for a in adrs:
+            d2.qpos[a : a + 2] = d.qpos[a : a + 2] + s * direction[:2]
+        mujoco.mj_kinematics(m, d2)
+        mujoco.mj_collision(m, d2)
+        n = d2.ncon
+        if not n:
+            continue
+        g = d2.contact.geom[:n]
+        valid = (g[:, 0] >= 0) & (g[:, 1] >= 0)
+        g = np.where(valid[:, None], g, 0)
+        one_side = moving[g[:, 0]] ^ moving[g[:, 1]]
+        lateral = np.abs(d2.contact.frame[:n, 2]) < RIDER_NORMAL_Z
+        deep = d2.contact.dist[:n] < -BLOCK_DEPTH_M
+        if np.any(valid & one_side & lateral & deep):
+            return s - CLEARANCE_STEP_M
+    return CLEARANCE_CAP_M
+
+
+def _touching(m, d, objects: _Objects, name: str, riders: set[str]) -> list[tuple[str, np.ndarray]]:
+    """Free objects touching ``name`` from the side at rest (not riders): (neighbour, horizontal
+    unit normal from ``name`` toward it), one per contact."""
+    out = []
+    for i in range(d.ncon):
+        c = d.contact[i]
+        g0, g1 = int(c.geom[0]), int(c.geom[1])
+        if g0 < 0 or g1 < 0 or float(c.dist) > BLOCK_DEPTH_M or abs(float(c.frame[2])) >= RIDER_NORMAL_Z:
+            continue
+        a, b = objects.geom_object[g0], objects.geom_object[g1]
+        if name not in (a, b) or a == b:
+            continue
+        other, n = (b, np.array(c.frame[:3])) if a == name else (a, -np.array(c.frame[:3]))
+        if not other or other in riders:
+            continue
+        n[2] = 0.0
+        out.append((other, n / max(float(np.linalg.norm(n)), 1e-9)))
+    return out
+
+
+SIDES = ("front (+x)", "left (+y)", "back (-x)", "right (-y)")  # of the object's body frame
 
 
 def _plan(m, d, objects: _Objects, name: str, riders: set[str], travel_m: float) -> PushPlan:
@@ -252,21 +295,29 @@ def _plan(m, d, objects: _Objects, name: str, riders: set[str], travel_m: float)
     accept = lambda g: objects.geom_object[g] not in skip  # noqa: E731
     com = d.subtree_com[root]
     bottom = float(pts[:, 2].min())
+    touching = _touching(m, d, objects, name, riders)
     tried = []
     for k, u in enumerate(_face_directions(d, root)):
-        clear = _clearance(m, d, objects, pts, u, skip)
+        clear = _clearance(m, d, objects, skip, u)
         ahead = np.array([com[0], com[1], bottom + 0.01]) + (travel_m + 0.03) * u
         drop = _cast(m, d, objects, ahead, np.array([0.0, 0.0, -1.0]), accept, cap=0.01 + SUPPORT_DROP_M)
-        tried.append((-clear, k, u, clear, np.isfinite(drop)))
+        # a neighbour touching its side is dragged along by friction unless the push leaves it
+        dragged = sorted({n for n, normal in touching if float(normal @ u) > -DRAG_COS})
+        if clear < MIN_CLEARANCE_M:
+            why = f"{clear * 100:.0f} cm free"
+        elif not np.isfinite(drop):
+            why = f"no support {(travel_m + 0.03) * 100:.0f} cm ahead"
+        elif dragged:
+            why = f"would drag {', '.join(dragged)} touching its side"
+        else:
+            why = ""
+        tried.append((-clear, k, u, clear, why))
     tried.sort(key=lambda t: (t[0], t[1]))
-    for _, _, u, clear, supported in tried:
-        if clear >= MIN_CLEARANCE_M and supported:
+    for _, _, u, clear, why in tried:
+        if not why:
             return PushPlan(name, True, (float(u[0]), float(u[1])), float(clear))
     _, _, u, clear, _ = tried[0]
-    if clear < MIN_CLEARANCE_M:
-        why = f"no side with {MIN_CLEARANCE_M * 100:.0f} cm free space ahead (best {clear * 100:.1f} cm)"
-    else:
-        why = f"no side with free space ahead and support under it {(travel_m + 0.03) * 100:.0f} cm further (it would fall off its support)"
+    why = "no side to push it from: " + "; ".join(f"toward its {SIDES[k]} {w}" for _, k, _, _, w in sorted(tried, key=lambda t: t[1]))
     return PushPlan(name, False, (float(u[0]), float(u[1])), float(clear), why)
 
 
@@ -307,11 +358,11 @@ def push_object(model, name: str, direction_xy=None, travel_m: float = PUSH_TRAV
     if name not in objects.root:
         raise InputError(f"interaction probe: no free object {name!r} in the model (free objects: {', '.join(objects.names) or 'none'})")
     riders = _riders(m, d, objects, name)
-    plan = _plan(m, d, objects, name, riders, travel_m)
     geoms = objects.geoms(name)
     if len(geoms) == 0:
         raise InputError(f"interaction probe: {name} has no collision geometry to push")
     if direction_xy is None:
+        plan = _plan(m, d, objects, name, riders, travel_m)
         u = np.array([plan.direction_xy[0], plan.direction_xy[1], 0.0])
         clearance = plan.clearance_m
     else:
@@ -319,7 +370,7 @@ def push_object(model, name: str, direction_xy=None, travel_m: float = PUSH_TRAV
         if np.linalg.norm(u) < 1e-9:
             raise InputError("interaction probe: the push direction is zero")
         u /= np.linalg.norm(u)
-        clearance = _clearance(m, d, objects, _points(m, d, geoms), u, {name} | riders)
+        clearance = _clearance(m, d, objects, {name} | riders, u)
     perp = np.array([-u[1], u[0], 0.0])
     root = objects.root[name]
     pts = _points(m, d, geoms)
@@ -328,20 +379,31 @@ def push_object(model, name: str, direction_xy=None, travel_m: float = PUSH_TRAV
     half_w = float(np.clip(0.3 * (lat.max() - lat.min()), 0.01, 0.05))
     half_h = float(np.clip(0.25 * (top - bottom), 0.01, 0.04))
     com = d.subtree_com[root].copy()
-    z = float(np.clip(com[2], bottom + half_h + 0.005, max(bottom + half_h + 0.005, top - half_h)))
+    # Push at the centre-of-mass height, lower where a push there would tip it over its leading
+    # bottom edge before it slides (it tips when height x friction > lever of its weight): at most
+    # half that height, as a robot pushes a tall cabinet low.
+    base_pts = pts[pts[:, 2] < bottom + 0.02]
+    lever = max(float((base_pts @ u).max() - com @ u), 0.0)
+    mu = float(np.max(m.geom_friction[objects.colliding, 0]))
+    low, high = bottom + half_h + 0.005, max(bottom + half_h + 0.005, top - half_h)
+    heights = [float(np.clip(min(com[2], bottom + 0.5 * lever / mu), low, high)), float(np.clip(com[2], low, high))]
 
-    # Where the paddle first meets the object: rays over its face from behind the object.
+    # Where the paddle first meets the object: rays over its face from behind the object (on
+    # the line through its centre of mass, else through the middle of its extent; at the push
+    # height, else at its centre-of-mass height).
     back = float((pts @ u).min()) - 0.05
     target = set(int(g) for g in geoms)
-    hit = float("inf")
-    line = float(com @ perp)
-    for lv in (line, float(np.median(lat))):
-        for dl in (-half_w, 0.0, half_w):
-            for dz in (-half_h, 0.0, half_h):
-                origin = back * u + (lv + dl) * perp + np.array([0.0, 0.0, z + dz])
-                hit = min(hit, _cast(m, d, objects, origin, u, lambda g: g in target, cap=5.0))
+    hit, line, z = float("inf"), float(com @ perp), heights[0]
+    for zc in heights:
+        for lv in (float(com @ perp), float(np.median(lat))):
+            for dl in (-half_w, 0.0, half_w):
+                for dz in (-half_h, 0.0, half_h):
+                    origin = back * u + (lv + dl) * perp + np.array([0.0, 0.0, zc + dz])
+                    hit = min(hit, _cast(m, d, objects, origin, u, lambda g: g in target, cap=5.0))
+            if np.isfinite(hit):
+                line, z = lv, zc
+                break
         if np.isfinite(hit):
-            line = lv
             break
     pusher_body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, PUSHER)
     mocap = int(m.body_mocapid[pusher_body])
@@ -369,10 +431,21 @@ def push_object(model, name: str, direction_xy=None, travel_m: float = PUSH_TRAV
     try:
         if np.isfinite(hit):
             start = (back + hit - APPROACH_GAP_M - PUSHER_HALF_THICKNESS_M) * u + line * perp + np.array([0.0, 0.0, z])
+            # The rays sample the paddle's face: a part of the object between them (a panel of
+            # an open shelf) may still reach into it there. Back off until it touches nothing.
+            backed = 0.0
+            for _ in range(int(round(0.3 / APPROACH_GAP_M))):
+                d.mocap_pos[mocap] = start
+                mujoco.mj_kinematics(m, d)
+                mujoco.mj_collision(m, d)
+                if not (d.ncon and np.any(d.contact.geom[: d.ncon] == pg)):
+                    break
+                start = start - APPROACH_GAP_M * u
+                backed += APPROACH_GAP_M
             dt = float(m.opt.timestep)
             step = speed_m_s * dt
             s, contact_at = 0.0, None
-            limit = APPROACH_GAP_M + 0.05 + travel_m  # give up if nothing is touched by then
+            limit = APPROACH_GAP_M + backed + 0.05 + travel_m  # give up if nothing is touched by then
             while s < limit and (contact_at is None or s - contact_at < travel_m):
                 s += step
                 d.mocap_pos[mocap] = start + s * u
@@ -562,7 +635,7 @@ def interaction_problems(pushes: tuple[PushResult, ...] = (), joints: tuple[Join
             n, v = max(p.others, key=lambda o: o[1])
             out.append(f"push {p.name}: {n} moved {v * 100:.1f} cm too")
     for j in joints:
-        unit = (lambda v: f"{np.degrees(v):.1f} deg") if j.kind == "hinge" else (lambda v: f"{v * 100:.1f} cm")
+        unit = lambda v, k=j.kind: _joint_unit(k, v)  # noqa: E731
         if j.open_fraction < OPEN_MIN_FRACTION:
             out.append(f"open {j.joint}: opened {unit(j.travel)} ({j.open_fraction:.0%} of its range)")
         if j.backtrack > BACKTRACK_TOLERANCE[j.kind]:
@@ -582,3 +655,26 @@ def probe_scene(mjcf_path: Path) -> tuple[tuple[PushPlan, ...], tuple[PushResult
     pushes = tuple(push_object(m, p.name, p.direction_xy) for p in plans if p.pushable)
     joints = tuple(open_joint(m, j) for j in joint_names(m))
     return plans, pushes, joints
+
+
+def _joint_unit(kind: str, v: float) -> str:
+    return f"{np.degrees(v):.1f} deg" if kind == "hinge" else f"{v * 100:.1f} cm"
+
+
+def probe_lines(plans: tuple[PushPlan, ...], pushes: tuple[PushResult, ...], joints: tuple[JointProbe, ...]) -> tuple[str, ...]:
+    """One human-readable line per probe (what ``scene-builder check --interact`` prints)."""
+    out = [f"push {p.name}: not pushable: {p.reason}" for p in plans if not p.pushable]
+    for r in pushes:
+        carried = f"; carried {', '.join(n for n, _ in r.carried)}" if r.carried else ""
+        out.append(
+            f"push {r.name}: moved {r.displacement_m * 100:.1f} cm ({r.along_m * 100:.1f} cm along "
+            f"({r.direction_xy[0]:+.2f}, {r.direction_xy[1]:+.2f}), {r.clearance_m * 100:.0f} cm free ahead), tilt {r.tilt_deg:.1f} deg, "
+            f"others at most {r.max_other_m * 1000:.1f} mm{carried}"
+        )
+    for j in joints:
+        out.append(
+            f"open {j.joint}: {j.kind} opened {_joint_unit(j.kind, j.travel)} of {_joint_unit(j.kind, abs(j.range[1] - j.range[0]))} "
+            f"({j.open_fraction:.0%}) under {j.force_n:.0f} N, {_joint_unit(j.kind, j.limit_violation)} beyond its range, "
+            f"{j.object} moved {j.body_displacement_m * 1000:.1f} mm"
+        )
+    return tuple(out)

@@ -113,7 +113,7 @@ class PushResult:
     at its centre-of-mass height, then withdrawn, then a settle.
 
     name: the pushed object; direction_xy: (2,) unit horizontal push direction in the world;
-    clearance_m: free space ahead of it along that direction (rays over its front face, up to
+    clearance_m: free space ahead of it along that direction (its collision geometry slid there, up to
       ``CLEARANCE_CAP_M``); height_m: world z of the pusher's centre; speed_m_s: pusher speed;
     pusher_travel_m: how far the pusher advanced past first contact (0 when it never touched);
     displacement_m: horizontal displacement of the pushed object's root body after the settle;
