@@ -47,7 +47,10 @@ CLEARANCE_CAP_M = 0.3  # free space is measured up to this far
 CLEARANCE_STEP_M = 0.01
 BLOCK_DEPTH_M = 0.002
 DRAG_COS = 0.5  # a push must leave a side-touching neighbour at least 60 deg off its contact normal
-SUPPORT_DROP_M = 0.03  # under the centre of mass after the push, support within this below the bottom
+SUPPORT_DROP_M = 0.03
+SUPPORT_MARGIN_M = 0.03  # support is checked this much beyond the push travel
+SUPPORT_INSET_M = 0.01  # the centre of mass must stay this far inside the support polygon
+UPRIGHT_NZ = 0.3  # a face whose normal is within ~17 deg of horizontal is upright enough to push  # under the centre of mass after the push, support within this below the bottom
 PRE_SETTLE_S = 0.5
 POST_SETTLE_S = 1.0
 RIDER_NORMAL_Z = 0.7  # a contact whose normal is within ~45 deg of vertical is resting contact
@@ -164,19 +167,21 @@ def _points(m, d, geoms: np.ndarray) -> np.ndarray:
     return np.concatenate(out) if out else np.zeros((0, 3))
 
 
-def _cast(m, d, objects: _Objects, pnt, vec, accept, cap: float) -> float:
+def _cast(m, d, objects: _Objects, pnt, vec, accept, cap: float, normal: np.ndarray | None = None) -> float:
     """Distance along the unit ``vec`` from ``pnt`` to the first colliding geom ``accept(g)``
     takes (rays pass through the others: visual geoms, the pushed object itself); inf if none
-    within ``cap``."""
+    within ``cap``. ``normal`` (3,), when given, receives the surface normal at the hit."""
     import mujoco
 
     groups = objects.groups
     gid = np.zeros(1, dtype=np.int32)
+    if normal is None:
+        normal = np.zeros(3)
     p = np.asarray(pnt, dtype=np.float64).copy()
     vec = np.asarray(vec, dtype=np.float64)
     gone = 0.0
     for _ in range(64):
-        dist = float(mujoco.mj_ray(m, d, p, vec, groups, 1, -1, gid))
+        dist = float(mujoco.mj_ray(m, d, p, vec, groups, 1, -1, gid, normal))
         if dist < 0.0 or gone + dist > cap:
             return float("inf")
         g = int(gid[0])
@@ -282,6 +287,30 @@ def _touching(m, d, objects: _Objects, name: str, riders: set[str]) -> list[tupl
     return out
 
 
+def _supported(m, d, objects: _Objects, pts: np.ndarray, com: np.ndarray, shift: np.ndarray, accept) -> bool:
+    """Whether the object would still stand with its points moved by ``shift``: rays down from
+    its bottom points (those within 2 cm of its lowest, at most 256) find support within
+    SUPPORT_DROP_M, and its centre of mass lies at least SUPPORT_INSET_M inside the convex hull
+    of the supported ones (its support polygon)."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    bottom = float(pts[:, 2].min())
+    base = pts[pts[:, 2] < bottom + 0.02]
+    if len(base) > 256:
+        base = base[np.linspace(0, len(base) - 1, 256).astype(int)]
+    down = np.array([0.0, 0.0, -1.0])
+    held = [p[:2] + shift[:2] for p in base
+            if np.isfinite(_cast(m, d, objects, np.array([p[0] + shift[0], p[1] + shift[1], bottom + 0.01]), down, accept, cap=0.01 + SUPPORT_DROP_M))]
+    if len(held) < 3:
+        return False
+    try:
+        hull = ConvexHull(np.array(held))
+    except QhullError:  # collinear: a knife edge
+        return False
+    c = com[:2] + shift[:2]
+    return bool(np.all(hull.equations[:, :2] @ c + hull.equations[:, 2] <= -SUPPORT_INSET_M))
+
+
 SIDES = ("front (+x)", "left (+y)", "back (-x)", "right (-y)")  # of the object's body frame
 
 
@@ -299,14 +328,13 @@ def _plan(m, d, objects: _Objects, name: str, riders: set[str], travel_m: float)
     tried = []
     for k, u in enumerate(_face_directions(d, root)):
         clear = _clearance(m, d, objects, skip, u)
-        ahead = np.array([com[0], com[1], bottom + 0.01]) + (travel_m + 0.03) * u
-        drop = _cast(m, d, objects, ahead, np.array([0.0, 0.0, -1.0]), accept, cap=0.01 + SUPPORT_DROP_M)
+        supported = _supported(m, d, objects, pts, com, (travel_m + SUPPORT_MARGIN_M) * u, accept)
         # a neighbour touching its side is dragged along by friction unless the push leaves it
         dragged = sorted({n for n, normal in touching if float(normal @ u) > -DRAG_COS})
         if clear < MIN_CLEARANCE_M:
             why = f"{clear * 100:.0f} cm free"
-        elif not np.isfinite(drop):
-            why = f"no support {(travel_m + 0.03) * 100:.0f} cm ahead"
+        elif not supported:
+            why = f"no support {(travel_m + SUPPORT_MARGIN_M) * 100:.0f} cm ahead"
         elif dragged:
             why = f"would drag {', '.join(dragged)} touching its side"
         else:
@@ -379,32 +407,42 @@ def push_object(model, name: str, direction_xy=None, travel_m: float = PUSH_TRAV
     half_w = float(np.clip(0.3 * (lat.max() - lat.min()), 0.01, 0.05))
     half_h = float(np.clip(0.25 * (top - bottom), 0.01, 0.04))
     com = d.subtree_com[root].copy()
-    # Push at the centre-of-mass height, lower where a push there would tip it over its leading
-    # bottom edge before it slides (it tips when height x friction > lever of its weight): at most
-    # half that height, as a robot pushes a tall cabinet low.
+    # Where to push: on the line through its centre of mass (else through the middle of its
+    # extent), at the lowest height up to its centre of mass where the paddle meets an upright
+    # face (a sloped face wedges the object against its support instead of sliding it), at most
+    # half the height at which a push would tip it over its leading bottom edge before it slides
+    # (it tips when height x friction > the lever of its weight), as a robot pushes a tall
+    # cabinet low. Rays over the paddle's face from behind the object find where it first meets it.
     base_pts = pts[pts[:, 2] < bottom + 0.02]
     lever = max(float((base_pts @ u).max() - com @ u), 0.0)
     mu = float(np.max(m.geom_friction[objects.colliding, 0]))
     low, high = bottom + half_h + 0.005, max(bottom + half_h + 0.005, top - half_h)
-    heights = [float(np.clip(min(com[2], bottom + 0.5 * lever / mu), low, high)), float(np.clip(com[2], low, high))]
-
-    # Where the paddle first meets the object: rays over its face from behind the object (on
-    # the line through its centre of mass, else through the middle of its extent; at the push
-    # height, else at its centre-of-mass height).
+    z_top = float(np.clip(min(com[2], bottom + 0.5 * lever / mu), low, high))
     back = float((pts @ u).min()) - 0.05
     target = set(int(g) for g in geoms)
-    hit, line, z = float("inf"), float(com @ perp), heights[0]
-    for zc in heights:
-        for lv in (float(com @ perp), float(np.median(lat))):
+    best = None  # ((not upright, above the tipping height, line index, height index), hit, line, z)
+    n_out = np.zeros(3)
+    heights = [(float(zc), False) for zc in (np.linspace(low, z_top, 5) if z_top > low + 1e-3 else [low])]
+    heights += [(float(zc), True) for zc in np.linspace(z_top, high, 6)[1:] if high > z_top + 1e-3]  # legs missed below
+    for li, lv in enumerate((float(com @ perp), float(np.median(lat)))):
+        for zi, (zc, above) in enumerate(heights):
+            hits = []
             for dl in (-half_w, 0.0, half_w):
                 for dz in (-half_h, 0.0, half_h):
                     origin = back * u + (lv + dl) * perp + np.array([0.0, 0.0, zc + dz])
-                    hit = min(hit, _cast(m, d, objects, origin, u, lambda g: g in target, cap=5.0))
-            if np.isfinite(hit):
-                line, z = lv, zc
-                break
-        if np.isfinite(hit):
+                    t = _cast(m, d, objects, origin, u, lambda g: g in target, cap=5.0, normal=n_out)
+                    if np.isfinite(t):
+                        hits.append((t, abs(float(n_out[2]))))
+            if not hits:
+                continue
+            first = min(t for t, _ in hits)
+            slope = max(nz for t, nz in hits if t < first + 0.005)
+            key = (slope > UPRIGHT_NZ, above, li, zi)
+            if best is None or key < best[0]:
+                best = (key, first, lv, zc)
+        if best is not None and not best[0][0] and not best[0][1]:
             break
+    hit, line, z = (float("inf"), float(com @ perp), z_top) if best is None else best[1:]
     pusher_body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, PUSHER)
     mocap = int(m.body_mocapid[pusher_body])
     pg = objects.pusher_geom
