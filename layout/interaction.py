@@ -55,7 +55,7 @@ PRE_SETTLE_S = 0.5
 POST_SETTLE_S = 1.0
 RIDER_NORMAL_Z = 0.7  # a contact whose normal is within ~45 deg of vertical is resting contact
 PULL_N = 10.0  # a hand's pull; raised for joints that need more (friction, gravity: see _pull_force)
-PULL_SPEED = {"hinge": 0.6, "slide": 0.25}  # rad/s, m/s: the hand pulls at most this fast
+PULL_SPEED = {"hinge": 1.0, "slide": 0.25}  # rad/s, m/s: the hand pulls at most this fast
 PULL_S = 3.0
 RELEASE_S = 0.5
 # What counts as a good interaction (``interaction_problems``; the bar).

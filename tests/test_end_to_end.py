@@ -10,20 +10,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from .conftest import build_sample, real_samples
+from .conftest import real_sample_params, real_samples
 
 SAMPLES = real_samples(with_intrinsics=True)
 
 
 @pytest.mark.slow
 @pytest.mark.skipif(not SAMPLES, reason="no real RGB-D samples with intrinsics in ../shared/data/real")
-@pytest.mark.parametrize("sample", SAMPLES, ids=[s.name for s in SAMPLES])
-def test_real_sample_builds_a_valid_stable_scene(sample: Path, tmp_path: Path):
+@pytest.mark.parametrize("sample", real_sample_params(with_intrinsics=True))
+def test_real_sample_builds_a_valid_stable_scene(sample: Path, built_real_sample):
     import mujoco
     from pxr import Usd, UsdValidation
 
-    result = build_sample(sample, tmp_path / "out")
-    out = tmp_path / "out"
+    result = built_real_sample(sample)
+    out = result.out_dir
     for name in ("scene.xml", "scene.usda", "scene.json", "report.json", "scene.urdf", "scene.glb"):
         assert (out / name).is_file(), name
     model = mujoco.MjModel.from_xml_path(str(out / "scene.xml"))
