@@ -57,4 +57,5 @@ def test_stage_benchmarks_run_in_their_own_process_and_are_pasted_with_their_com
     assert {e.argv[e.argv.index("-m") + 1] for e in report.EXTRAS} == {
         "scene_builder.bench.solver", "scene_builder.bench.assets", "scene_builder.bench.tokens", "scene_builder.bench.depth",
         "scene_builder.bench.perception", "scene_builder.bench.single_photo", "scene_builder.bench.detect", "scene_builder.bench.learned", "scene_builder.bench.fuzz",
+        "scene_builder.bench.interaction",
     }
