@@ -8,13 +8,15 @@ group 3), after a short settle (``PRE_SETTLE_S``) so that every measurement star
 Push (:func:`push_object`): a kinematic pusher, a mocap paddle added to the model by
 :func:`load_probe_model`, collides with the pushed object only (contype bit ``PUSHER_BIT``): it is
 the robot's fingertip, which a real robot brings in from wherever it has room. It is driven at
-``PUSH_SPEED_M_S`` horizontally into the object's side at its centre-of-mass height along one of
-the four horizontal face directions of its body frame (:func:`plan_push` picks the one with the
-most free space ahead, found by sliding its collision geometry there, and with support under its centre
-of mass after the push), advances ``PUSH_TRAVEL_M`` past first contact, is withdrawn, and the
-scene settles for ``POST_SETTLE_S``. Objects resting on the pushed one (directly or on each
-other, found from the contacts at rest: normal within 45 degrees of vertical) ride along: they are
-reported as ``carried``, not as others.
+``PUSH_SPEED_M_S`` horizontally into the object's side along one of the four horizontal face
+directions of its body frame (:func:`plan_push` picks the one with the most free space ahead,
+found by sliding its collision geometry there, whose support polygon still holds its centre of
+mass after the push, and which does not drag a neighbour touching its side), on an upright face
+at the lowest height up to its centre of mass and below the height where it would tip before
+sliding; it advances ``PUSH_TRAVEL_M`` past first contact, is withdrawn, and the scene settles for
+``POST_SETTLE_S``. Objects resting on the pushed one (directly or on each other, found from the
+contacts at rest: normal within 45 degrees of vertical) ride along: they are reported as
+``carried``, not as others. Free bodies only: soft bodies (flex) are neither pushed nor tracked.
 
 Door / drawer (:func:`open_joint`): a pull at the handle (the part's ``*handle`` child body, else
 its edge farthest from the hinge axis), tangential to the swing for a hinge and along the axis
@@ -47,10 +49,10 @@ CLEARANCE_CAP_M = 0.3  # free space is measured up to this far
 CLEARANCE_STEP_M = 0.01
 BLOCK_DEPTH_M = 0.002
 DRAG_COS = 0.5  # a push must leave a side-touching neighbour at least 60 deg off its contact normal
-SUPPORT_DROP_M = 0.03
+SUPPORT_DROP_M = 0.03  # a bottom point is supported by anything within this below it
 SUPPORT_MARGIN_M = 0.03  # support is checked this much beyond the push travel
 SUPPORT_INSET_M = 0.01  # the centre of mass must stay this far inside the support polygon
-UPRIGHT_NZ = 0.3  # a face whose normal is within ~17 deg of horizontal is upright enough to push  # under the centre of mass after the push, support within this below the bottom
+UPRIGHT_NZ = 0.3  # a face whose normal is within ~17 deg of horizontal is upright enough to push
 PRE_SETTLE_S = 0.5
 POST_SETTLE_S = 1.0
 RIDER_NORMAL_Z = 0.7  # a contact whose normal is within ~45 deg of vertical is resting contact
@@ -323,7 +325,6 @@ def _plan(m, d, objects: _Objects, name: str, riders: set[str], travel_m: float)
     skip = {name} | riders
     accept = lambda g: objects.geom_object[g] not in skip  # noqa: E731
     com = d.subtree_com[root]
-    bottom = float(pts[:, 2].min())
     touching = _touching(m, d, objects, name, riders)
     tried = []
     for k, u in enumerate(_face_directions(d, root)):
@@ -366,12 +367,6 @@ def plan_push(model, travel_m: float = PUSH_TRAVEL_M) -> tuple[PushPlan, ...]:
     m, d = _settled(model, True)
     objects = _Objects(m)
     return tuple(_plan(m, d, objects, n, _riders(m, d, objects, n), travel_m) for n in objects.names)
-
-
-def _tilt_deg(q0: np.ndarray, q1: np.ndarray) -> float:
-    from layout.verify import _tilt_deg as tilt
-
-    return tilt(q0, q1)
 
 
 def push_object(model, name: str, direction_xy=None, travel_m: float = PUSH_TRAVEL_M, speed_m_s: float = PUSH_SPEED_M_S) -> PushResult:
@@ -498,8 +493,9 @@ def push_object(model, name: str, direction_xy=None, travel_m: float = PUSH_TRAV
         m.geom_conaffinity[geoms] = saved
         m.body_conaffinity[bodies] = saved_bodies
     delta = d.xpos[root] - base[name]
+    from layout.verify import TOPPLE_DEG, _tilt_deg
+
     tilt = _tilt_deg(q_base, d.xquat[root].copy())
-    from layout.verify import TOPPLE_DEG
 
     others = tuple((n, moved[n]) for n in objects.names if n != name and n not in riders)
     carried = tuple((n, float(np.linalg.norm((d.xpos[objects.root[n]] - base[n])[:2]))) for n in sorted(riders))

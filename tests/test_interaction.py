@@ -200,3 +200,23 @@ def test_built_cabinet_photo_doors_and_drawers_open(index, tmp_path):
         pytest.skip(f"{d.name}: the build has no articulated object ({why or 'none was generated'})")
     _, joints = _check_built(result.out_dir)
     assert joints >= 1, f"{d.name}: no hinge or slide joint in the MJCF"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sample", [p for p in real_sample_params(with_intrinsics=True) if p.values[0].name == "nyuv2_metric3d_00000"])
+def test_check_interact_prints_and_records_the_probes(sample, built_real_sample, capsys):
+    import json
+
+    from scene_builder.cli import main
+
+    out = built_real_sample(sample).out_dir
+    assert main(["check", str(out), "--interact"]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    doc = json.loads((out / "interaction.json").read_text())
+    assert doc["problems"] == [] and doc["pushes"]
+    for r in doc["pushes"]:
+        assert any(line.startswith(f"push {r['name']}: moved {r['displacement_m'] * 100:.1f} cm") for line in printed), printed
+    for p in doc["push_plans"]:
+        if not p["pushable"]:
+            assert f"push {p['name']}: not pushable: {p['reason']}" in printed
+    assert "interaction.json" in json.loads((out / ".scene-builder").read_text())["files"]
