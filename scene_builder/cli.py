@@ -25,6 +25,7 @@ and glTF, with a rerun recording to inspect it.
   scene-builder build room.jpg --depth d.png  RGB-D (uint16 PNG in millimetres)
   scene-builder demo                          render a procedural room and rebuild it
   scene-builder check room_scene              re-validate an output folder
+  scene-builder check room_scene --interact   ... and push its objects, open its doors in MuJoCo
   scene-builder view room_scene               open the rerun viewer on a saved scene
 
 Frames: world Z up, metres, kilograms, floor at z = 0; camera frame OpenCV (x right, y down, z forward).
