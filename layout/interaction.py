@@ -62,6 +62,7 @@ PULL_S = 3.0
 RELEASE_S = 0.5
 # What counts as a good interaction (``interaction_problems``; the issue's bar).
 PUSH_MOVE_M = (0.02, 0.10)
+PUSH_TILT_MAX_DEG = 10.0
 OTHERS_MAX_M = 0.01
 OPEN_MIN_FRACTION = 0.5
 LIMIT_TOLERANCE = {"hinge": np.radians(2.0), "slide": 0.005}
@@ -402,8 +403,8 @@ def push_object(model, name: str, direction_xy=None, travel_m: float = PUSH_TRAV
     half_w = float(np.clip(0.3 * (lat.max() - lat.min()), 0.01, 0.05))
     half_h = float(np.clip(0.25 * (top - bottom), 0.01, 0.04))
     com = d.subtree_com[root].copy()
-    # Where to push: on the line through its centre of mass (else through the middle of its
-    # extent), at the lowest height up to its centre of mass where the paddle meets an upright
+    # Where to push: on the line through its centre of mass (else the nearest line across its
+    # extent where the paddle meets it), at the lowest height up to its centre of mass where the paddle meets an upright
     # face (a sloped face wedges the object against its support instead of sliding it), at most
     # half the height at which a push would tip it over its leading bottom edge before it slides
     # (it tips when height x friction > the lever of its weight), as a robot pushes a tall
@@ -419,11 +420,15 @@ def push_object(model, name: str, direction_xy=None, travel_m: float = PUSH_TRAV
     n_out = np.zeros(3)
     heights = [(float(zc), False) for zc in (np.linspace(low, z_top, 5) if z_top > low + 1e-3 else [low])]
     heights += [(float(zc), True) for zc in np.linspace(z_top, high, 6)[1:] if high > z_top + 1e-3]  # legs missed below
-    for li, lv in enumerate((float(com @ perp), float(np.median(lat)))):
+    # lines: through the centre of mass, the middle of its extent, then across its extent nearest
+    # the centre first (a table whose collision is only its legs has nothing on the middle lines)
+    across = np.linspace(float(lat.min()) + half_w, float(lat.max()) - half_w, 7) if lat.max() - lat.min() > 2 * half_w else []
+    lines = [float(com @ perp), float(np.median(lat))] + sorted((float(v) for v in across), key=lambda v: (abs(v - float(com @ perp)), v))
+    for li, lv in enumerate(lines):
         for zi, (zc, above) in enumerate(heights):
             hits = []
-            for dl in (-half_w, 0.0, half_w):
-                for dz in (-half_h, 0.0, half_h):
+            for dl in np.linspace(-half_w, half_w, 5):
+                for dz in np.linspace(-half_h, half_h, 9):  # rows 1 cm apart: a thin table top falls between coarser ones
                     origin = back * u + (lv + dl) * perp + np.array([0.0, 0.0, zc + dz])
                     t = _cast(m, d, objects, origin, u, lambda g: g in target, cap=5.0, normal=n_out)
                     if np.isfinite(t):
@@ -654,7 +659,7 @@ def open_joint(model, joint: str, force_n: float | None = None, pull_s: float = 
 
 def interaction_problems(pushes: tuple[PushResult, ...] = (), joints: tuple[JointProbe, ...] = ()) -> tuple[str, ...]:
     """One line per probe that misses the bar: a push moves its object PUSH_MOVE_M (2-10 cm)
-    without toppling while every other object moves under OTHERS_MAX_M (1 cm); a joint opens at
+    tilting it at most PUSH_TILT_MAX_DEG (10 deg) while every other object moves under OTHERS_MAX_M (1 cm); a joint opens at
     least OPEN_MIN_FRACTION of its range without backtracking, stays within its range
     (LIMIT_TOLERANCE) and its carcass moves under CARCASS_MAX_M (1 cm)."""
     out = []
@@ -663,8 +668,8 @@ def interaction_problems(pushes: tuple[PushResult, ...] = (), joints: tuple[Join
             out.append(f"push {p.name}: the pusher never touched it")
         elif not PUSH_MOVE_M[0] <= p.displacement_m <= PUSH_MOVE_M[1]:
             out.append(f"push {p.name}: moved {p.displacement_m * 100:.1f} cm (expected {PUSH_MOVE_M[0] * 100:.0f}-{PUSH_MOVE_M[1] * 100:.0f} cm)")
-        if p.toppled:
-            out.append(f"push {p.name}: toppled ({p.tilt_deg:.0f} deg)")
+        if p.toppled or p.tilt_deg > PUSH_TILT_MAX_DEG:
+            out.append(f"push {p.name}: {'toppled' if p.toppled else 'tilted'} ({p.tilt_deg:.0f} deg)")
         if p.max_other_m >= OTHERS_MAX_M:
             n, v = max(p.others, key=lambda o: o[1])
             out.append(f"push {p.name}: {n} moved {v * 100:.1f} cm too")
