@@ -13,7 +13,7 @@ demo: setup
 	$(BIN)/scene-builder demo -o demo_scene
 
 test: setup
-	$(BIN)/python -m pytest -n 2 -q
+	$(BIN)/python -m pytest -n 2 --dist loadgroup -q
 
 test-fast: setup
 	$(BIN)/python -m pytest -n 2 -q -m "not slow and not newton"

@@ -10,7 +10,7 @@ import numpy as np
 
 from scene_builder.arrays import _freeze
 
-__all__ = ["Fidelity", "ObjectVerdict", "PhysicsVerdict", "Trajectory"]
+__all__ = ["Fidelity", "JointProbe", "ObjectVerdict", "PhysicsVerdict", "PushPlan", "PushResult", "Trajectory"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -104,3 +104,93 @@ class Fidelity:
     ssim_settled: float = float("nan")
     render_rgb: np.ndarray | None = None
     render_settled_rgb: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class PushResult:
+    """A scripted push of one movable object (``layout.interaction.push_object``): a kinematic
+    pusher (a mocap paddle that touches only the pushed object) driven horizontally into its side
+    at its centre-of-mass height, then withdrawn, then a settle.
+
+    name: the pushed object; direction_xy: (2,) unit horizontal push direction in the world;
+    clearance_m: free space ahead of it along that direction (its collision geometry slid there, up to
+      ``CLEARANCE_CAP_M``); height_m: world z of the pusher's centre; speed_m_s: pusher speed;
+    pusher_travel_m: how far the pusher advanced past first contact (0 when it never touched);
+    displacement_m: horizontal displacement of the pushed object's root body after the settle;
+      along_m: its component along the push direction; tilt_deg: change of its up axis;
+      toppled: tilt above ``layout.verify.TOPPLE_DEG``.
+    carried: (name, displacement_m) of the objects resting on it (directly or on each other):
+      they ride along and are not counted as others.
+    others: (name, max displacement_m over the push and settle) of every other free object;
+      max_other_m: their largest (0 with none).
+    """
+
+    name: str
+    direction_xy: tuple[float, float]
+    clearance_m: float
+    height_m: float
+    speed_m_s: float
+    pusher_travel_m: float
+    displacement_m: float
+    along_m: float
+    tilt_deg: float
+    toppled: bool
+    carried: tuple[tuple[str, float], ...] = ()
+    others: tuple[tuple[str, float], ...] = ()
+    max_other_m: float = 0.0
+
+
+@dataclass(frozen=True)
+class PushPlan:
+    """Whether and where a movable object can be pushed (``layout.interaction.plan_push``).
+
+    name: the object; pushable: a direction with at least ``min_clearance_m`` free space ahead and
+    support under its centre of mass after the push was found; direction_xy / clearance_m: the
+    best of the tried directions (most clearance; (0, 0) and 0 with no collision geometry);
+    reason: why it cannot be pushed ("" when it can).
+    """
+
+    name: str
+    pushable: bool
+    direction_xy: tuple[float, float]
+    clearance_m: float
+    reason: str = ""
+
+
+@dataclass(frozen=True, eq=False)
+class JointProbe:
+    """One articulation joint pulled open (``layout.interaction.open_joint``): a force at the
+    handle (a hinge: tangential to the swing at the handle or the part's edge farthest from the
+    axis; a slide: along the axis), held ``pull_s`` seconds, then released.
+
+    joint: MJCF joint name (``NAME/PART/joint``); object: NAME; kind: "hinge" (rad) or "slide" (m);
+    range: (lower, upper) joint limits in joint units; start: position before the pull;
+    open_sign: +1 when opening increases the position (toward the farther limit), else -1;
+    force_n: the pull; travel: signed-open travel at the end of the pull (joint units);
+    open_fraction: travel over the distance from start to the far limit;
+    backtrack: the largest step back against the opening direction while pulled (joint units);
+    limit_violation: the largest excursion beyond the range at any time (joint units);
+    final: position after release and settle;
+    body_displacement_m: largest displacement of the object's root body (the carcass);
+    times_s / positions: (T,) samples of the joint position over the probe.
+    """
+
+    joint: str
+    object: str
+    kind: str
+    range: tuple[float, float]
+    start: float
+    open_sign: float
+    force_n: float
+    travel: float
+    open_fraction: float
+    backtrack: float
+    limit_violation: float
+    final: float
+    body_displacement_m: float
+    times_s: np.ndarray
+    positions: np.ndarray
+
+    def __post_init__(self) -> None:
+        _freeze(self, "times_s", np.float64, (None,))
+        _freeze(self, "positions", np.float64, (len(self.times_s),))

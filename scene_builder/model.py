@@ -49,6 +49,7 @@ __all__ = [
     "GeneratedAsset",
     "Inertial",
     "Joint",
+    "JointProbe",
     "JointType",
     "LayoutResult",
     "Material",
@@ -60,6 +61,8 @@ __all__ = [
     "Perception",
     "PhysicsVerdict",
     "PlacedObject",
+    "PushPlan",
+    "PushResult",
     "Placement",
     "Plane",
     "RobotModel",
@@ -765,4 +768,4 @@ class ExportedFiles:
 
 # The results of the physics check and render-and-compare live in scene_builder.checks (to keep
 # this module readable); they are part of the data model and re-exported here.
-from scene_builder.checks import Fidelity, ObjectVerdict, PhysicsVerdict, Trajectory  # noqa: E402
+from scene_builder.checks import Fidelity, JointProbe, ObjectVerdict, PhysicsVerdict, PushPlan, PushResult, Trajectory  # noqa: E402

@@ -85,6 +85,44 @@ def real_samples(with_intrinsics: bool = True) -> list[Path]:
     return out
 
 
+def build_sample(src: Path, out: Path, viz: str = "off", **export):
+    """Build the RGB-D sample folder ``src`` (rgb.jpg or rgb.png, depth.png in millimetres,
+    camera.json) into ``out`` with the default configuration (``export``: ExportConfig fields to
+    change, e.g. ``scene_urdf=True``); returns the pipeline's BuildResult."""
+    import json
+
+    from scene_builder.config import BuildConfig, ExportConfig, InputSpec
+    from scene_builder.pipeline import build
+
+    cam = json.loads((src / "camera.json").read_text())
+    rgb = src / ("rgb.jpg" if (src / "rgb.jpg").exists() else "rgb.png")
+    inputs = InputSpec(rgb, src / "depth.png", 0.001, (cam["fx"], cam["fy"], cam["cx"], cam["cy"]))
+    return build(inputs, out, BuildConfig(export=ExportConfig(viz=viz, **export)))
+
+
+def real_sample_params(with_intrinsics: bool = True) -> list:
+    """``real_samples`` as pytest parameters named after the sample, each in the xdist group of
+    its name: under ``pytest -n 2 --dist loadgroup`` (``make test``) every test of one sample
+    runs on the same worker and shares its build (:func:`built_real_sample`)."""
+    return [pytest.param(s, id=s.name, marks=pytest.mark.xdist_group(s.name)) for s in real_samples(with_intrinsics)]
+
+
+_REAL_BUILDS: dict[str, object] = {}
+
+
+@pytest.fixture(scope="session")
+def built_real_sample(tmp_path_factory):
+    """``get(sample)``: the BuildResult of the real sample folder, built once per test session
+    (worker) with :func:`build_sample` and shared by the test modules that read it."""
+
+    def get(sample: Path):
+        if sample.name not in _REAL_BUILDS:
+            _REAL_BUILDS[sample.name] = build_sample(sample, tmp_path_factory.mktemp(sample.name) / "out")
+        return _REAL_BUILDS[sample.name]
+
+    return get
+
+
 @pytest.fixture(scope="session")
 def newton():
     """NVIDIA Newton, the independent UsdPhysics consumer (its kernels are cached under .cache/warp)."""

@@ -59,4 +59,5 @@ def test_stage_benchmarks_run_in_their_own_process_and_are_pasted_with_their_com
         "scene_builder.bench.perception", "scene_builder.bench.single_photo", "scene_builder.bench.detect", "scene_builder.bench.learned", "scene_builder.bench.fuzz",
         "scene_builder.bench.batch",
         "scene_builder.bench.robot",
+        "scene_builder.bench.interaction",
     }

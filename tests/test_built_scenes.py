@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from .conftest import REAL_DATA, load_newton_model, require
+from .conftest import REAL_DATA, build_sample, load_newton_model, require
 
 pytestmark = pytest.mark.slow
 
@@ -30,20 +30,10 @@ MASS_RTOL = 1e-4  # USD stores masses as float32
 DT = 0.002
 
 
-def _build(src: Path, out: Path):
-    from scene_builder.config import BuildConfig, ExportConfig, InputSpec
-    from scene_builder.pipeline import build
-
-    cam = json.loads((src / "camera.json").read_text())
-    rgb = src / ("rgb.jpg" if (src / "rgb.jpg").exists() else "rgb.png")
-    inputs = InputSpec(rgb, src / "depth.png", 0.001, (cam["fx"], cam["fy"], cam["cx"], cam["cy"]))
-    return build(inputs, out, BuildConfig(export=ExportConfig(viz="save", scene_urdf=True)))
-
-
 @pytest.fixture(scope="module")
 def real_built(tmp_path_factory):
     require(REAL_SAMPLE / "camera.json")
-    return _build(REAL_SAMPLE, tmp_path_factory.mktemp("real") / "out")
+    return build_sample(REAL_SAMPLE, tmp_path_factory.mktemp("real") / "out", viz="save", scene_urdf=True)
 
 
 @pytest.fixture(scope="module")
@@ -51,7 +41,7 @@ def procedural_built(tmp_path_factory):
     from scene_builder.bench.render import write_demo_input
 
     src = write_demo_input(tmp_path_factory.mktemp("room_in"), seed=PROCEDURAL_SEED, n_objects=6)
-    return _build(src, tmp_path_factory.mktemp("room") / "out")
+    return build_sample(src, tmp_path_factory.mktemp("room") / "out", viz="save", scene_urdf=True)
 
 
 @pytest.fixture(params=["real", "procedural"])

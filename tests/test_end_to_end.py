@@ -10,30 +10,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from .conftest import real_samples
+from .conftest import real_sample_params, real_samples
 
 SAMPLES = real_samples(with_intrinsics=True)
 
 
-def _build(sample: Path, out: Path):
-    from scene_builder.config import BuildConfig, ExportConfig, InputSpec
-    from scene_builder.pipeline import build
-
-    cam = json.loads((sample / "camera.json").read_text())
-    rgb = sample / ("rgb.jpg" if (sample / "rgb.jpg").exists() else "rgb.png")
-    inputs = InputSpec(rgb, sample / "depth.png", 0.001, (cam["fx"], cam["fy"], cam["cx"], cam["cy"]))
-    return build(inputs, out, BuildConfig(export=ExportConfig(viz="off")))
-
-
 @pytest.mark.slow
 @pytest.mark.skipif(not SAMPLES, reason="no real RGB-D samples with intrinsics in ../shared/data/real")
-@pytest.mark.parametrize("sample", SAMPLES, ids=[s.name for s in SAMPLES])
-def test_real_sample_builds_a_valid_stable_scene(sample: Path, tmp_path: Path):
+@pytest.mark.parametrize("sample", real_sample_params(with_intrinsics=True))
+def test_real_sample_builds_a_valid_stable_scene(sample: Path, built_real_sample):
     import mujoco
     from pxr import Usd, UsdValidation
 
-    result = _build(sample, tmp_path / "out")
-    out = tmp_path / "out"
+    result = built_real_sample(sample)
+    out = result.out_dir
     for name in ("scene.xml", "scene.usda", "scene.json", "report.json", "scene.sdf", "urdf/placements.json", "scene.glb"):
         assert (out / name).is_file(), name
     model = mujoco.MjModel.from_xml_path(str(out / "scene.xml"))

@@ -105,6 +105,16 @@ EXTRAS: tuple[Extra, ...] = (
         timeout_s=1800.0,
     ),
     Extra(
+        "Interaction probes on built real scenes",
+        "Every real RGB-D sample with intrinsics and every URDFormer cabinet photo built as the tests build them, then "
+        "(`scene_builder.bench.interaction`, as `scene-builder check OUT --interact`) every pushable movable object pushed 6 cm "
+        "past contact by a kinematic paddle and every door and drawer pulled open by a hand-like pull: how far the pushed "
+        "object moved, how far anything else moved, tilt; share of each joint's range opened, excursion beyond its limits, "
+        "carcass motion; the objects that could not be pushed and why.",
+        ("-m", "scene_builder.bench.interaction"),
+        markdown=True,
+    ),
+    Extra(
         "Parser fuzzing",
         "Every parser of outside data (`scene_builder.bench.fuzz`): PhysX geometry token decoders (strict and lenient), the "
         "PhysX text protocol, basic_info.json, scene.json, depth, camera.json and image files, on mutated real seeds. "

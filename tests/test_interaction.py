@@ -1,0 +1,241 @@
+"""Interaction probes (issue 15): a scripted push moves one object a few centimetres while the
+others stay, and the doors and drawers of an articulated object open along their joints under a
+pull and stay within their limits. On hand-built scenes (fast), then on every real RGB-D sample
+that has a movable object, and on built cabinet photos (slow).
+
+The bar (the issue's words, written out here rather than read from the module under test): the
+pushed object moves 2-10 cm horizontally and does not topple; every other free object moves less
+than 1 cm (objects resting on the pushed one ride along and are reported apart); a pulled joint
+opens at least half of its range, never goes back more than 1 deg / 2 mm while pulled, stays
+within its range (2 deg / 5 mm) and its carcass moves less than 1 cm.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from scene_builder.frames import pose
+from scene_builder.model import AssetKind, PlacedObject, Scene
+
+from .conftest import PHOTOS, real_sample_params, real_samples, require
+from .fixtures_scenes import box_asset, boxes_scene, cabinet_scene, fixture_camera, fixture_room
+
+SAMPLES = real_samples(with_intrinsics=True)
+MOVE_M = (0.02, 0.10)
+OTHERS_M = 0.01
+LIMIT_TOL = {"hinge": np.radians(2.0), "slide": 0.005}
+BACKTRACK_TOL = {"hinge": np.radians(1.0), "slide": 0.002}
+
+
+def _mjcf(scene: Scene, out: Path) -> Path:
+    from exporters.mjcf import write_mjcf
+
+    return write_mjcf(scene, out)
+
+
+def assert_good_push(r) -> None:
+    assert r.pusher_travel_m > 0.05, f"{r.name}: the pusher touched it for only {r.pusher_travel_m * 100:.1f} cm"
+    assert MOVE_M[0] <= r.displacement_m <= MOVE_M[1], f"{r.name} moved {r.displacement_m * 100:.1f} cm"
+    assert r.along_m > 0.8 * r.displacement_m, f"{r.name} moved sideways: {r.along_m:.3f} of {r.displacement_m:.3f} m along the push"
+    assert not r.toppled and r.tilt_deg < 10.0, f"{r.name} tilted {r.tilt_deg:.0f} deg"
+    bad = [(n, round(v, 4)) for n, v in r.others if v >= OTHERS_M]
+    assert not bad, f"pushing {r.name} moved others: {bad}"
+
+
+def assert_good_opening(j) -> None:
+    lo, hi = j.range
+    assert j.open_fraction >= 0.5, f"{j.joint} opened only {j.open_fraction:.0%} of its range ({j.travel:.3f})"
+    assert j.backtrack <= BACKTRACK_TOL[j.kind], f"{j.joint} went back {j.backtrack:.4f} while pulled"
+    assert lo - LIMIT_TOL[j.kind] <= j.positions.min() and j.positions.max() <= hi + LIMIT_TOL[j.kind], (j.joint, j.positions.min(), j.positions.max(), j.range)
+    assert j.limit_violation <= LIMIT_TOL[j.kind]
+    assert j.body_displacement_m < 0.01, f"{j.object} moved {j.body_displacement_m * 100:.1f} cm while {j.joint} was pulled"
+
+
+# --- hand-built scenes (fast) --------------------------------------------------------------
+
+
+def test_push_moves_one_box_a_few_centimetres_and_the_others_stay(tmp_path):
+    from layout.interaction import PUSH_TRAVEL_M, push_object
+
+    r = push_object(_mjcf(boxes_scene(), tmp_path), "box_c")
+    assert_good_push(r)
+    # the paddle advanced PUSH_TRAVEL_M past contact: the box follows it to within 1.5 cm
+    assert r.along_m == pytest.approx(PUSH_TRAVEL_M, abs=0.015)
+    assert {n for n, _ in r.others} == {"box_a", "box_b"} and r.carried == ()
+
+
+def test_what_rests_on_the_pushed_object_rides_along(tmp_path):
+    from layout.interaction import push_object
+
+    r = push_object(_mjcf(boxes_scene(), tmp_path), "box_a")  # box_b stands on box_a
+    assert_good_push(r)
+    assert [n for n, _ in r.carried] == ["box_b"] and [n for n, _ in r.others] == ["box_c"]
+    (_, carried_m), = r.carried
+    assert carried_m > 0.5 * r.displacement_m  # it went along, not left behind
+
+
+def test_push_direction_has_room_ahead_and_a_push_into_a_wall_is_caught(tmp_path):
+    from layout.interaction import MIN_CLEARANCE_M, interaction_problems, plan_push, push_object
+
+    # a 40 cm box 2 cm in front of the back wall (x = 2), a fixed counter 3 cm beside it (+y)
+    box = PlacedObject(box_asset("box", (0.4, 0.4, 0.3)), pose(np.eye(3), (2.0 - 0.22, 0.0, 0.0)), "floor")
+    counter = PlacedObject(box_asset("counter", (0.6, 0.6, 0.9), is_fixed=True, label="counter"), pose(np.eye(3), (1.7, 0.53, 0.0)), "floor")
+    path = _mjcf(Scene(fixture_camera(), fixture_room(), (box, counter)), tmp_path)
+    (plan,) = plan_push(path)
+    assert plan.pushable and plan.clearance_m >= MIN_CLEARANCE_M
+    assert plan.direction_xy[0] < -0.9 or plan.direction_xy[1] < -0.9  # away from the wall, or along it away from the counter
+    assert_good_push(push_object(path, "box", plan.direction_xy))
+    into_wall = push_object(path, "box", (1.0, 0.0))
+    assert into_wall.clearance_m < 0.05 and into_wall.displacement_m < 0.03
+    problems = interaction_problems((into_wall,))
+    assert problems and all(p.startswith("push box: moved") for p in problems), problems
+
+
+def test_an_object_that_would_fall_off_its_support_is_not_pushable_and_says_why(tmp_path):
+    from layout.interaction import plan_push
+
+    # a 30 cm box on a 14 cm fixed pedestal: after a 6 cm push its centre of mass would be 1 cm
+    # from the pedestal's edge (the plan asks for support 3 cm beyond the push)
+    pedestal = PlacedObject(box_asset("pedestal", (0.14, 0.14, 0.5), is_fixed=True, label="counter"), pose(np.eye(3), (0.5, 0.0, 0.0)), "floor")
+    box = PlacedObject(box_asset("box", (0.3, 0.3, 0.2)), pose(np.eye(3), (0.5, 0.0, 0.5)), "pedestal")
+    (plan,) = plan_push(_mjcf(Scene(fixture_camera(), fixture_room(), (pedestal, box)), tmp_path))
+    assert not plan.pushable and plan.reason.count("no support 9 cm ahead") == 4, plan.reason
+
+
+@pytest.mark.parametrize("fixed", [False, True], ids=["free", "fixed"])
+def test_cabinet_door_and_drawer_open_along_their_joints_within_limits(tmp_path, fixed):
+    from layout.interaction import joint_names, open_joint
+
+    path = _mjcf(cabinet_scene(is_fixed=fixed), tmp_path)
+    joints = joint_names(path)
+    assert joints == ("cabinet/door/joint", "cabinet/drawer/joint")
+    for name in joints:
+        j = open_joint(path, name)
+        assert_good_opening(j)
+        assert j.open_sign == 1.0 and j.start == pytest.approx(0.0, abs=1e-3)
+        # opened all the way: the pull holds it at the stop
+        assert j.open_fraction > 0.95, (name, j.open_fraction)
+        assert j.kind == ("hinge" if "door" in name else "slide")
+
+
+def test_a_weak_pull_is_reported_as_not_opening(tmp_path):
+    from layout.interaction import interaction_problems, open_joint
+
+    path = _mjcf(cabinet_scene(), tmp_path)
+    # below the drawer's joint friction (0.1 N) nothing moves
+    j = open_joint(path, "cabinet/drawer/joint", force_n=0.05)
+    assert j.travel < 0.01
+    assert any(p.startswith("open cabinet/drawer/joint: opened") for p in interaction_problems(joints=(j,)))
+
+
+def test_probes_refuse_unknown_names(tmp_path):
+    from layout.interaction import open_joint, push_object
+    from scene_builder.errors import InputError
+
+    path = _mjcf(boxes_scene(), tmp_path)
+    with pytest.raises(InputError, match="no free object 'nothing'"):
+        push_object(path, "nothing")
+    with pytest.raises(InputError, match="no joint 'box_a/lid/joint'"):
+        open_joint(path, "box_a/lid/joint")
+    with pytest.raises(InputError, match="does not exist"):
+        push_object(tmp_path / "missing.xml", "box_a")
+
+
+# --- built scenes (slow) --------------------------------------------------------------------
+
+
+def _check_built(out: Path) -> tuple[int, int]:
+    """Both probes on a built scene: every pushable free object pushed, every articulation joint
+    pulled. Returns (pushes, joints) run. A scene with free objects of which none is pushable
+    fails with each one's reason."""
+    from layout.interaction import joint_names, open_joint, plan_push, push_object
+
+    path = out / "scene.xml"
+    plans = plan_push(path)
+    pushable = [p for p in plans if p.pushable]
+    assert not plans or pushable, "no movable object can be pushed: " + "; ".join(f"{p.name}: {p.reason}" for p in plans)
+    for p in pushable:
+        assert_good_push(push_object(path, p.name, p.direction_xy))
+    joints = joint_names(path)
+    for name in joints:
+        assert_good_opening(open_joint(path, name))
+    return len(pushable), len(joints)
+
+
+# Known layout defect (measured with these probes, reported): the sample's only movable object, an
+# open shelf beside a bed that became static background, holds the bed's convex pieces in its
+# compartments (a bed leg inside its base, the bed's slabs between its boards): it cannot slide 2 cm
+# in any direction, so nothing there is pushable. Strict: the test fails once the layout is fixed.
+LOCKED = {
+    "sunrgbd_imvotenet_000005": "shelf_1 interlocks with the static bed's collision pieces inside its open compartments",
+}
+
+
+def _probe_params() -> list:
+    out = []
+    for p in real_sample_params(with_intrinsics=True):
+        marks = list(p.marks)
+        if p.id in LOCKED:
+            marks.append(pytest.mark.xfail(strict=True, raises=AssertionError, reason=LOCKED[p.id]))
+        out.append(pytest.param(*p.values, id=p.id, marks=marks))
+    return out
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not SAMPLES, reason="no real RGB-D samples with intrinsics in ../shared/data/real")
+@pytest.mark.parametrize("sample", _probe_params())
+def test_real_sample_push_and_open(sample, built_real_sample):
+    """Each real sample (built once per session, shared with test_end_to_end): every pushable
+    movable object pushed, every door and drawer pulled open."""
+    built = built_real_sample(sample)
+    movable = [o for o in built.scene.objects if not o.asset.is_fixed and o.asset.deformable is None]
+    if not movable:
+        pytest.skip(f"{sample.name}: the build has no movable rigid object (all became background)")
+    pushes, _ = _check_built(built.out_dir)
+    assert pushes >= 1
+
+
+def _cabinet_photos() -> list[Path]:
+    return sorted(require(PHOTOS).glob("urdformer_*"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("index", range(10))
+def test_built_cabinet_photo_doors_and_drawers_open(index, tmp_path):
+    from scene_builder.config import BuildConfig, ExportConfig, InputSpec
+    from scene_builder.pipeline import build
+
+    photos = _cabinet_photos()
+    if index >= len(photos):
+        pytest.skip(f"only {len(photos)} urdformer_* cabinet photos in {PHOTOS}")
+    d = photos[index]
+    result = build(InputSpec(next(d.glob("rgb.*"))), tmp_path / "out",
+                   BuildConfig(export=ExportConfig(usd=False, urdf=False, gltf=False, viz="off")))
+    if not any(o.asset.kind is AssetKind.ARTICULATED for o in result.scene.objects):
+        why = "; ".join(f"{p.name}: {p.reason}" for p in result.layout.placements if p.became_background)
+        pytest.skip(f"{d.name}: the build has no articulated object ({why or 'none was generated'})")
+    _, joints = _check_built(result.out_dir)
+    assert joints >= 1, f"{d.name}: no hinge or slide joint in the MJCF"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sample", [p for p in real_sample_params(with_intrinsics=True) if p.values[0].name == "nyuv2_metric3d_00000"])
+def test_check_interact_prints_and_records_the_probes(sample, built_real_sample, capsys):
+    import json
+
+    from scene_builder.cli import main
+
+    out = built_real_sample(sample).out_dir
+    assert main(["check", str(out), "--interact"]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    doc = json.loads((out / "interaction.json").read_text())
+    assert doc["problems"] == [] and doc["pushes"]
+    for r in doc["pushes"]:
+        assert any(line.startswith(f"push {r['name']}: moved {r['displacement_m'] * 100:.1f} cm") for line in printed), printed
+    for p in doc["push_plans"]:
+        if not p["pushable"]:
+            assert f"push {p['name']}: not pushable: {p['reason']}" in printed
+    assert "interaction.json" in json.loads((out / ".scene-builder").read_text())["files"]
