@@ -32,6 +32,8 @@ MAX_TRIM_M = 0.06
 TRIM_CLEARANCE_M = 0.002
 #: A cut piece smaller than this (m^3) is dropped (when its part keeps another piece).
 MIN_PIECE_VOLUME_M3 = 1e-7
+#: A piece holding at least this share of its part's collision volume is never cut away whole.
+MAIN_PIECE_SHARE = 0.25
 
 
 def _face_normals(v: np.ndarray) -> np.ndarray:
@@ -100,6 +102,22 @@ def clip_convex(vertices: np.ndarray, normal: np.ndarray, offset: float) -> Tria
     return TriangleMesh(verts, faces)
 
 
+def _volume(mesh: TriangleMesh) -> float:
+    """Volume (m^3) of a closed convex piece (its hull's; 0 when degenerate)."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        return float(ConvexHull(mesh.vertices_m).volume)
+    except (QhullError, ValueError):
+        return 0.0
+
+
+def _large(mesh: TriangleMesh, part_volume_m3: float) -> bool:
+    """A main piece of its part (at least :data:`MAIN_PIECE_SHARE` of the part's collision
+    volume): a cut may shrink it, never remove it whole."""
+    return _volume(mesh) >= MAIN_PIECE_SHARE * part_volume_m3
+
+
 def _world(mesh: TriangleMesh, world_from_asset: np.ndarray) -> np.ndarray:
     return mesh.vertices_m @ world_from_asset[:3, :3].T + world_from_asset[:3, 3]
 
@@ -140,20 +158,23 @@ def _inside(points: np.ndarray, hull_vertices: np.ndarray) -> np.ndarray:
 
 
 def _cut_offset(n: np.ndarray, c: float, depth: float, va_vis: np.ndarray, vb_vis: np.ndarray, ma: np.ndarray, mb: np.ndarray,
-                max_depth_m: float) -> float | None:
+                max_depth_m: float, strict: bool = False) -> float | None:
     """Where to cut two overlapping pieces along ``n`` (A on the negative side): the mid-plane
     ``c`` for a shallow overlap; for a deep one the offset nearest ``c`` that keeps A's visual
     vertices inside B's piece on A's side and B's inside A's piece on B's side, give or take
     half of ``max_depth_m`` (None when no such offset exists: the objects themselves overlap
-    there by more than ``max_depth_m``)."""
-    if depth <= max_depth_m:
+    there by more than ``max_depth_m``). ``strict``: for any depth, an offset with every such
+    visual vertex on its own side (no tolerance), None when there is none."""
+    if depth <= max_depth_m and not strict:
         return c
     a_in = va_vis[_inside(va_vis, mb)] @ n
     b_in = vb_vis[_inside(vb_vis, ma)] @ n
     # The visuals themselves may overlap by up to max_depth_m (voxel surfaces are up to a voxel
     # off), each reaching at most half of that past the cut; a deeper visual overlap is real.
-    lo = float(a_in.max()) - max_depth_m / 2 if len(a_in) else -np.inf
-    hi = float(b_in.min()) + max_depth_m / 2 if len(b_in) else np.inf
+    # Strict: every visual vertex on its own side with the cut faces' clearance.
+    slack = -TRIM_CLEARANCE_M if strict else max_depth_m / 2
+    lo = float(a_in.max()) - slack if len(a_in) else -np.inf
+    hi = float(b_in.min()) + slack if len(b_in) else np.inf
     if lo > hi:
         return None
     return float(np.clip(c, lo, hi))
@@ -169,6 +190,8 @@ def trim_pair(
     the deepest overlap left (the visuals overlap, or a part would lose its last piece)."""
     pieces_a = {p.name: list(p.collision) for p in a.parts}
     pieces_b = {p.name: list(p.collision) for p in b.parts}
+    part_volume_a = {p.name: sum(_volume(m) for m in p.collision) for p in a.parts}
+    part_volume_b = {p.name: sum(_volume(m) for m in p.collision) for p in b.parts}
     vis_a = np.concatenate([_surface_points(_world(p.visual, ta), p.visual.faces) for p in a.parts])
     vis_b = np.concatenate([_surface_points(_world(p.visual, tb), p.visual.faces) for p in b.parts])
     cut_depth, left_depth = 0.0, 0.0
@@ -191,8 +214,21 @@ def trim_pair(
                         continue
                     # Plane in each asset's frame: n . (R v + t) = c  ->  (R^T n) . v = c - n . t
                     na, nb = ta[:3, :3].T @ n, tb[:3, :3].T @ n
-                    new_a = clip_convex(ma.vertices_m, na, c - float(n @ ta[:3, 3]) - TRIM_CLEARANCE_M / 2)
-                    new_b = clip_convex(mb.vertices_m, -nb, -(c - float(n @ tb[:3, 3])) - TRIM_CLEARANCE_M / 2)
+
+                    def cut(offset: float):
+                        return (clip_convex(ma.vertices_m, na, offset - float(n @ ta[:3, 3]) - TRIM_CLEARANCE_M / 2),
+                                clip_convex(mb.vertices_m, -nb, -(offset - float(n @ tb[:3, 3])) - TRIM_CLEARANCE_M / 2))
+
+                    new_a, new_b = cut(c)
+                    if (new_a is None and _large(ma, part_volume_a[pa_name])) or (new_b is None and _large(mb, part_volume_b[pb_name])):
+                        # The cut would remove a main piece whole (a table top inside the bulged
+                        # hull of a bed's piece, within the visuals' tolerance): cut exactly
+                        # between the visuals instead, or leave the overlap to the solver.
+                        strict = _cut_offset(n, c, depth, vis_a, vis_b, va, vb, max_depth_m, strict=True)
+                        new_a, new_b = cut(strict) if strict is not None else (None, None)
+                        if (new_a is None and _large(ma, part_volume_a[pa_name])) or (new_b is None and _large(mb, part_volume_b[pb_name])):
+                            left_depth = max(left_depth, depth)
+                            continue
                     alive_a = sum(m is not None for m in pieces_a[pa_name]) - 1 + (new_a is not None)
                     alive_b = sum(m is not None for m in pieces_b[pb_name]) - 1 + (new_b is not None)
                     if alive_a == 0 or alive_b == 0:

@@ -337,3 +337,27 @@ def test_object_seen_above_its_support_stands_on_legs(tmp_path):
     verdict, _ = verify_scene(write_mjcf(result.scene, tmp_path), result.scene, CFG)
     assert verdict.max_penetration_m < 1e-3 and verdict.stable and verdict.settle_max_drift_m < 2e-3
 
+
+
+def test_a_cut_never_removes_a_main_piece_whole():
+    """A bed's collision piece bulged up around a table top (its visual stays below): the cut
+    between the visuals, with their tolerance, would have removed the table's whole top piece
+    (seen on a real photo with the offline detectors: a table colliding by its legs only). The
+    top is kept; the bed's bulge is cut above it."""
+    import dataclasses
+
+    from layout.trim import trim_pair
+
+    table = table_asset("table", (1.0, 1.0, 0.75), top_m=0.03)
+    bed = asset_from_pieces("bed", "bed", [box_mesh([-0.6, -0.6, 0.5], [0.6, 0.6, 1.0])])
+    bed = dataclasses.replace(bed, parts=(dataclasses.replace(bed.parts[0], visual=box_mesh([-0.6, -0.6, 0.0], [0.6, 0.6, 0.45])),))
+    top = table.parts[0].collision[0]
+    new_table, new_bed, cut, left = trim_pair(table, np.eye(4), bed, np.eye(4))
+    assert len(new_table.parts[0].collision) == 5
+    kept_top = new_table.parts[0].collision[0]
+    assert kept_top.vertices_m[:, 2].max() == pytest.approx(top.vertices_m[:, 2].max(), abs=2e-3)
+    assert kept_top.vertices_m[:, 2].min() == pytest.approx(0.72, abs=1e-9)
+    # The bed's piece keeps only what lies above the top, clear of it.
+    assert len(new_bed.parts[0].collision) == 1
+    assert new_bed.parts[0].collision[0].vertices_m[:, 2].min() > top.vertices_m[:, 2].max()
+    assert cut > 0.2 and left == 0.0
