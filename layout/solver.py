@@ -337,6 +337,16 @@ class _Solver:
             if move_i > self.free_travel(mover_i, -u):
                 move_i = self.free_travel(mover_i, -u)
                 move_j = amount - move_i
+        # Pushes add up: one that would take a body more than max_push from where it was seen
+        # (a cluster spreading out over many sweeps) means it cannot stand there either.
+        for m, step in ((mover_j, u * move_j), (mover_i, -u * move_i)):
+            if np.any(step):
+                b = self.bodies[m]
+                total = float(np.linalg.norm(b.position_m[:2] + step - b.initial_position_m[:2]))
+                if total > self.max_push:
+                    other = bodies[i if m == mover_j else j].name
+                    self.leave_where_seen(m, f"would have to move {total * 100:.0f} cm sideways in all to clear {other} and its neighbours")
+                    return True
         if move_j > 0:
             self.move_tree(mover_j, u * move_j)
         if move_i > 0:

@@ -223,12 +223,12 @@ def trim_pair(
                     if (new_a is None and _large(ma, part_volume_a[pa_name])) or (new_b is None and _large(mb, part_volume_b[pb_name])):
                         # The cut would remove a main piece whole (a table top inside the bulged
                         # hull of a bed's piece, within the visuals' tolerance): cut exactly
-                        # between the visuals instead, or leave the overlap to the solver.
+                        # between the visuals instead where that keeps both main pieces.
                         strict = _cut_offset(n, c, depth, vis_a, vis_b, va, vb, max_depth_m, strict=True)
-                        new_a, new_b = cut(strict) if strict is not None else (None, None)
-                        if (new_a is None and _large(ma, part_volume_a[pa_name])) or (new_b is None and _large(mb, part_volume_b[pb_name])):
-                            left_depth = max(left_depth, depth)
-                            continue
+                        if strict is not None:
+                            sa, sb = cut(strict)
+                            if (sa is not None or not _large(ma, part_volume_a[pa_name])) and (sb is not None or not _large(mb, part_volume_b[pb_name])):
+                                new_a, new_b = sa, sb
                     alive_a = sum(m is not None for m in pieces_a[pa_name]) - 1 + (new_a is not None)
                     alive_b = sum(m is not None for m in pieces_b[pb_name]) - 1 + (new_b is not None)
                     if alive_a == 0 or alive_b == 0:
