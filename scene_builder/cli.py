@@ -25,6 +25,7 @@ and glTF, with a rerun recording to inspect it.
   scene-builder room.jpg                      plain photo (depth estimated)
   scene-builder build room.jpg --depth d.png  RGB-D (uint16 PNG in millimetres)
   scene-builder batch photos/ -o scenes/      many photos, resumable (--workers N, --ray auto)
+  scene-builder room.jpg --robot panda        ... with a Franka Panda on the floor, its arm reaching a surface
   scene-builder demo                          render a procedural room and rebuild it
   scene-builder check room_scene              re-validate an output folder
   scene-builder check room_scene --interact   ... and push its objects, open its doors in MuJoCo
