@@ -112,12 +112,6 @@ def _volume(mesh: TriangleMesh) -> float:
         return 0.0
 
 
-def _large(mesh: TriangleMesh, part_volume_m3: float) -> bool:
-    """A main piece of its part (at least :data:`MAIN_PIECE_SHARE` of the part's collision
-    volume): a cut may shrink it, never remove it whole."""
-    return _volume(mesh) >= MAIN_PIECE_SHARE * part_volume_m3
-
-
 def _world(mesh: TriangleMesh, world_from_asset: np.ndarray) -> np.ndarray:
     return mesh.vertices_m @ world_from_asset[:3, :3].T + world_from_asset[:3, 3]
 
@@ -190,8 +184,16 @@ def trim_pair(
     the deepest overlap left (the visuals overlap, or a part would lose its last piece)."""
     pieces_a = {p.name: list(p.collision) for p in a.parts}
     pieces_b = {p.name: list(p.collision) for p in b.parts}
-    part_volume_a = {p.name: sum(_volume(m) for m in p.collision) for p in a.parts}
-    part_volume_b = {p.name: sum(_volume(m) for m in p.collision) for p in b.parts}
+    parts_a, parts_b = {p.name: p for p in a.parts}, {p.name: p for p in b.parts}
+    part_volumes: dict[int, float] = {}  # id(part) -> its collision volume, computed when first needed
+
+    def main_piece(mesh: TriangleMesh, part) -> bool:
+        """A main piece of its part (at least :data:`MAIN_PIECE_SHARE` of the part's collision
+        volume): a cut may shrink it, never remove it whole."""
+        if id(part) not in part_volumes:
+            part_volumes[id(part)] = sum(_volume(m) for m in part.collision)
+        return _volume(mesh) >= MAIN_PIECE_SHARE * part_volumes[id(part)]
+
     vis_a = np.concatenate([_surface_points(_world(p.visual, ta), p.visual.faces) for p in a.parts])
     vis_b = np.concatenate([_surface_points(_world(p.visual, tb), p.visual.faces) for p in b.parts])
     cut_depth, left_depth = 0.0, 0.0
@@ -219,16 +221,19 @@ def trim_pair(
                         return (clip_convex(ma.vertices_m, na, offset - float(n @ ta[:3, 3]) - TRIM_CLEARANCE_M / 2),
                                 clip_convex(mb.vertices_m, -nb, -(offset - float(n @ tb[:3, 3])) - TRIM_CLEARANCE_M / 2))
 
+                    def loses_main_piece(cut_a, cut_b) -> bool:
+                        return (cut_a is None and main_piece(ma, parts_a[pa_name])) or (cut_b is None and main_piece(mb, parts_b[pb_name]))
+
                     new_a, new_b = cut(c)
-                    if (new_a is None and _large(ma, part_volume_a[pa_name])) or (new_b is None and _large(mb, part_volume_b[pb_name])):
+                    if loses_main_piece(new_a, new_b):
                         # The cut would remove a main piece whole (a table top inside the bulged
                         # hull of a bed's piece, within the visuals' tolerance): cut exactly
                         # between the visuals instead where that keeps both main pieces.
                         strict = _cut_offset(n, c, depth, vis_a, vis_b, va, vb, max_depth_m, strict=True)
                         if strict is not None:
-                            sa, sb = cut(strict)
-                            if (sa is not None or not _large(ma, part_volume_a[pa_name])) and (sb is not None or not _large(mb, part_volume_b[pb_name])):
-                                new_a, new_b = sa, sb
+                            kept = cut(strict)
+                            if not loses_main_piece(*kept):
+                                new_a, new_b = kept
                     alive_a = sum(m is not None for m in pieces_a[pa_name]) - 1 + (new_a is not None)
                     alive_b = sum(m is not None for m in pieces_b[pb_name]) - 1 + (new_b is not None)
                     if alive_a == 0 or alive_b == 0:
