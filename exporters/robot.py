@@ -49,18 +49,13 @@ def robot_child_spec(placement: RobotPlacement, out_dir: Path):
     except ValueError as err:
         raise ExportError(f"MuJoCo cannot read the robot model {src}: {str(err).strip().splitlines()[0]}") from err
     base = src.parent
-    mesh_root = base / child.meshdir if child.meshdir else base
-    tex_root = base / child.texturedir if child.texturedir else base
-    for mesh in child.meshes:
-        if mesh.file:
-            rel = _rel(mesh.file)
-            _copy(mesh_root / mesh.file, Path(out_dir) / MESH_DIR / rel)
-            mesh.file = rel
-    for tex in child.textures:
-        if tex.file:
-            rel = _rel(tex.file)
-            _copy(tex_root / tex.file, Path(out_dir) / TEXTURE_DIR / rel)
-            tex.file = rel
+    for assets, folder, out_folder in ((child.meshes, child.meshdir, MESH_DIR), (child.textures, child.texturedir, TEXTURE_DIR)):
+        root = base / folder if folder else base
+        for asset in assets:
+            if asset.file:
+                rel = _rel(asset.file)
+                _copy(root / asset.file, Path(out_dir) / out_folder / rel)
+                asset.file = rel
     if len(child.hfields) or len(child.skins):
         raise ExportError(f"robot model {src.name} uses height fields or skins, which the scene export does not carry")
     child.meshdir, child.texturedir = MESH_DIR, TEXTURE_DIR
