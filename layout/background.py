@@ -276,7 +276,7 @@ def column_boxes(points_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if cur is not None:
         boxes_lo.append([cur[0] * CELL_M, cur[1] * CELL_M, cur[3]])
         boxes_hi.append([(cur[2] + 1) * CELL_M, (cur[1] + 1) * CELL_M, cur[4]])
-    lo, hi = np.array(boxes_lo), np.array(boxes_hi)
+    lo, hi = np.array(boxes_lo).reshape(-1, 3), np.array(boxes_hi).reshape(-1, 3)
     lo[:, 2] = np.maximum(lo[:, 2], 0.0)
     hi[:, 2] = np.maximum(hi[:, 2], lo[:, 2] + MIN_BOX_THICKNESS_M)
     return lo, hi

@@ -130,6 +130,17 @@ def test_column_boxes_follow_observed_heights_and_carving_cuts_under_objects():
     assert not hit.any() and len(cut_lo) < len(lo)
 
 
+def test_column_boxes_of_scattered_points_are_none():
+    """Points too sparse for any column (fewer than MIN_RUN_POINTS per cell, as a plain photo's
+    thin background can give: nyuv2 00050 without its depth map crashed here) give no boxes, as
+    (0, 3) arrays, not an IndexError."""
+    from layout.background import CELL_M, MIN_RUN_POINTS
+
+    pts = np.array([[k * 3 * CELL_M, 0.02, 0.5] for k in range(MIN_RUN_POINTS + 2)])
+    lo, hi = column_boxes(pts)
+    assert lo.shape == (0, 3) and hi.shape == (0, 3)
+
+
 def test_overlapping_fixed_bodies_are_measured(tmp_path):
     """MuJoCo makes no contacts between bodies welded to the world; the check measures every
     pair of collision geoms itself, so two fixed boxes 0.5 m into each other do not pass."""
