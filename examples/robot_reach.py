@@ -65,7 +65,7 @@ def run(out_dir: Path, seconds: float = 4.0, fps: int = 25, size: tuple[int, int
 
     from layout.reach import simulate_reach
 
-    m, d, arm, target, _info = load(out_dir)
+    m, d, arm, target, info = load(out_dir)
     frames: list[np.ndarray] = []
     on_step = None
     renderer = None
@@ -85,7 +85,7 @@ def run(out_dir: Path, seconds: float = 4.0, fps: int = 25, size: tuple[int, int
                 frames.append(renderer.render().copy())
 
     try:
-        result = simulate_reach(m, d, arm, target, seconds, on_step)
+        result = simulate_reach(m, d, arm, target, seconds, on_step, info.get("hold_tool_axis", True))
     finally:
         if renderer is not None:
             renderer.close()

@@ -89,10 +89,12 @@ def reset_home(m, d, arm: ArmIds) -> None:
     mujoco.mj_forward(m, d)
 
 
-def ik_step(m, scratch, arm: ArmIds, q: np.ndarray, pos: np.ndarray, rot: np.ndarray, iters: int = 5) -> np.ndarray:
-    """Arm joint values that bring the tool site to ``pos`` with orientation ``rot`` (3x3),
-    starting from ``q`` (damped least squares, home pulled in the null space, clipped to the
-    limits). ``scratch``: an MjData holding the rest of the state (kinematics only)."""
+def ik_step(m, scratch, arm: ArmIds, q: np.ndarray, pos: np.ndarray, rot: np.ndarray | None, iters: int = 5) -> np.ndarray:
+    """Arm joint values that bring the tool site to ``pos`` with its approach axis (z) along
+    ``rot``'s (3x3) z, free to turn about it (a gripper coming down on a table keeps pointing
+    down; its wrist may turn: the arm reaches further; ``rot`` None: position only), starting from ``q`` (damped least
+    squares, home pulled in the null space, clipped to the limits). ``scratch``: an MjData
+    holding the rest of the state (kinematics only)."""
     import mujoco
 
     jacp, jacr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
@@ -103,10 +105,15 @@ def ik_step(m, scratch, arm: ArmIds, q: np.ndarray, pos: np.ndarray, rot: np.nda
         mujoco.mj_comPos(m, scratch)
         err_p = pos - scratch.site_xpos[arm.site]
         cur = scratch.site_xmat[arm.site].reshape(3, 3)
-        err_r = 0.5 * sum(np.cross(cur[:, k], rot[:, k]) for k in range(3))
+        axis = cur[:, 2]
         mujoco.mj_jacSite(m, scratch, jacp, jacr, arm.site)
-        jac = np.vstack([jacp[:, arm.dof], jacr[:, arm.dof]])
-        dq = jac.T @ np.linalg.solve(jac @ jac.T + DAMPING**2 * np.eye(6), np.concatenate([err_p, err_r]))
+        if rot is None:
+            jac, err = jacp[:, arm.dof], err_p
+        else:
+            # Turning about the approach axis is free: that part of the rotation is projected out.
+            jac = np.vstack([jacp[:, arm.dof], (np.eye(3) - np.outer(axis, axis)) @ jacr[:, arm.dof]])
+            err = np.concatenate([err_p, np.cross(axis, rot[:, 2])])
+        dq = jac.T @ np.linalg.solve(jac @ jac.T + DAMPING**2 * np.eye(len(err)), err)
         dq += (np.eye(len(q)) - np.linalg.pinv(jac) @ jac) @ (NULL_GAIN * (arm.home - q))
         q = np.clip(q + dq, arm.lo, arm.hi)
     return q
@@ -151,18 +158,8 @@ def _scene_geoms(m, arm: ArmIds) -> np.ndarray:
 
 def robot_overlaps(mjcf_path: Path, placement: RobotPlacement) -> float:
     """Deepest overlap (m, 0 when none) between the robot's collision geoms and the scene's, at
-    the start pose and at the home pose."""
-    import mujoco
-
-    m = mujoco.MjModel.from_xml_path(str(mjcf_path))
-    d = mujoco.MjData(m)
-    arm = _arm(m, placement)
-    others = _scene_geoms(m, arm)
-    mujoco.mj_forward(m, d)
-    worst = _min_distance(m, d, arm.geoms, others, 0.0)
-    reset_home(m, d, arm)
-    worst = min(worst, _min_distance(m, d, arm.geoms, others, 0.0))
-    return max(0.0, -worst)
+    the start pose and at the home pose (the MJCF written with ``placement``)."""
+    return PlacementTrials(mjcf_path, placement).overlap(placement)
 
 
 def _arm(m, placement: RobotPlacement) -> ArmIds:
@@ -174,28 +171,103 @@ def check_reach(mjcf_path: Path, placement: RobotPlacement) -> tuple[float, floa
     """Sweep the scripted reach kinematically (SWEEP_STEPS waypoints): (tool's distance to the
     target at the end, smallest distance between the arm's geoms and the scene on the way; the
     base, which does not move, is measured by :func:`robot_overlaps`)."""
-    import mujoco
+    return PlacementTrials(mjcf_path, placement).reach(placement)
 
-    m = mujoco.MjModel.from_xml_path(str(mjcf_path))
-    d = mujoco.MjData(m)
-    arm = _arm(m, placement)
-    others = _scene_geoms(m, arm)
-    reset_home(m, d, arm)
-    start = d.site_xpos[arm.site].copy()
-    rot = d.site_xmat[arm.site].reshape(3, 3).copy()
-    path = tool_path(start, np.asarray(placement.target_m), 1.0)
-    q = d.qpos[arm.qpos].copy()
-    clearance = np.inf
-    for t in np.linspace(0.0, 1.0, SWEEP_STEPS + 1):
-        q = ik_step(m, d, arm, q, path(t), rot)
+
+class PlacementTrials:
+    """One compiled scene (the MJCF written with the robot at ``written``) in which the robot is
+    moved to other placements of the same model without writing and compiling the scene again:
+    the robot's bodies hanging from the world (attached under one frame) are carried from the
+    written placement's frame to the new one's."""
+
+    def __init__(self, mjcf_path: Path, written: RobotPlacement) -> None:
+        import mujoco
+
+        self.m = mujoco.MjModel.from_xml_path(str(mjcf_path))
+        self.d = mujoco.MjData(self.m)
+        self.arm = _arm(self.m, written)
+        self.others = _scene_geoms(self.m, self.arm)
+        self.roots = np.array([b for b in range(1, self.m.nbody) if self.m.body_parentid[b] == 0
+                               and self.m.body(b).name.startswith(PREFIX)])
+        # Each root's pose in the written placement's robot frame.
+        inv = np.linalg.inv(written.world_from_robot)
+        self.root_pos = self.m.body_pos[self.roots] @ inv[:3, :3].T + inv[:3, 3]
+        self.root_quat = np.array([_quat_mul(_yaw_quat(-written.yaw_rad), q) for q in self.m.body_quat[self.roots]])
+
+    def _move(self, placement: RobotPlacement) -> None:
+        t = placement.world_from_robot
+        self.m.body_pos[self.roots] = self.root_pos @ t[:3, :3].T + t[:3, 3]
+        self.m.body_quat[self.roots] = [_quat_mul(_yaw_quat(placement.yaw_rad), q) for q in self.root_quat]
+
+    def overlap(self, placement: RobotPlacement) -> float:
+        """Deepest overlap (m, 0 when none) of the robot at ``placement`` with the scene, at the
+        start pose and at the home pose."""
+        import mujoco
+
+        self._move(placement)
+        m, d = self.m, self.d
+        mujoco.mj_resetData(m, d)
+        mujoco.mj_forward(m, d)
+        worst = _min_distance(m, d, self.arm.geoms, self.others, 0.0)
+        reset_home(m, d, self.arm)
+        worst = min(worst, _min_distance(m, d, self.arm.geoms, self.others, 0.0))
+        return max(0.0, -worst)
+
+    def reach(self, placement: RobotPlacement) -> tuple[float, float]:
+        """(tool's final distance to the target, smallest arm-scene distance on the way) of the
+        scripted reach swept kinematically from the home pose at ``placement``."""
+        import mujoco
+
+        self._move(placement)
+        m, d, arm = self.m, self.d, self.arm
+        reset_home(m, d, arm)
+        start = d.site_xpos[arm.site].copy()
+        rot = d.site_xmat[arm.site].reshape(3, 3).copy() if placement.hold_tool_axis else None
+        path = tool_path(start, np.asarray(placement.target_m), 1.0)
+        q = d.qpos[arm.qpos].copy()
+        clearance = np.inf
+        for t in np.linspace(0.0, 1.0, SWEEP_STEPS + 1):
+            q = ik_step(m, d, arm, q, path(t), rot)
+            d.qpos[arm.qpos] = q
+            mujoco.mj_kinematics(m, d)
+            clearance = min(clearance, _min_distance(m, d, arm.moving, self.others, 0.05))
+        for _ in range(5):  # settle the last waypoint
+            q = ik_step(m, d, arm, q, path(1.0), rot)
         d.qpos[arm.qpos] = q
         mujoco.mj_kinematics(m, d)
-        clearance = min(clearance, _min_distance(m, d, arm.moving, others, 0.05))
-    for _ in range(5):  # settle the last waypoint
-        q = ik_step(m, d, arm, q, path(1.0), rot)
-    d.qpos[arm.qpos] = q
-    mujoco.mj_kinematics(m, d)
-    return float(np.linalg.norm(d.site_xpos[arm.site] - placement.target_m)), float(clearance)
+        return float(np.linalg.norm(d.site_xpos[arm.site] - placement.target_m)), float(clearance)
+
+    def first_passing(self, placements, variants=None) -> tuple[RobotPlacement | None, list[str]]:
+        """The first placement whose robot overlaps nothing at the start and home poses and
+        whose reach ends within REACH_TOL_M of the target, SWEEP_CLEARANCE_M clear of the scene;
+        and why each one tried before it failed. ``variants(placement)``: placements to try in
+        its stead when it fails (an arm whose home pose reaches over the edge of the bed it
+        faces: the robot turned or stepped back; a target lowered)."""
+        why = []
+        for first in placements:
+            for placement in [first, *(variants(first) if variants is not None else ())]:
+                overlap = self.overlap(placement)
+                if overlap > 0.0:
+                    why.append(f"{placement.target_kind} of {placement.target_support}: overlap {overlap * 1000:.1f} mm")
+                    continue
+                error, clearance = self.reach(placement)
+                if error <= REACH_TOL_M and clearance >= SWEEP_CLEARANCE_M:
+                    return placement, why
+                why.append(f"{placement.target_kind} of {placement.target_support}: reach ends {error * 100:.1f} cm off, "
+                           f"{clearance * 1000:.0f} mm clear")
+        return None, why
+
+
+def _yaw_quat(yaw: float) -> np.ndarray:
+    return np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
+
+
+def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    import mujoco
+
+    out = np.zeros(4)
+    mujoco.mju_mulQuat(out, np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64))
+    return out
 
 
 def robot_contacts(m, d, mine: set[int]) -> list[tuple[str, str, float]]:
@@ -222,7 +294,8 @@ class ReachResult:
     contacts: list[tuple[float, str, str, float]]
 
 
-def simulate_reach(m, d, arm: ArmIds, target: np.ndarray, seconds: float, on_step: Callable[[int], None] | None = None) -> ReachResult:
+def simulate_reach(m, d, arm: ArmIds, target: np.ndarray, seconds: float, on_step: Callable[[int], None] | None = None,
+                   hold_tool_axis: bool = True) -> ReachResult:
     """Run the scripted reach in simulation from the current state for ``seconds``: every
     CONTROL_DT_S the next waypoint of :func:`tool_path` (over 80 % of the time, then held) goes
     through :func:`ik_step` to the arm's position actuators; ``on_step(k)`` after each step."""
@@ -231,7 +304,7 @@ def simulate_reach(m, d, arm: ArmIds, target: np.ndarray, seconds: float, on_ste
     scratch = mujoco.MjData(m)
     scratch.qpos[:] = d.qpos
     start = d.site_xpos[arm.site].copy()
-    rot = d.site_xmat[arm.site].reshape(3, 3).copy()
+    rot = d.site_xmat[arm.site].reshape(3, 3).copy() if hold_tool_axis else None
     path = tool_path(start, np.asarray(target, dtype=np.float64), 0.8 * seconds)
     q = d.qpos[arm.qpos].copy()
     mine = {int(g) for g in range(m.ngeom) if m.body(int(m.geom_bodyid[g])).name.startswith(PREFIX)}

@@ -20,7 +20,7 @@ open floor (:data:`SIDE_GAP_M` from its outline, at half its height) are targets
 target whose floor-plan path from the spot passes :data:`PATH_CLEARANCE_M` under it over
 everything (:meth:`_Footprints.path_clear`: the arm comes in over the top); spots are ranked by how comfortably they reach (distance near :data:`COMFORT_FRACTION` of
 the reach), standing on floor the camera saw (:func:`_seen_floor`), a table before an object's
-top before its side (:data:`KIND_BONUS`), visibility from the input camera, not
+top before its side (each kind's spots in turn), visibility from the input camera, not
 standing between the camera and the target, then grid order (deterministic).
 
 :mod:`layout.reach` then measures each candidate in MuJoCo (overlap at the start and home poses,
@@ -28,6 +28,8 @@ the scripted reach swept kinematically); the pipeline keeps the first that passe
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 
@@ -40,11 +42,13 @@ CELL_M = 0.04
 CLEARANCE_M = 0.05
 FLOOR_EPS_M = 0.003  # geometry lower than this is the floor itself (the robot's geoms start at 5 mm)
 TARGET_HEIGHT_M = 0.18
+LOW_TARGET_HEIGHT_M = 0.1
 TARGET_INSET_M = 0.06
 ON_TOP_CLEARANCE_M = 0.12
 MIN_TOP_M = 0.05
 TOP_BAND_M = 0.03
 REACH_FRACTION = 0.75
+FREE_REACH_FRACTION = 0.9  # with the tool's axis free and the target lowered (see alternatives)
 COMFORT_FRACTION = 0.55
 MIN_HORIZONTAL_M = 0.25
 ROOM_MARGIN_M = 1.5
@@ -52,7 +56,6 @@ CANDIDATES = 8
 CHUNK = 128
 TOP, OBJECT_TOP, SIDE = 0, 1, 2
 KIND_NAMES = ("top", "object_top", "side")
-KIND_BONUS = np.array([0.2, 0.1, 0.0])  # a table first, then above an object, then beside one
 SIDE_GAP_M = (0.10, 0.14)
 SIDE_HEIGHTS_M = (0.3, 0.7)
 SIDE_FLOOR_M = 0.05
@@ -63,6 +66,8 @@ ARM_BAND_M = 0.5
 SEEN_FLOOR_BAND_M = 0.03
 SEEN_FLOOR_WEIGHT = 1.0
 CANDIDATE_SPACING_M = 0.3
+TURNS_RAD = (np.pi / 4, -np.pi / 4, np.pi / 2, -np.pi / 2)
+STEP_BACK_M = (0.05, 0.1, 0.15)
 
 
 def _pieces(scene: Scene) -> list[tuple[str, np.ndarray]]:
@@ -190,20 +195,36 @@ class _Footprints:
     def __init__(self, pieces: list[tuple[str, np.ndarray]]) -> None:
         import shapely
 
-        self.polys = [_hull(v[:, :2]) for _, v in pieces]
-        self.z = np.array([[v[:, 2].min(), v[:, 2].max()] for _, v in pieces])
+        self.vertices = [v for _, v in pieces]
+        self.polys = [_hull(v[:, :2]) for v in self.vertices]
+        self.z = np.array([[v[:, 2].min(), v[:, 2].max()] for v in self.vertices])
         self.tree = shapely.STRtree(self.polys)
 
     def path_clear(self, spot_xy: np.ndarray, target: np.ndarray) -> bool:
         """The arm comes in over the top: no piece within PATH_WIDTH_M of the floor-plan segment
         from the spot to the target reaches into the band from PATH_CLEARANCE_M under the target
-        point to ARM_BAND_M above it (where the forearm and the elbow pass)."""
+        point to ARM_BAND_M above it (where the forearm and the elbow pass). A piece's height
+        under the path is its exact top there (a bed's convex piece is low at the mattress and
+        high at the headboard), sampled every CELL_M / 2 along the segment and at its sides."""
         import shapely
 
         line = shapely.LineString([spot_xy.tolist(), target[:2].tolist()]).buffer(PATH_WIDTH_M)
         hits = self.tree.query(line, predicate="intersects")
-        z = self.z[hits]
-        return not bool(((z[:, 1] > target[2] - PATH_CLEARANCE_M) & (z[:, 0] < target[2] + ARM_BAND_M)).any())
+        floor_z, ceiling_z = target[2] - PATH_CLEARANCE_M, target[2] + ARM_BAND_M
+        hits = [h for h in hits if self.z[h, 1] > floor_z and self.z[h, 0] < ceiling_z]
+        if not hits:
+            return True
+        along = target[:2] - spot_xy
+        length = float(np.linalg.norm(along))
+        side = np.array([-along[1], along[0]]) / max(length, 1e-9)
+        t = np.linspace(0.0, 1.0, max(2, int(np.ceil(length / (0.5 * CELL_M))) + 1))
+        samples = np.concatenate([spot_xy + t[:, None] * along + o * side for o in (-PATH_WIDTH_M, 0.0, PATH_WIDTH_M)])
+        for h in hits:
+            inside = shapely.contains_xy(self.polys[h], samples[:, 0], samples[:, 1])
+            pts = samples[inside] if inside.any() else np.array(shapely.get_coordinates(self.polys[h].intersection(line).representative_point()))
+            if float(_convex_top(self.vertices[h], pts[:, 0], pts[:, 1]).max()) > floor_z:
+                return False
+        return True
 
 
 def _candidate_grid(scene: Scene, pieces: list[tuple[str, np.ndarray]]) -> np.ndarray:
@@ -252,12 +273,98 @@ def _in_view(scene: Scene, xy: np.ndarray, z_m: float) -> np.ndarray:
     return ok & (u >= 0) & (u < k.width_px) & (v >= 0) & (v < k.height_px)
 
 
-def place_robot(scene: Scene, model: RobotModel) -> tuple[RobotPlacement, ...]:
-    """Up to CANDIDATES placements, best first, at least CANDIDATE_SPACING_M apart.
+class _Scoring:
+    """Spots ranked by their best targets among ``targets`` (T, 3): for each free grid spot the
+    TARGETS_PER_SPOT best-scored targets it reaches (see the module docstring for the score),
+    a target counting as reached when the point ``drop_m`` under it is within ``reach``."""
 
-    Raises InputError when no free floor spot reaches any support surface."""
+    def __init__(self, grid, free, targets, on_object, visible, seen, cam_xy, radius, mount_r, mount_z, reach, comfort_m,
+                 drop_m: float = 0.0) -> None:
+        keep = min(TARGETS_PER_SPOT, len(targets))
+        self.scores = np.full((len(grid), keep), -np.inf)
+        self.best = np.zeros((len(grid), keep), dtype=int)
+        sel_all = np.flatnonzero(free)
+        seg = targets[:, :2] - cam_xy
+        seg_len2 = np.maximum(np.einsum("ij,ij->i", seg, seg), 1e-9)
+        for start in range(0, len(sel_all), CHUNK):
+            sel = sel_all[start : start + CHUNK]
+            away = targets[None, :, :2] - grid[sel, None, :]
+            h = np.linalg.norm(away, axis=2) - mount_r  # the shoulder sits mount_r towards the target
+            dist = np.hypot(h, targets[None, :, 2] - mount_z)
+            ok = (h >= MIN_HORIZONTAL_M) & (np.hypot(h, targets[None, :, 2] - drop_m - mount_z) <= reach)
+            # Ranked: on floor the camera saw (not behind furniture, where a wall may hide), comfort
+            # of the reach, an object's top over the background's, seen by the camera, not standing
+            # between the camera and the target.
+            tpar = np.clip(np.einsum("ftk,tk->ft", grid[sel, None, :] - cam_xy, seg) / seg_len2, 0.0, 1.0)
+            closest = cam_xy + tpar[:, :, None] * seg[None]
+            blocks = np.linalg.norm(grid[sel, None, :] - closest, axis=2) < radius
+            score = (-np.abs(dist - comfort_m) + 0.1 * on_object[None] + 0.2 * visible[sel, None]
+                     + SEEN_FLOOR_WEIGHT * seen[sel, None] - 0.3 * blocks)
+            score = np.where(ok, score, -np.inf)
+            top = np.argsort(-score, axis=1, kind="stable")[:, :keep]
+            self.scores[sel] = np.take_along_axis(score, top, axis=1)
+            self.best[sel] = top
+
+    def ranked(self):
+        """(spot index, target indices reaching it best first) for spots reaching any, best
+        spot first (ties in grid order: deterministic)."""
+        first = self.scores[:, 0]
+        for g in np.lexsort((np.arange(len(first)), -np.round(first, 6))):
+            if not np.isfinite(first[g]):
+                return
+            yield g, [t for t, sc in zip(self.best[g], self.scores[g]) if np.isfinite(sc)]
+
+
+def _clearance(scene: Scene, pieces: list[tuple[str, np.ndarray]], model: RobotModel, xy: np.ndarray) -> np.ndarray:
+    """(G,) distance from the robot's footprint circle at each spot ``xy`` (G, 2) to the nearest
+    obstacle footprint (pieces from above the floor to above the robot) or wall; negative
+    inside one."""
     import shapely
 
+    obstacles = [_hull(v[:, :2]) for _, v in pieces if v[:, 2].max() > FLOOR_EPS_M and v[:, 2].min() < model.height_m + 0.1]
+    clearance = np.full(len(xy), np.inf)
+    if obstacles:
+        idx, dist = shapely.STRtree(obstacles).query_nearest(shapely.points(xy), return_distance=True, all_matches=False)
+        clearance[idx[0]] = dist
+    for wall in scene.room.walls:
+        clearance = np.minimum(clearance, np.column_stack([xy, np.zeros(len(xy))]) @ wall.normal + wall.offset_m)
+    return clearance - float(model.footprint_radius_m)
+
+
+def alternatives(scene: Scene, placement: RobotPlacement) -> list[RobotPlacement]:
+    """Placements to try in the stead of ``placement`` when its robot overlaps the scene (its arm's
+    home pose reaching over the edge of the bed or table it faces) or its arm falls short: at
+    the same spot turned by each of TURNS_RAD (the arm turns to the target during the reach),
+    stepped straight back from the target by each of STEP_BACK_M, still facing it (only spots
+    free on the floor plan with the target in reach); then all of them again, and the placement
+    itself, with a target over a top lowered to LOW_TARGET_HEIGHT_M above it (a high table at
+    the edge of a floor-standing arm's reach); last, the placement and its turned and stepped
+    back poses with the tool's approach axis free (see ``RobotPlacement.hold_tool_axis``), at
+    the target and at the lowered one."""
+    model = placement.model
+    poses = [dataclasses.replace(placement, yaw_rad=float(placement.yaw_rad + t)) for t in TURNS_RAD]
+    heading = np.array([np.cos(placement.yaw_rad), np.sin(placement.yaw_rad)])
+    spots = placement.position_m[:2] - np.asarray(STEP_BACK_M)[:, None] * heading
+    clearance = _clearance(scene, _pieces(scene), model, spots)
+    mount_r, mount_z = float(np.linalg.norm(model.arm_mount_m[:2])), float(model.arm_mount_m[2])
+    for xy, clear in zip(spots, clearance):
+        horizontal = float(np.linalg.norm(placement.target_m[:2] - xy)) - mount_r
+        if clear < CLEARANCE_M or np.hypot(horizontal, placement.target_m[2] - mount_z) > FREE_REACH_FRACTION * model.reach_m:
+            continue
+        yaw = float(np.arctan2(placement.target_m[1] - xy[1], placement.target_m[0] - xy[0]))
+        poses.append(dataclasses.replace(placement, position_m=np.array([xy[0], xy[1], 0.0]), yaw_rad=yaw, clearance_m=float(clear)))
+    tried = [placement, *poses]
+    if placement.target_kind != "side":
+        low = placement.target_m - np.array([0.0, 0.0, TARGET_HEIGHT_M - LOW_TARGET_HEIGHT_M])
+        tried += [dataclasses.replace(p, target_m=low) for p in tried]
+    return tried[1:] + [dataclasses.replace(p, hold_tool_axis=False) for p in tried]
+
+
+def place_robot(scene: Scene, model: RobotModel) -> tuple[RobotPlacement, ...]:
+    """Placements best first: up to CANDIDATES of each target kind (a top, then an object's top,
+    then beside an object), each kind's at least CANDIDATE_SPACING_M apart.
+
+    Raises InputError when no free floor spot reaches any support surface."""
     pieces = _pieces(scene)
     radius = float(model.footprint_radius_m)
     mount_z = float(model.arm_mount_m[2])
@@ -265,25 +372,20 @@ def place_robot(scene: Scene, model: RobotModel) -> tuple[RobotPlacement, ...]:
     height_map = _height_map(pieces)
     footprints = _Footprints(pieces)
     movable = {o.name for o in scene.objects if not o.asset.is_fixed}
-    targets, target_owner, target_kind, owners = _targets(height_map, mount_z + reach - 0.05, movable)
+    free_reach = FREE_REACH_FRACTION * float(model.reach_m)
+    targets, target_owner, target_kind, owners = _targets(height_map, mount_z + free_reach - LOW_TARGET_HEIGHT_M, movable)
+    inside = np.ones(len(targets), dtype=bool)  # a top behind a wall is not the room's
+    for wall in scene.room.walls:
+        inside &= targets @ wall.normal + wall.offset_m > 0.0
+    targets, target_owner, target_kind = targets[inside], target_owner[inside], target_kind[inside]
     if not len(targets):
         raise InputError(
             f"--robot {model.name}: no flat top nor movable object in the scene for the arm to work above ({MIN_TOP_M:g} m to "
-            f"{mount_z + reach - 0.05:.2f} m high); build without --robot"
+            f"{mount_z + free_reach - LOW_TARGET_HEIGHT_M:.2f} m high); build without --robot"
         )
-    obstacles = [_hull(v[:, :2]) for _, v in pieces if v[:, 2].max() > FLOOR_EPS_M and v[:, 2].min() < model.height_m + 0.1]
     grid, shape = _candidate_grid(scene, pieces)
-    points = shapely.points(grid)
-    free = np.ones(len(grid), dtype=bool)
-    clearance = np.full(len(grid), np.inf)
-    if obstacles:
-        tree = shapely.STRtree(obstacles)
-        idx, dist = tree.query_nearest(points, return_distance=True, all_matches=False)
-        clearance[idx[0]] = dist
-    for wall in scene.room.walls:
-        clearance = np.minimum(clearance, np.column_stack([grid, np.zeros(len(grid))]) @ wall.normal + wall.offset_m)
-    clearance = clearance - radius
-    free &= clearance >= CLEARANCE_M
+    clearance = _clearance(scene, pieces, model, grid)
+    free = clearance >= CLEARANCE_M
     if not free.any():
         raise InputError(f"--robot {model.name}: no free floor spot {2 * radius:.2f} m wide in the room; build without --robot")
     cam_xy = scene.camera.position_m[:2]
@@ -291,48 +393,34 @@ def place_robot(scene: Scene, model: RobotModel) -> tuple[RobotPlacement, ...]:
     seen = _seen_floor(scene, grid, shape, radius)
     mount_r = float(np.linalg.norm(model.arm_mount_m[:2]))
     on_object = np.array([owners[k] != "background" for k in target_owner])
-    keep = min(TARGETS_PER_SPOT, len(targets))
-    best_scores = np.full((len(grid), keep), -np.inf)
-    best_targets = np.zeros((len(grid), keep), dtype=int)
-    sel_all = np.flatnonzero(free)
-    seg = targets[:, :2] - cam_xy
-    seg_len2 = np.maximum(np.einsum("ij,ij->i", seg, seg), 1e-9)
-    for start in range(0, len(sel_all), CHUNK):
-        sel = sel_all[start : start + CHUNK]
-        away = targets[None, :, :2] - grid[sel, None, :]
-        h = np.linalg.norm(away, axis=2) - mount_r  # the shoulder sits mount_r towards the target
-        dist = np.hypot(h, targets[None, :, 2] - mount_z)
-        ok = (h >= MIN_HORIZONTAL_M) & (dist <= reach)
-        # Ranked: on floor the camera saw (not behind furniture, where a wall may hide), comfort
-        # of the reach, an object's top over the background's, seen by the camera, not standing
-        # between the camera and the target.
-        tpar = np.clip(np.einsum("ftk,tk->ft", grid[sel, None, :] - cam_xy, seg) / seg_len2, 0.0, 1.0)
-        closest = cam_xy + tpar[:, :, None] * seg[None]
-        blocks = np.linalg.norm(grid[sel, None, :] - closest, axis=2) < radius
-        score = (-np.abs(dist - COMFORT_FRACTION * model.reach_m) + 0.1 * on_object[None] + KIND_BONUS[target_kind][None]
-                 + 0.2 * visible[sel, None]
-                 + SEEN_FLOOR_WEIGHT * seen[sel, None] - 0.3 * blocks)
-        score = np.where(ok, score, -np.inf)
-        top = np.argsort(-score, axis=1, kind="stable")[:, :keep]
-        best_scores[sel] = np.take_along_axis(score, top, axis=1)
-        best_targets[sel] = top
-    best_score = best_scores[:, 0]
-    order = np.lexsort((np.arange(len(grid)), -np.round(best_score, 6)))
     chosen: list[RobotPlacement] = []
-    for g in order:
-        if not np.isfinite(best_score[g]) or len(chosen) >= CANDIDATES:
-            break
-        if any(np.linalg.norm(c.position_m[:2] - grid[g]) < CANDIDATE_SPACING_M for c in chosen):
+    # A table before an object's top before its side: each kind's best spots in turn, so that
+    # the pipeline's MuJoCo check tries every spot reaching a top before settling for less.
+    for kind in (TOP, OBJECT_TOP, SIDE):
+        of_kind = np.flatnonzero(target_kind == kind)
+        if not len(of_kind):
             continue
-        options = [t for t, sc in zip(best_targets[g], best_scores[g]) if np.isfinite(sc)
-                   and footprints.path_clear(grid[g], targets[t])]
-        if not options:
-            continue
-        target = targets[options[0]]
-        yaw = float(np.arctan2(target[1] - grid[g][1], target[0] - grid[g][0]))
-        name = owners[int(target_owner[options[0]])]
-        kind = KIND_NAMES[int(target_kind[options[0]])]
-        chosen.append(RobotPlacement(model, np.array([grid[g][0], grid[g][1], 0.0]), yaw, target, name, kind, float(clearance[g])))
+        # Over a top, a spot counts when the lowered target is in the arm's reach with the tool
+        # free (:func:`alternatives` tries those last).
+        top_kind = kind != SIDE
+        ctx = _Scoring(grid, free, targets[of_kind], on_object[of_kind], visible, seen, cam_xy, radius, mount_r, mount_z,
+                       free_reach if top_kind else reach, COMFORT_FRACTION * model.reach_m,
+                       TARGET_HEIGHT_M - LOW_TARGET_HEIGHT_M if top_kind else 0.0)
+        picked = []
+        for g, options in ctx.ranked():
+            if len(picked) >= CANDIDATES:
+                break
+            if any(np.linalg.norm(c.position_m[:2] - grid[g]) < CANDIDATE_SPACING_M for c in picked):
+                continue
+            options = [of_kind[t] for t in options if footprints.path_clear(grid[g], targets[of_kind[t]])]
+            if not options:
+                continue
+            target = targets[options[0]]
+            yaw = float(np.arctan2(target[1] - grid[g][1], target[0] - grid[g][0]))
+            name = owners[int(target_owner[options[0]])]
+            picked.append(RobotPlacement(model, np.array([grid[g][0], grid[g][1], 0.0]), yaw, target, name, KIND_NAMES[kind],
+                                         float(clearance[g])))
+        chosen.extend(picked)
     if not chosen:
         raise InputError(
             f"--robot {model.name}: no free floor spot within reach of a top or a movable object ({', '.join(sorted(set(owners))[:4])}); "

@@ -254,27 +254,23 @@ def _add_robot(scene: Scene, staging: Path, config: BuildConfig) -> tuple[Scene,
     from exporters import write_mjcf
     from generation.robot import load_robot
     from layout import verify_scene
-    from layout.reach import REACH_TOL_M, SWEEP_CLEARANCE_M, check_reach, robot_overlaps
-    from layout.robot import place_robot
+    from layout.reach import PlacementTrials
+    from layout.robot import alternatives, place_robot
 
     model = load_robot(config.robot.name, staging / ROBOT_WORK_DIR, config.robot.source, config.robot.offline)
-    why = []
-    for placement in place_robot(scene, model):
-        with_robot = dataclasses.replace(scene, robot=placement)
+    placements = place_robot(scene, model)
+    # The scene is written and compiled once; each placement moves the robot in that model.
+    mjcf_path = write_mjcf(dataclasses.replace(scene, robot=placements[0]), staging)
+    chosen, why = PlacementTrials(mjcf_path, placements[0]).first_passing(placements, lambda p: alternatives(scene, p))
+    if chosen is None:
+        raise InputError(
+            f"--robot {model.name}: no free spot found reaches its target clear of the scene ({'; '.join(why[:3])}); build without --robot"
+        )
+    with_robot = dataclasses.replace(scene, robot=chosen)
+    if chosen is not placements[0]:
         mjcf_path = write_mjcf(with_robot, staging)
-        overlap = robot_overlaps(mjcf_path, placement)
-        if overlap > 0.0:
-            why.append(f"overlap {overlap * 1000:.1f} mm")
-            continue
-        error, clearance = check_reach(mjcf_path, placement)
-        if error > REACH_TOL_M or clearance < SWEEP_CLEARANCE_M:
-            why.append(f"reach ends {error * 100:.1f} cm off, {clearance * 1000:.0f} mm clear")
-            continue
-        verdict, _ = verify_scene(mjcf_path, with_robot, config.layout)
-        return with_robot, mjcf_path, verdict
-    raise InputError(
-        f"--robot {model.name}: no free spot found reaches its target clear of the scene ({'; '.join(why[:3])}); build without --robot"
-    )
+    verdict, _ = verify_scene(mjcf_path, with_robot, config.layout)
+    return with_robot, mjcf_path, verdict
 
 
 def _robot_summary(scene: Scene, verdict: PhysicsVerdict) -> str:

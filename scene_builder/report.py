@@ -185,6 +185,7 @@ def robot_report(scene: Scene) -> dict | None:
         "target_m": [_r(float(v), 4) for v in r.target_m],
         "target_support": r.target_support,
         "target_kind": r.target_kind,
+        "hold_tool_axis": r.hold_tool_axis,
         "ee_site": f"robot/{m.ee_site}",
         "arm_joints": [f"robot/{j}" for j in m.arm_joints],
         "base_joints": [f"robot/{j}" for j in m.base_joints],

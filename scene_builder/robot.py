@@ -66,7 +66,9 @@ class RobotPlacement:
     ``background``); target_kind: ``"top"`` (above a flat top, a table's), ``"object_top"``
     (above a movable object's highest point) or ``"side"`` (beside a movable object, over open
     floor). clearance_m: distance from the robot's footprint to the nearest obstacle on the
-    floor plan."""
+    floor plan. hold_tool_axis: the scripted reach keeps the tool's approach axis as at the home
+    pose (a gripper pointing down); False where the arm gets there only with it free (a high
+    table at the edge of a floor-standing arm's reach)."""
 
     model: RobotModel
     position_m: np.ndarray
@@ -75,6 +77,7 @@ class RobotPlacement:
     target_support: str
     target_kind: str
     clearance_m: float
+    hold_tool_axis: bool = True
 
     def __post_init__(self) -> None:
         _freeze(self, "position_m", np.float64, (3,))

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import real_samples
-from tests.fixtures_scenes import boxes_scene, fixture_camera, fixture_room, mixed_scene
+from tests.fixtures_scenes import WOOD, box_asset, boxes_scene, fixture_camera, fixture_room, mixed_scene, pose
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "examples"))
@@ -317,6 +317,33 @@ def test_arm_reaches_above_the_support_without_touching_the_fixture_scene(name, 
     _assert_reaches(out)
 
 
+@pytest.mark.parametrize("bed_height_m", [0.55, 0.7])
+def test_beside_a_bed_the_robot_turns_or_lowers_its_target_and_reaches_above_it(bed_height_m, tmp_path):
+    """A bed-high top (a fixed 1.6 x 2.0 m box) is the only thing to work above. Facing it, the
+    Panda's home pose pokes its hand into the bed's side at every spot place_robot ranks: none
+    passes as it was placed. The alternatives (turned, stepped back, a lower target, the tool's
+    axis free) find one that overlaps nothing and whose simulated reach ends above the bed
+    without a contact."""
+    from layout.reach import PlacementTrials
+    from layout.robot import alternatives, place_robot
+    from scene_builder.model import PlacedObject, Scene
+
+    bed = box_asset("bed", (1.6, 2.0, bed_height_m), WOOD, is_fixed=True, label="bed")
+    scene = Scene(fixture_camera(), fixture_room(), (PlacedObject(bed, pose(np.eye(3), (1.0, 0.5, 0.0)), "floor"),))
+    placements = place_robot(scene, _robot("panda", tmp_path))
+    assert all(p.target_kind == "top" and p.target_support == "bed" for p in placements)
+    path = _write_scene(dataclasses.replace(scene, robot=placements[0]), tmp_path / "first")
+    trials = PlacementTrials(path, placements[0])
+    assert trials.first_passing(placements)[0] is None
+    chosen, why = trials.first_passing(placements, lambda p: alternatives(scene, p))
+    assert chosen is not None and why and "overlap" in why[0]
+    assert chosen.target_kind == "top" and bed_height_m + 0.08 < chosen.target_m[2] < bed_height_m + 0.2
+    assert abs(chosen.target_m[0] - 1.0) < 0.8 - 0.02 and abs(chosen.target_m[1] - 0.5) < 1.0 - 0.02  # over the bed
+    out = tmp_path / "out"
+    _write_scene(dataclasses.replace(scene, robot=chosen), out)
+    _assert_reaches(out)
+
+
 def test_a_target_inside_the_support_is_not_reached_without_contact(tmp_path):
     """The check can fail: moving the target 10 cm into the support top makes the arm touch it."""
     from layout.robot import place_robot
@@ -375,8 +402,9 @@ def test_real_sample_panda_reaches_its_target_without_collision(real_with_panda)
     """Every real sample with a movable object, built with --robot panda: the robot is in
     scene.xml and scene.usda, nothing overlaps at t = 0 (the physics check over all pairs,
     robot included), the objects stay at rest, input_camera is kept, and the scripted arm ends
-    within 2 cm of its target (18 cm above a table or a movable object's top; beside a movable
-    object where no top is in reach), touching nothing on the way."""
+    within 2 cm of its target (18 or 10 cm above a table or a movable object's top, which a ray
+    straight down finds; beside a movable object where no top is in reach), touching nothing on
+    the way."""
     import mujoco
 
     result = real_with_panda
@@ -393,6 +421,17 @@ def test_real_sample_panda_reaches_its_target_without_collision(real_with_panda)
     from exporters import check_output
 
     assert check_output(result.out_dir) == ()  # `scene-builder check` passes with the robot in
+    robot = report["robot"]
+    if robot["target_kind"] != "side":
+        # Above a top: straight down from the target, the first thing hit is the scene's (not the
+        # floor), 8 to 20 cm below.
+        d = mujoco.MjData(m)
+        mujoco.mj_forward(m, d)
+        geom = np.array([-1], dtype=np.int32)
+        dist = mujoco.mj_ray(m, d, np.array(robot["target_m"]), np.array([0.0, 0.0, -1.0]), None, 1, -1, geom)
+        hit = m.geom(int(geom[0]))
+        assert 0.08 - 1e-3 <= dist <= 0.2, (dist, hit.name)
+        assert hit.name != "floor" and not m.body(int(hit.bodyid[0])).name.startswith("robot/")
     _assert_reaches(result.out_dir)
 
 

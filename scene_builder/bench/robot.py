@@ -52,7 +52,7 @@ def robot_rows(data: Path, robot: str) -> list[dict]:
             d = mujoco.MjData(m)
             arm = arm_ids(m, f"robot/{r.model.ee_site}", [f"robot/{j}" for j in r.model.arm_joints], r.model.home_qpos)
             reset_home(m, d, arm)
-            reach = simulate_reach(m, d, arm, r.target_m, REACH_S)
+            reach = simulate_reach(m, d, arm, r.target_m, REACH_S, hold_tool_axis=r.hold_tool_axis)
         rows.append(dict(
             sample=src.name, objects=len(result.scene.objects), movable=sum(not o.asset.is_fixed for o in result.scene.objects),
             target_kind=r.target_kind, target_support=r.target_support, clearance_m=r.clearance_m,
