@@ -47,6 +47,8 @@ class Body:
     legs_m: float = 0.0
     hidden_support: bool = False  # legs stand on a support found below a hidden underside
     pad_bottom_m: float | None = None  # its background pad is a column from here (hidden support)
+    # Static only: movable bodies its collision caged, cut back out of their outlines (layout.cage).
+    cut_for: list[str] = field(default_factory=list)
 
     @property
     def bottom_m(self) -> float:

@@ -668,6 +668,34 @@ def _trim_overlaps(solver: _Solver) -> bool:
     return changed
 
 
+def _uncage(bodies: list[Body], absorbed: list[int], walls: tuple[Plane, ...], seen: dict[str, np.ndarray]) -> None:
+    """Static bodies (``absorbed``, at their seen poses, as the background will hold them) whose
+    collision cages a movable body get it cut back out of that body's outline (``layout.cage``);
+    each records whom for (``Body.cut_for``)."""
+    from layout.cage import CAGE_TRAVEL_M, caged, uncage
+
+    statics = set(absorbed)
+    reach = CAGE_TRAVEL_M + 0.05
+    for i, b in enumerate(bodies):
+        if i in statics or b.asset.kind is AssetKind.DEFORMABLE:
+            continue
+        moving = [p.verts_rel_m + b.position_m for p in b.pieces]
+        lo, hi = b.lo_rel_m + b.position_m - reach, b.hi_rel_m + b.position_m + reach
+        near = []
+        for k in sorted(statics):
+            t = seen[bodies[k].name]
+            pieces = [piece.vertices_m @ t[:3, :3].T + t[:3, 3] for part in bodies[k].asset.parts for piece in part.collision]
+            if any(np.all(v.max(axis=0) > lo) and np.all(v.min(axis=0) < hi) for v in pieces):
+                near.append((k, pieces))
+        if not near or not caged(moving, [v for _, ps in near for v in ps], walls):
+            continue
+        for k, _ in near:
+            cut = uncage(moving, bodies[k].asset, seen[bodies[k].name])
+            if cut is not bodies[k].asset:
+                bodies[k].asset = cut
+                bodies[k].cut_for.append(b.name)
+
+
 def _yaw_deg(rotation: np.ndarray) -> float:
     return float(np.degrees(np.arctan2(rotation[1, 0], rotation[0, 0])))
 
@@ -723,6 +751,8 @@ def _placement(g: GeneratedAsset, b: Body, support: str, absorbed: bool) -> Plac
     reasons = []
     if absorbed:
         reasons.append(f"{b.unsupported_reason or 'nothing seen under it to rest on'}: kept where seen as static background")
+        if b.cut_for:
+            reasons.append(f"its collision cut back out of the outline of {', '.join(b.cut_for)}, which it held caged")
     if b.pad_bottom_m is not None and not absorbed:
         reasons.append(f"rests where seen on a static {(b.bottom_m - b.pad_bottom_m) * 100:.0f} cm column standing in for the support hidden under it")
     if b.legs_m > 0.0 and not absorbed:
@@ -814,6 +844,9 @@ def solve_layout_with_stats(
     after = solver.max_penetration()
     lap("measure_after")
     absorbed = sorted(set(absorbed) | set(solver.stuck))
+    seen = {g.asset.name: g.world_from_asset for g in generated}
+    _uncage(bodies, absorbed, walls, seen)
+    lap("uncage")
 
     by_name = {b.name: b for b in bodies}
     parent_of = {e.child: e.parent for e in edges}
@@ -826,7 +859,6 @@ def solve_layout_with_stats(
         for g in generated
         if g.asset.name not in absorbed_names
     )
-    seen = {g.asset.name: g.world_from_asset for g in generated}
     room = dataclasses.replace(perception.room, background=_static_background(background, bodies, absorbed, walls, seen))
     scene = Scene(camera=perception.camera, room=room, objects=placed)
     edge_order = {n: k for k, n in enumerate(names)}

@@ -165,28 +165,9 @@ def _check_built(out: Path) -> tuple[int, int]:
     return len(pushable), len(joints)
 
 
-# Known layout defect (measured with these probes, reported): the sample's only movable object, an
-# open shelf beside a bed that became static background, holds the bed's convex pieces in its
-# compartments (a bed leg inside its base, the bed's slabs between its boards): it cannot slide 2 cm
-# in any direction, so nothing there is pushable. Strict: the test fails once the layout is fixed.
-LOCKED = {
-    "sunrgbd_imvotenet_000005": "shelf_1 interlocks with the static bed's collision pieces inside its open compartments",
-}
-
-
-def _probe_params() -> list:
-    out = []
-    for p in real_sample_params(with_intrinsics=True):
-        marks = list(p.marks)
-        if p.id in LOCKED:
-            marks.append(pytest.mark.xfail(strict=True, raises=AssertionError, reason=LOCKED[p.id]))
-        out.append(pytest.param(*p.values, id=p.id, marks=marks))
-    return out
-
-
 @pytest.mark.slow
 @pytest.mark.skipif(not SAMPLES, reason="no real RGB-D samples with intrinsics in ../shared/data/real")
-@pytest.mark.parametrize("sample", _probe_params())
+@pytest.mark.parametrize("sample", real_sample_params(with_intrinsics=True))
 def test_real_sample_push_and_open(sample, built_real_sample):
     """Each real sample (built once per session, shared with test_end_to_end): every pushable
     movable object pushed, every door and drawer pulled open."""

@@ -5,7 +5,7 @@ Run: ``python -m scene_builder.bench.robot [--data ../shared/data] [--robot pand
 Every sample of ``DATA/real`` with aligned depth and a camera.json is built with ``--robot``
 (the built-in model, so no download is timed; no URDF, glTF or rerun output), then the scripted
 reach of :func:`layout.reach.simulate_reach` runs 4 s in MuJoCo from the home pose. Per sample:
-objects (movable), the target's kind and support, the robot's clearance on the floor plan,
+objects (movable), the target's kind, support and height, whether the reach held the tool's axis, the robot's clearance on the floor plan,
 seconds of the ``robot`` stage (model, placement candidates measured in MuJoCo, the physics check
 again) and of the whole build, the tool's final distance to the target, and the robot-scene
 contacts during the reach. Prints a Markdown table and the medians.
@@ -56,6 +56,7 @@ def robot_rows(data: Path, robot: str) -> list[dict]:
         rows.append(dict(
             sample=src.name, objects=len(result.scene.objects), movable=sum(not o.asset.is_fixed for o in result.scene.objects),
             target_kind=r.target_kind, target_support=r.target_support, clearance_m=r.clearance_m,
+            target_z_m=float(r.target_m[2]), hold_tool_axis=r.hold_tool_axis,
             robot_s=timings.get("robot", float("nan")), build_s=timings["total"], final_error_m=reach.final_error_m,
             contacts=len(reach.contacts), max_penetration_m=result.verdict.max_penetration_m, stable=result.verdict.stable,
         ))
@@ -64,14 +65,15 @@ def robot_rows(data: Path, robot: str) -> list[dict]:
 
 def render(rows: list[dict], robot: str) -> str:
     lines = [f"Robot `{robot}` (built-in), {len(rows)} samples.", "",
-             "| sample | objects (movable) | target | clearance (m) | robot stage (s) | build (s) | final error (cm) | contacts | max penetration (mm) | stable |",
-             "|---|---|---|---:|---:|---:|---:|---:|---:|---|"]
+             "| sample | objects (movable) | target | target height (m) | tool axis | clearance (m) | robot stage (s) | build (s) | final error (cm) | contacts | max penetration (mm) | stable |",
+             "|---|---|---|---:|---|---:|---:|---:|---:|---:|---:|---|"]
     for r in rows:
         if "error" in r:
-            lines.append(f"| {r['sample']} | failed: {r['error']} | | | | | | | | |")
+            lines.append(f"| {r['sample']} | failed: {r['error']} | | | | | | | | | | |")
             continue
         lines.append(
-            f"| {r['sample']} | {r['objects']} ({r['movable']}) | {r['target_kind']} of {r['target_support']} | {r['clearance_m']:.2f} | "
+            f"| {r['sample']} | {r['objects']} ({r['movable']}) | {r['target_kind']} of {r['target_support']} | {r['target_z_m']:.2f} | "
+            f"{'held' if r['hold_tool_axis'] else 'free'} | {r['clearance_m']:.2f} | "
             f"{r['robot_s']:.1f} | {r['build_s']:.1f} | {r['final_error_m'] * 100:.2f} | {r['contacts']} | "
             f"{r['max_penetration_m'] * 1000:.2f} | {'yes' if r['stable'] else 'no'} |"
         )

@@ -1,0 +1,61 @@
+"""layout.cage: a movable object held in a static object's collision is freed by cutting the
+static pieces back out of its outline, and nothing else changes."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from layout.cage import CAGE_TRAVEL_M, caged, uncage
+from scene_builder.model import Plane
+from tests.fixtures_scenes import WOOD, box_asset, pose
+
+
+def _box(lo, hi) -> np.ndarray:
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+
+
+# An open shelf against the wall x = 0, its compartments open towards +x: back board, two sides,
+# bottom and top boards (0.4 m deep, 0.8 m wide, 1 m high).
+SHELF = [
+    _box((0.0, -0.4, 0.0), (0.02, 0.4, 1.0)),
+    _box((0.0, -0.4, 0.0), (0.4, -0.38, 1.0)),
+    _box((0.0, 0.38, 0.0), (0.4, 0.4, 1.0)),
+    _box((0.0, -0.4, 0.0), (0.4, 0.4, 0.02)),
+    _box((0.0, -0.4, 0.98), (0.4, 0.4, 1.0)),
+]
+WALL = (Plane(np.array([1.0, 0.0, 0.0]), 0.0, "wall", 100),)
+
+
+def _slab(x0: float):
+    """A static 'bed' slab from x0 to 1.5 m, 0.74 m wide (1 cm from the shelf's sides), 0.4-0.6 m
+    high, and its placement."""
+    length = 1.5 - x0
+    asset = box_asset("bed", (length, 0.74, 0.2), WOOD, is_fixed=True, label="bed")
+    return asset, pose(np.eye(3), (x0 + length / 2.0, 0.0, 0.4))
+
+
+def _pieces(asset, t) -> list[np.ndarray]:
+    return [p.vertices_m @ t[:3, :3].T + t[:3, 3] for part in asset.parts for p in part.collision]
+
+
+def test_a_slab_inside_the_shelf_cages_it_and_is_cut_back_to_the_shelf_front():
+    asset, t = _slab(0.021)  # into the compartment, 1 mm from the back board
+    statics = _pieces(asset, t)
+    assert caged(SHELF, statics, WALL)
+    assert not caged(SHELF, statics, ())  # without the wall it slides back, off the slab
+    cut = uncage(SHELF, asset, t)
+    assert cut is not asset and cut.name == asset.name and cut.parts[0].visual is asset.parts[0].visual
+    kept = _pieces(cut, t)
+    assert len(kept) == 1
+    lo, hi = kept[0].min(axis=0), kept[0].max(axis=0)
+    # Cut at the shelf's front (x = 0.4, plus the trim clearance): the rest of the slab is kept.
+    assert np.allclose(lo, [0.402, -0.37, 0.4], atol=1e-6) and np.allclose(hi, [1.5, 0.37, 0.6], atol=1e-6)
+    assert not caged(SHELF, kept, WALL)
+
+
+def test_a_slab_outside_the_shelf_is_left_alone():
+    asset, t = _slab(0.4 + CAGE_TRAVEL_M + 0.01)
+    statics = _pieces(asset, t)
+    assert not caged(SHELF, statics, WALL)
+    assert uncage(SHELF, asset, t) is asset
