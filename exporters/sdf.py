@@ -26,6 +26,8 @@ SDFormat consumers).
   instead, since a static model's joints cannot move. SDFormat has no soft bodies: a deformable
   is written as its rigid shape (mass and meshes), as in the URDF.
 * Meshes: the same .obj files as the MJCF and URDF (``meshes/``, relative URIs).
+* ``robot`` (with ``--robot``): its links, joints and position controllers
+  (:mod:`exporters.sdf_robot`).
 
 Validated after writing: a structural check in Python (XML, version, every object's model and
 links, inertials, joint parents and children, every mesh and texture inside the folder), and,
@@ -79,7 +81,7 @@ CAMERA_CLIP_M = (0.02, 50.0)
 CAMERA_RATE_HZ = 30.0
 SLIDE_LINK_MASS_KG = 0.001
 # Reserved at the world level: the models and light this module writes besides the objects.
-_WORLD_NAMES = ("world", "room", "input_camera", "key")
+_WORLD_NAMES = ("world", "room", "input_camera", "key", "robot")
 # Grey of untextured background meshes (as the URDF's).
 _GREY = (0.7, 0.7, 0.7, 1.0)
 _WALL_RGBA = (0.86, 0.84, 0.78, 1.0)
@@ -125,6 +127,10 @@ def write_sdf(scene: Scene, out_dir: Path) -> Path:
     for placed in scene.objects:
         write_part_meshes(placed.asset, out_dir)
         _add_object(world, placed, model_names[placed.name])
+    if scene.robot is not None:
+        from exporters.sdf_robot import add_robot
+
+        add_robot(world, scene.robot, out_dir)
     ET.indent(sdf)
     path = out_dir / "scene.sdf"
     path.write_text('<?xml version="1.0"?>\n' + ET.tostring(sdf, encoding="unicode") + "\n")
@@ -441,7 +447,35 @@ def validate_sdf(path: Path, scene: Scene, command: list[str] | None = None) -> 
             raise ExportError(f"{path.name}: libsdformat finds physically invalid mass properties in link {invalid[0]}")
         if not any(c for m in report["models"] for link in m["links"] for c in link["cameras"]):
             raise ExportError(f"{path.name}: libsdformat finds no camera sensor")
+        if scene.robot is not None:
+            _check_robot(path, scene, report)
     return report
+
+
+def _check_robot(path: Path, scene: Scene, report: dict) -> None:
+    """libsdformat's robot model against MuJoCo's compile of the robot at its placement: the same
+    mass and centre of mass (so the link, inertial and model poses agree), a link per body."""
+    from exporters.sdf_robot import CHAIN_LINK_MASS_KG, MODEL_NAME, compiled_robot, robot_mass_kg
+
+    m, d = compiled_robot(scene.robot)
+    got = next((mdl for mdl in report["models"] if mdl["name"] == MODEL_NAME), None)
+    if got is None or len(got["links"]) < m.nbody - 1:
+        raise ExportError(f"{path.name}: libsdformat finds no robot model with a link per body of the robot")
+    mass = np.array([link["mass"] for link in got["links"]])
+    if not np.isclose(mass.sum(), robot_mass_kg(m), rtol=1e-6):
+        raise ExportError(f"{path.name}: libsdformat reads {mass.sum():.6g} kg of robot, MuJoCo {robot_mass_kg(m):.6g} kg")
+    # Bodies at their inertial frames, chain links (a body's extra joints) at the body's origin.
+    weights = [max(float(m.body_mass[b]), 1e-6) for b in range(1, m.nbody)]
+    points = [d.xipos[b] for b in range(1, m.nbody)]
+    for b in range(1, m.nbody):
+        weights += [CHAIN_LINK_MASS_KG] * max(int(m.body_jntnum[b]) - 1, 0)
+        points += [d.xpos[b]] * max(int(m.body_jntnum[b]) - 1, 0)
+    t = scene.robot.world_from_robot
+    want = (np.array(weights) @ np.array(points)) / sum(weights) @ t[:3, :3].T + t[:3, 3]
+    got_com = (mass @ np.array([link["com"] for link in got["links"]])) / mass.sum()
+    if np.linalg.norm(got_com - want) > 1e-4:
+        raise ExportError(f"{path.name}: the robot's centre of mass is at {np.round(got_com, 4).tolist()} in libsdformat, "
+                          f"{np.round(want, 4).tolist()} in MuJoCo")
 
 
 def _positive(text: str | None) -> bool:

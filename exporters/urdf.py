@@ -46,10 +46,16 @@ def _fmt(values) -> str:
 
 
 def rpy_from_matrix(r: np.ndarray) -> np.ndarray:
-    """URDF roll-pitch-yaw (fixed axes X, Y, Z: ``R = Rz(yaw) Ry(pitch) Rx(roll)``) of a rotation."""
+    """URDF roll-pitch-yaw (fixed axes X, Y, Z: ``R = Rz(yaw) Ry(pitch) Rx(roll)``) of a rotation.
+    At pitch +-90 deg (a robot link turned onto its side) roll and yaw are not unique: scipy
+    sets yaw to zero and warns; the angles still give ``r`` exactly, so the warning is dropped."""
+    import warnings
+
     from scipy.spatial.transform import Rotation
 
-    return Rotation.from_matrix(r).as_euler("xyz")
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message="Gimbal lock detected")
+        return Rotation.from_matrix(r).as_euler("xyz")
 
 
 def write_urdf(scene: Scene, out_dir: Path) -> Path:

@@ -198,3 +198,55 @@ def test_without_a_checker_the_structural_check_still_runs(tmp_path, monkeypatch
     (tmp_path / "meshes" / "cabinet__door__visual.obj").unlink()
     with pytest.raises(ExportError, match="cabinet__door__visual.obj"):
         validate_sdf(path, scene)
+
+
+@pytest.mark.parametrize("name", ["panda", "mobile_panda"])
+def test_the_robot_is_a_model_that_libsdformat_reads_as_mujoco_compiles_it(name, tmp_path, sdf_checker, monkeypatch):
+    """--robot in scene.sdf: model ``robot`` with a link per MuJoCo body (its mass and, over
+    all links, the centre of mass at the placement as MuJoCo computes it: validate_sdf checks
+    both through libsdformat), the arm's revolute joints with Franka's limits, the fingers
+    prismatic, the base welded to the world (panda) or on prismatic x, y and revolute yaw joints
+    through two 1 g links (mobile_panda), and a position controller per driven joint. A robot
+    link moved or made heavier is caught."""
+    import mujoco
+
+    from exporters.sdf_robot import compiled_robot
+    from generation.robot import load_robot
+    from layout.robot import place_robot
+
+    monkeypatch.setenv(CHECKER_ENV, sdf_checker[0])
+    model = load_robot(name, tmp_path / "model", source="built-in")
+    scene = dataclasses.replace(boxes_scene(), robot=place_robot(boxes_scene(), model)[0])
+    path = write_sdf(scene, tmp_path)
+    report = validate_sdf(path, scene, sdf_checker)
+    robot = next(m for m in report["models"] if m["name"] == "robot")
+    m, _ = compiled_robot(scene.robot)
+    joints = {j["name"]: j for j in robot["joints"]}
+    arm = [joints[f"joint{k}"] for k in range(1, 8)]
+    assert all(j["type"] == "revolute" for j in arm)
+    assert [round(j["upper"], 4) for j in arm] == [round(float(m.joint(f"joint{k}").range[1]), 4) for k in range(1, 8)]
+    assert joints["finger_joint1"]["type"] == joints["finger_joint2"]["type"] == "prismatic"
+    welded = sum(int(m.body_jntnum[b]) == 0 for b in range(1, m.nbody))  # the hand; the Panda's link0
+    assert sum(j["type"] == "fixed" for j in robot["joints"]) == welded
+    if name == "panda":
+        assert len(robot["links"]) == m.nbody - 1
+        assert any(j["parent"] == "world" and j["type"] == "fixed" for j in robot["joints"])
+    else:
+        assert len(robot["links"]) == m.nbody - 1 + 2
+        base = [j for j in robot["joints"] if j["name"].startswith("base_")]
+        assert sorted(j["type"] for j in base) == ["prismatic", "prismatic", "revolute"] and base[0]["parent"] == "world"
+    root = ET.parse(path).getroot()
+    controllers = [p for p in root.iter("plugin") if p.get("filename") == "gz-sim-joint-position-controller-system"]
+    assert len(controllers) == sum(int(m.actuator_trntype[a]) == int(mujoco.mjtTrn.mjTRN_JOINT) for a in range(m.nu)) + 1  # + the coupled finger
+    text = path.read_text()
+    link0 = re.search(r'<link name="link0">\s*<pose>([^<]+)</pose>', text)
+    moved = tmp_path / "moved.sdf"
+    x = link0.group(1).split()
+    moved.write_text(text.replace(link0.group(0), link0.group(0).replace(link0.group(1), " ".join([str(float(x[0]) + 0.1)] + x[1:]))))
+    with pytest.raises(ExportError, match="centre of mass"):
+        validate_sdf(moved, scene, sdf_checker)
+    heavier = tmp_path / "heavier.sdf"
+    start = text.index('<model name="robot">')
+    heavier.write_text(text[:start] + re.sub(r"<mass>([0-9.e+-]+)</mass>", "<mass>99</mass>", text[start:], count=1))
+    with pytest.raises(ExportError, match="kg of robot"):
+        validate_sdf(heavier, scene, sdf_checker)
