@@ -70,3 +70,52 @@ def attach_robot(spec, placement: RobotPlacement, out_dir: Path) -> None:
     yaw = float(placement.yaw_rad)
     frame = spec.worldbody.add_frame(pos=placement.position_m.tolist(), quat=[float(np.cos(yaw / 2)), 0.0, 0.0, float(np.sin(yaw / 2))])
     spec.attach(child, prefix=PREFIX, frame=frame)
+
+
+# ---------------------------------------------------------------------------------------------
+# The robot's own compiled model, as the USD and SDF writers read it
+# ---------------------------------------------------------------------------------------------
+
+
+def compiled_robot(placement: RobotPlacement, target: str):
+    """(model, data at qpos0 after kinematics) of the robot's own MJCF; ``target`` names the
+    export in the error when MuJoCo cannot load it."""
+    import mujoco
+
+    try:
+        m = mujoco.MjModel.from_xml_path(str(placement.model.mjcf_path))
+    except ValueError as err:
+        raise ExportError(f"{target} export: MuJoCo cannot load the robot model: {str(err).strip().splitlines()[0]}") from err
+    d = mujoco.MjData(m)
+    mujoco.mj_kinematics(m, d)
+    return m, d
+
+
+def quat_matrix(q: np.ndarray) -> np.ndarray:
+    """(3, 3) rotation of a MuJoCo quaternion (w, x, y, z)."""
+    import mujoco
+
+    out = np.zeros(9)
+    mujoco.mju_quat2Mat(out, np.asarray(q, dtype=np.float64))
+    return out.reshape(3, 3)
+
+
+def position_drives(m) -> dict[int, tuple[float, float, float, float]]:
+    """joint id -> (kp, kv, max force (0: none), target at zero control) of its position
+    actuator; joints coupled to a driven one by an equality (the second finger) get the same."""
+    import mujoco
+
+    out = {}
+    for a in range(m.nu):
+        if int(m.actuator_trntype[a]) != int(mujoco.mjtTrn.mjTRN_JOINT) or int(m.actuator_biastype[a]) != int(mujoco.mjtBias.mjBIAS_AFFINE):
+            continue
+        j = int(m.actuator_trnid[a, 0])
+        force = float(np.max(np.abs(m.actuator_forcerange[a]))) if m.actuator_forcelimited[a] else 0.0
+        target = float(np.clip(0.0, *m.jnt_range[j])) if m.jnt_limited[j] else 0.0
+        out[j] = (float(m.actuator_gainprm[a, 0]), -float(m.actuator_biasprm[a, 2]), force, target)
+    for e in range(m.neq):
+        if int(m.eq_type[e]) == int(mujoco.mjtEq.mjEQ_JOINT):
+            j1, j2 = int(m.eq_obj1id[e]), int(m.eq_obj2id[e])
+            if j1 in out and j2 not in out:
+                out[j2] = out[j1]
+    return out

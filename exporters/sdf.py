@@ -455,9 +455,10 @@ def validate_sdf(path: Path, scene: Scene, command: list[str] | None = None) -> 
 def _check_robot(path: Path, scene: Scene, report: dict) -> None:
     """libsdformat's robot model against MuJoCo's compile of the robot at its placement: the same
     mass and centre of mass (so the link, inertial and model poses agree), a link per body."""
-    from exporters.sdf_robot import CHAIN_LINK_MASS_KG, MODEL_NAME, compiled_robot, robot_mass_kg
+    from exporters.robot import compiled_robot
+    from exporters.sdf_robot import CHAIN_LINK_MASS_KG, MODEL_NAME, robot_mass_kg
 
-    m, d = compiled_robot(scene.robot)
+    m, d = compiled_robot(scene.robot, "SDF")
     got = next((mdl for mdl in report["models"] if mdl["name"] == MODEL_NAME), None)
     if got is None or len(got["links"]) < m.nbody - 1:
         raise ExportError(f"{path.name}: libsdformat finds no robot model with a link per body of the robot")

@@ -26,6 +26,8 @@ import numpy as np
 
 from exporters import names
 from exporters.mjcf import MESH_DIR
+from exporters.robot import compiled_robot, position_drives, quat_matrix
+from exporters.sdf import _fmt, _sub
 from exporters.urdf import rpy_from_matrix
 from scene_builder.errors import ExportError
 from scene_builder.robot import RobotPlacement
@@ -36,40 +38,8 @@ CHAIN_LINK_MASS_KG = 0.001
 POSITION_CONTROLLER = ("gz-sim-joint-position-controller-system", "gz::sim::systems::JointPositionController")
 
 
-def _fmt(values) -> str:
-    return " ".join(f"{float(v):.9g}" for v in np.atleast_1d(values))
-
-
-def _sub(parent: ET.Element, tag: str, text=None, **attrib) -> ET.Element:
-    el = ET.SubElement(parent, tag, attrib)
-    if text is not None:
-        el.text = text if isinstance(text, str) else _fmt(text)
-    return el
-
-
 def _pose(parent: ET.Element, pos, rot: np.ndarray) -> None:
     _sub(parent, "pose", _fmt(np.concatenate([np.asarray(pos, float), rpy_from_matrix(rot)])))
-
-
-def _mat(q: np.ndarray) -> np.ndarray:
-    import mujoco
-
-    out = np.zeros(9)
-    mujoco.mju_quat2Mat(out, np.asarray(q, dtype=np.float64))
-    return out.reshape(3, 3)
-
-
-def compiled_robot(placement: RobotPlacement):
-    """(model, data at qpos0 after kinematics) of the robot's own MJCF."""
-    import mujoco
-
-    try:
-        m = mujoco.MjModel.from_xml_path(str(placement.model.mjcf_path))
-    except ValueError as err:
-        raise ExportError(f"SDF export: MuJoCo cannot load the robot model: {str(err).strip().splitlines()[0]}") from err
-    d = mujoco.MjData(m)
-    mujoco.mj_kinematics(m, d)
-    return m, d
 
 
 def robot_mass_kg(m) -> float:
@@ -108,33 +78,10 @@ def _geometry(parent: ET.Element, m, g: int, out_dir: Path, mesh_files: dict[int
         raise ExportError(f"robot geom {m.geom(g).name or g} is of a type (MuJoCo {t}) the SDF export does not write")
 
 
-def _drives(m) -> dict[int, tuple[float, float, float, float]]:
-    """joint id -> (kp, kv, max force (0: none), target at zero control) of its position
-    actuator; joints coupled to a driven one by an equality get the same."""
-    import mujoco
-
-    out = {}
-    for a in range(m.nu):
-        if int(m.actuator_trntype[a]) != int(mujoco.mjtTrn.mjTRN_JOINT) or int(m.actuator_biastype[a]) != int(mujoco.mjtBias.mjBIAS_AFFINE):
-            continue
-        j = int(m.actuator_trnid[a, 0])
-        force = float(np.max(np.abs(m.actuator_forcerange[a]))) if m.actuator_forcelimited[a] else 0.0
-        target = float(np.clip(0.0, *m.jnt_range[j])) if m.jnt_limited[j] else 0.0
-        out[j] = (float(m.actuator_gainprm[a, 0]), -float(m.actuator_biasprm[a, 2]), force, target)
-    for e in range(m.neq):
-        if int(m.eq_type[e]) == int(mujoco.mjtEq.mjEQ_JOINT):
-            j1, j2 = int(m.eq_obj1id[e]), int(m.eq_obj2id[e])
-            if j1 in out and j2 not in out:
-                out[j2] = out[j1]
-    return out
-
-
 def add_robot(world: ET.Element, placement: RobotPlacement, out_dir: Path) -> ET.Element:
     """Write the robot as the model MODEL_NAME into ``world`` (see the module docstring); its
     mesh files go to ``out_dir/meshes``. Returns the model element."""
-    import mujoco
-
-    m, d = compiled_robot(placement)
+    m, d = compiled_robot(placement, "SDF")
     model = _sub(world, "model", name=MODEL_NAME)
     t = placement.world_from_robot
     _pose(model, t[:3, 3], t[:3, :3])
@@ -145,7 +92,7 @@ def add_robot(world: ET.Element, placement: RobotPlacement, out_dir: Path) -> ET
         link = _sub(model, "link", name=link_of[b])
         _pose(link, d.xpos[b], d.xmat[b].reshape(3, 3))
         inertial = _sub(link, "inertial")
-        _pose(inertial, m.body_ipos[b], _mat(m.body_iquat[b]))
+        _pose(inertial, m.body_ipos[b], quat_matrix(m.body_iquat[b]))
         _sub(inertial, "mass", f"{max(float(m.body_mass[b]), 1e-6):.9g}")
         moments = np.maximum(m.body_inertia[b], 1e-9)
         tensor = _sub(inertial, "inertia")
@@ -155,7 +102,7 @@ def add_robot(world: ET.Element, placement: RobotPlacement, out_dir: Path) -> ET
             collides = bool(m.geom_contype[g] or m.geom_conaffinity[g])
             for kind in ("visual", "collision") if collides else ("visual",):
                 el = _sub(link, kind, name=f"{kind}_{k}")
-                _pose(el, m.geom_pos[g], _mat(m.geom_quat[g]))
+                _pose(el, m.geom_pos[g], quat_matrix(m.geom_quat[g]))
                 _geometry(el, m, g, out_dir, mesh_files)
                 if kind == "visual":
                     material = _sub(el, "material")
@@ -165,7 +112,7 @@ def add_robot(world: ET.Element, placement: RobotPlacement, out_dir: Path) -> ET
                     friction = _sub(_sub(el, "surface"), "friction")
                     _sub(_sub(friction, "ode"), "mu", f"{float(m.geom_friction[g][0]):.9g}")
                     _sub(_sub(friction, "bullet"), "friction", f"{float(m.geom_friction[g][0]):.9g}")
-    drives = _drives(m)
+    drives = position_drives(m)
     joint_names = names.UniqueNames(tuple(link_of.values()))
     for b in range(1, m.nbody):
         _body_joints(model, m, b, link_of, joint_names, drives)

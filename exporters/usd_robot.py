@@ -26,20 +26,13 @@ from __future__ import annotations
 import numpy as np
 
 from exporters import names
+from exporters.robot import compiled_robot, position_drives, quat_matrix
 from scene_builder.errors import ExportError
 from scene_builder.frames import quat_wxyz_from_matrix
 from scene_builder.robot import RobotPlacement
 
 ROOT = "/World/Robot"
 UNBOUNDED = 1.0e6  # the range of a free axis without limits (metres or degrees)
-
-
-def _mat(q: np.ndarray) -> np.ndarray:
-    import mujoco
-
-    out = np.zeros(9)
-    mujoco.mju_quat2Mat(out, np.asarray(q, dtype=np.float64))
-    return out.reshape(3, 3)
 
 
 def _quatf(r: np.ndarray):
@@ -93,7 +86,7 @@ def _geom(stage, m, g: int, path) -> None:
         shape.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
     else:
         raise ExportError(f"robot geom {m.geom(g).name or g} is of a type (MuJoCo {t}) the USD export does not write")
-    _xform(shape, m.geom_pos[g], _mat(m.geom_quat[g]), scale)
+    _xform(shape, m.geom_pos[g], quat_matrix(m.geom_quat[g]), scale)
     shape.CreateDisplayColorAttr([Gf.Vec3f(*m.geom_rgba[g][:3].tolist())])
     if m.geom_contype[g] or m.geom_conaffinity[g]:
         UsdPhysics.CollisionAPI.Apply(shape.GetPrim())
@@ -103,39 +96,11 @@ def _geom(stage, m, g: int, path) -> None:
         shape.CreatePurposeAttr(UsdGeom.Tokens.render)
 
 
-def _drives(m) -> dict[int, tuple[float, float, float, float]]:
-    """joint id -> (kp, kv, max force, target at zero control) of its position actuator; joints
-    coupled by an equality to a driven joint get the same drive."""
-    import mujoco
-
-    out = {}
-    for a in range(m.nu):
-        if int(m.actuator_trntype[a]) != int(mujoco.mjtTrn.mjTRN_JOINT) or int(m.actuator_biastype[a]) != int(mujoco.mjtBias.mjBIAS_AFFINE):
-            continue
-        j = int(m.actuator_trnid[a, 0])
-        kp, kv = float(m.actuator_gainprm[a, 0]), -float(m.actuator_biasprm[a, 2])
-        force = float(np.max(np.abs(m.actuator_forcerange[a]))) if m.actuator_forcelimited[a] else 0.0
-        target = float(np.clip(0.0, *m.jnt_range[j])) if m.jnt_limited[j] else 0.0
-        out[j] = (kp, kv, force, target)
-    for e in range(m.neq):
-        if int(m.eq_type[e]) == int(mujoco.mjtEq.mjEQ_JOINT):
-            j1, j2 = int(m.eq_obj1id[e]), int(m.eq_obj2id[e])
-            if j1 in out and j2 not in out:
-                out[j2] = out[j1]
-    return out
-
-
 def add_robot(stage, placement: RobotPlacement) -> None:
     """Write the robot under ROOT (see the module docstring)."""
-    import mujoco
     from pxr import Sdf, UsdGeom, UsdPhysics
 
-    try:
-        m = mujoco.MjModel.from_xml_path(str(placement.model.mjcf_path))
-    except ValueError as err:
-        raise ExportError(f"USD export: MuJoCo cannot load the robot model: {str(err).strip().splitlines()[0]}") from err
-    d = mujoco.MjData(m)
-    mujoco.mj_kinematics(m, d)
+    m, d = compiled_robot(placement, "USD")
     world = placement.world_from_robot
     root = UsdGeom.Xform.Define(stage, ROOT)
     rp = root.GetPrim()
@@ -160,13 +125,13 @@ def add_robot(stage, placement: RobotPlacement) -> None:
         mass.CreateMassAttr(float(max(m.body_mass[b], 1e-6)))
         mass.CreateCenterOfMassAttr(Gf.Vec3f(*m.body_ipos[b].tolist()))
         mass.CreateDiagonalInertiaAttr(Gf.Vec3f(*np.maximum(m.body_inertia[b], 1e-9).tolist()))
-        mass.CreatePrincipalAxesAttr(_quatf(_mat(m.body_iquat[b])))
+        mass.CreatePrincipalAxesAttr(_quatf(quat_matrix(m.body_iquat[b])))
         geom_names = names.UniqueNames()
         for g in range(int(m.body_geomadr[b]), int(m.body_geomadr[b]) + int(m.body_geomnum[b])):
             _geom(stage, m, g, path.AppendChild(geom_names(m.geom(g).name or f"geom_{g - int(m.body_geomadr[b])}")))
     joints = Sdf.Path(ROOT).AppendChild("Joints")
     UsdGeom.Scope.Define(stage, joints)
-    drives = _drives(m)
+    drives = position_drives(m)
     for b in range(1, m.nbody):
         _add_body_joint(stage, m, d, b, paths, joints, world, drives)
 

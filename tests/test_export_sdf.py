@@ -210,7 +210,7 @@ def test_the_robot_is_a_model_that_libsdformat_reads_as_mujoco_compiles_it(name,
     link moved or made heavier is caught."""
     import mujoco
 
-    from exporters.sdf_robot import compiled_robot
+    from exporters.robot import compiled_robot
     from generation.robot import load_robot
     from layout.robot import place_robot
 
@@ -220,7 +220,7 @@ def test_the_robot_is_a_model_that_libsdformat_reads_as_mujoco_compiles_it(name,
     path = write_sdf(scene, tmp_path)
     report = validate_sdf(path, scene, sdf_checker)
     robot = next(m for m in report["models"] if m["name"] == "robot")
-    m, _ = compiled_robot(scene.robot)
+    m, _ = compiled_robot(scene.robot, "SDF")
     joints = {j["name"]: j for j in robot["joints"]}
     arm = [joints[f"joint{k}"] for k in range(1, 8)]
     assert all(j["type"] == "revolute" for j in arm)
