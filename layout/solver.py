@@ -670,29 +670,29 @@ def _trim_overlaps(solver: _Solver) -> bool:
 
 def _uncage(bodies: list[Body], absorbed: list[int], walls: tuple[Plane, ...], seen: dict[str, np.ndarray]) -> None:
     """Static bodies (``absorbed``, at their seen poses, as the background will hold them) whose
-    collision cages a movable body get it cut back out of that body's outline (``layout.cage``);
-    each records whom for (``Body.cut_for``)."""
-    from layout.cage import CAGE_TRAVEL_M, caged, uncage
+    collision cages a movable body get the pieces that hold it cut back (``layout.cage``); each
+    records whom for (``Body.cut_for``)."""
+    from layout.cage import CAGE_TRAVEL_M, uncage
 
     statics = set(absorbed)
     reach = CAGE_TRAVEL_M + 0.05
     for i, b in enumerate(bodies):
         if i in statics or b.asset.kind is AssetKind.DEFORMABLE:
             continue
-        moving = [p.verts_rel_m + b.position_m for p in b.pieces]
         lo, hi = b.lo_rel_m + b.position_m - reach, b.hi_rel_m + b.position_m + reach
         near = []
         for k in sorted(statics):
             t = seen[bodies[k].name]
             pieces = [piece.vertices_m @ t[:3, :3].T + t[:3, 3] for part in bodies[k].asset.parts for piece in part.collision]
             if any(np.all(v.max(axis=0) > lo) and np.all(v.min(axis=0) < hi) for v in pieces):
-                near.append((k, pieces))
-        if not near or not caged(moving, [v for _, ps in near for v in ps], walls):
+                near.append(k)
+        if not near:
             continue
-        for k, _ in near:
-            cut = uncage(moving, bodies[k].asset, seen[bodies[k].name])
-            if cut is not bodies[k].asset:
-                bodies[k].asset = cut
+        cut = uncage([p.verts_rel_m + b.position_m for p in b.pieces], [(bodies[k].asset, seen[bodies[k].name]) for k in near], walls,
+                     float(np.arctan2(b.rotation[1, 0], b.rotation[0, 0])))
+        for k, asset in zip(near, cut or ()):
+            if asset is not bodies[k].asset:
+                bodies[k].asset = asset
                 bodies[k].cut_for.append(b.name)
 
 

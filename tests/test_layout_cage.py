@@ -28,9 +28,9 @@ WALL = (Plane(np.array([1.0, 0.0, 0.0]), 0.0, "wall", 100),)
 
 
 def _slab(x0: float):
-    """A static 'bed' slab from x0 to 1.5 m, 0.74 m wide (1 cm from the shelf's sides), 0.4-0.6 m
+    """A static "bed" slab from x0 to 2.5 m, 0.74 m wide (1 cm from the shelf's sides), 0.4-0.6 m
     high, and its placement."""
-    length = 1.5 - x0
+    length = 2.5 - x0
     asset = box_asset("bed", (length, 0.74, 0.2), WOOD, is_fixed=True, label="bed")
     return asset, pose(np.eye(3), (x0 + length / 2.0, 0.0, 0.4))
 
@@ -44,13 +44,13 @@ def test_a_slab_inside_the_shelf_cages_it_and_is_cut_back_to_the_shelf_front():
     statics = _pieces(asset, t)
     assert caged(SHELF, statics, WALL)
     assert not caged(SHELF, statics, ())  # without the wall it slides back, off the slab
-    cut = uncage(SHELF, asset, t)
+    (cut,) = uncage(SHELF, [(asset, t)], WALL)
     assert cut is not asset and cut.name == asset.name and cut.parts[0].visual is asset.parts[0].visual
     kept = _pieces(cut, t)
     assert len(kept) == 1
     lo, hi = kept[0].min(axis=0), kept[0].max(axis=0)
     # Cut at the shelf's front (x = 0.4, plus the trim clearance): the rest of the slab is kept.
-    assert np.allclose(lo, [0.402, -0.37, 0.4], atol=1e-6) and np.allclose(hi, [1.5, 0.37, 0.6], atol=1e-6)
+    assert np.allclose(lo, [0.402, -0.37, 0.4], atol=1e-6) and np.allclose(hi, [2.5, 0.37, 0.6], atol=1e-6)
     assert not caged(SHELF, kept, WALL)
 
 
@@ -58,4 +58,23 @@ def test_a_slab_outside_the_shelf_is_left_alone():
     asset, t = _slab(0.4 + CAGE_TRAVEL_M + 0.01)
     statics = _pieces(asset, t)
     assert not caged(SHELF, statics, WALL)
-    assert uncage(SHELF, asset, t) is asset
+    assert uncage(SHELF, [(asset, t)], WALL) is None
+
+
+def test_a_neighbour_touching_its_side_is_not_cut():
+    """A static cabinet standing against the shelf's side, 5 mm into its outline (as hulls of
+    neighbours do), is not what holds it: it keeps its collision."""
+    neighbour = box_asset("cabinet", (0.4, 0.5, 0.9), WOOD, is_fixed=True, label="cabinet")
+    t = pose(np.eye(3), (0.2, 0.4 - 0.005 + 0.25, 0.0))
+    slab, ts = _slab(0.021)
+    assert caged(SHELF, _pieces(slab, ts) + _pieces(neighbour, t), WALL)
+    cut_slab, kept_neighbour = uncage(SHELF, [(slab, ts), (neighbour, t)], WALL)
+    assert kept_neighbour is neighbour and cut_slab is not slab
+    # Held between that neighbour and a second one on its other side (and the wall), with no
+    # slab: nothing reaches into it, nothing is cut, it stays caged.
+    other = pose(np.eye(3), (0.2, -0.4 + 0.005 - 0.25, 0.0))
+    front = box_asset("counter", (0.5, 1.2, 0.9), WOOD, is_fixed=True, label="counter")
+    tf = pose(np.eye(3), (0.4 - 0.005 + 0.25, 0.0, 0.0))
+    statics = [(neighbour, t), (neighbour, other), (front, tf)]
+    assert caged(SHELF, [v for a, ta in statics for v in _pieces(a, ta)], WALL)
+    assert uncage(SHELF, statics, WALL) is None
