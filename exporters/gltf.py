@@ -6,7 +6,9 @@ texture (embedded PNG, unlit-looking base colour), else per-vertex colours (the 
 when the mesh has none). The static background is one node ``background`` (world frame) plus
 ``background/object/NAME`` for objects that became background. glTF is +Y up, so every node transform is
 premultiplied by ``GLTF_FROM_WORLD`` (a -90 degree rotation about X taking our Z-up world to
-Y-up): viewers show the room upright. Collision pieces are not written (glTF is for looking).
+Y-up): viewers show the room upright. The robot (``--robot``) is one node per geom,
+``robot/BODY/geom_K``, at its start pose (qpos0) in the world frame, coloured as its materials.
+Collision pieces are not written (glTF is for looking).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from exporters import names
+from exporters.robot import robot_meshes
 from scene_builder.errors import ExportError
 from scene_builder.model import Scene, TriangleMesh
 
@@ -65,6 +68,12 @@ def build_trimesh_scene(scene: Scene):
             name = names.body_name(placed.asset, part)
             out.add_geometry(_trimesh(part.visual, part.material.rgba, images), node_name=name, geom_name=name,
                              transform=GLTF_FROM_WORLD @ placed.world_from_asset)
+    if scene.robot is not None:
+        for mesh in robot_meshes(scene.robot, "glTF"):
+            name = f"robot/{mesh.name}"
+            colors = np.tile(np.round(np.clip(mesh.rgba, 0.0, 1.0) * 255).astype(np.uint8), (len(mesh.vertices_m), 1))
+            geometry = trimesh.Trimesh(vertices=mesh.vertices_m, faces=mesh.faces, vertex_colors=colors, process=False)
+            out.add_geometry(geometry, node_name=name, geom_name=name, transform=GLTF_FROM_WORLD)
     return out
 
 
@@ -83,4 +92,7 @@ def write_gltf(scene: Scene, out_dir: Path) -> Path:
             name = names.body_name(placed.asset, part)
             if name not in back.graph.nodes_geometry:
                 raise ExportError(f"glTF of object {placed.name}: node {name} missing after reading {path.name} back")
+    lost = sorted({n for n in tm.graph.nodes_geometry if n.startswith("robot/")} - set(back.graph.nodes_geometry))
+    if lost:
+        raise ExportError(f"glTF: {len(lost)} of the robot's nodes ({lost[0]}, ...) missing after reading {path.name} back")
     return path

@@ -15,6 +15,8 @@ Entity tree (world is Z up, ``RIGHT_HAND_Z_UP``)::
     world/objects/<name>/collision/<part>/piece_<k>   convex pieces (hidden by the blueprint: tick the
                                             eye of an object's ``collision`` subtree to show them)
     world/objects/<name>/label              the object's name at its centre
+    world/robot/<body>/geom_<k>             the robot (``--robot``) at its start pose (qpos0), world frame
+    world/robot_target                      the point its scripted reach aims at, labelled
     world/support                           LineStrips3D child centre -> supporter centre, labelled
     world/contacts                          contact / penetration points of the physics check
     render/input_camera                     the scene rendered by MuJoCo from the input camera (t = 0)
@@ -104,6 +106,7 @@ def record_scene(
     _log_background(rec, scene)
     _log_objects(rec, scene, verdict)
     _log_support(rec, scene, layout)
+    _log_robot(rec, scene)
     if fidelity is not None and fidelity.render_rgb is not None:
         rec.log("render/input_camera", rr.Image(fidelity.render_rgb), static=True)
         if fidelity.render_settled_rgb is not None:
@@ -350,6 +353,25 @@ def _log_background(rec, scene: Scene) -> None:
                                                                    albedo_factor=[80, 130, 230, 110]), static=True)
 
 
+def _log_robot(rec, scene: Scene) -> None:
+    """The robot's look (visual geoms, else collision geoms) at its start pose, and its target."""
+    import rerun as rr
+    import trimesh
+
+    from exporters.robot import robot_meshes
+
+    r = scene.robot
+    if r is None:
+        return
+    for mesh in robot_meshes(r, "rerun"):
+        ent = "world/robot/" + "/".join(rr.escape_entity_path_part(p) for p in mesh.name.split("/"))
+        normals = trimesh.Trimesh(mesh.vertices_m, mesh.faces, process=False).vertex_normals
+        rec.log(ent, rr.Mesh3D(vertex_positions=mesh.vertices_m, triangle_indices=mesh.faces, vertex_normals=normals,
+                               albedo_factor=np.round(np.clip(mesh.rgba, 0.0, 1.0) * 255).astype(np.uint8)), static=True)
+    rec.log("world/robot_target", rr.Points3D([r.target_m], labels=[f"{r.model.name} reach target: {r.target_kind} of {r.target_support}"],
+                                              colors=[255, 190, 0], radii=0.015), static=True)
+
+
 def _log_support(rec, scene: Scene, layout: LayoutResult | None) -> None:
     import rerun as rr
 
@@ -391,6 +413,10 @@ def _log_report(rec, scene: Scene, layout: LayoutResult | None, verdict: Physics
         lines += ["", f"fidelity (input camera vs photo): PSNR {fidelity.psnr_db:.1f} dB, SSIM {fidelity.ssim:.3f}, "
                   f"depth AbsRel {fidelity.depth_absrel:.3f} (after settling {fidelity.depth_absrel_settled:.3f}), "
                   f"silhouette IoU {fidelity.mask_iou_mean:.3f}"]
+    if scene.robot is not None:
+        r = scene.robot
+        lines += ["", f"robot: {r.model.name} ({r.model.source}) at ({r.position_m[0]:.2f}, {r.position_m[1]:.2f}) m, "
+                  f"reaching for the {r.target_kind} of {r.target_support}"]
     bg = scene.room.background
     if bg is not None and bg.static_names:
         lines += ["", "became background (could not stand where seen): " + ", ".join(sorted({n.split('/')[0] for n in bg.static_names}))]

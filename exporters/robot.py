@@ -10,6 +10,7 @@ bodies, joints, actuators, sensors and keyframes keep their names behind that pr
 from __future__ import annotations
 
 import shutil
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -119,3 +120,79 @@ def position_drives(m) -> dict[int, tuple[float, float, float, float]]:
             if j1 in out and j2 not in out:
                 out[j2] = out[j1]
     return out
+
+
+# ---------------------------------------------------------------------------------------------
+# The robot's look as triangle meshes, for the exports that only show it (rerun, glTF)
+# ---------------------------------------------------------------------------------------------
+
+#: Segments around a tessellated capsule, cylinder or sphere: at most 0.5 % of the radius off
+#: the true surface (1 - cos(pi / 32)).
+ROUND_SEGMENTS = 32
+
+
+@dataclass(frozen=True, eq=False)
+class RobotMesh:
+    """One geom of the robot as a triangle mesh in the world, at the start pose (qpos0, the pose
+    scene.xml and scene.usda start in) moved to the placement.
+
+    name: ``BODY/geom_K`` (BODY the robot's body name, K the geom's index within the body).
+    vertices_m: (N, 3) world. faces: (M, 3) int32, counter-clockwise seen from outside.
+    rgba: (4,) in [0, 1], the geom's material colour (its own colour without a material).
+    """
+
+    name: str
+    vertices_m: np.ndarray
+    faces: np.ndarray
+    rgba: np.ndarray
+
+
+def _geom_local_mesh(m, g: int):
+    """(vertices, faces) of geom ``g`` in its own frame (MuJoCo's compiled size and mesh)."""
+    import mujoco
+    import trimesh
+
+    t, size = int(m.geom_type[g]), m.geom_size[g]
+    if t == int(mujoco.mjtGeom.mjGEOM_MESH):
+        k = int(m.geom_dataid[g])
+        va, vn = int(m.mesh_vertadr[k]), int(m.mesh_vertnum[k])
+        fa, fn = int(m.mesh_faceadr[k]), int(m.mesh_facenum[k])
+        return np.array(m.mesh_vert[va : va + vn], np.float64), np.array(m.mesh_face[fa : fa + fn], np.int32)
+    if t == int(mujoco.mjtGeom.mjGEOM_BOX):
+        shape = trimesh.creation.box(extents=2.0 * size)
+    elif t == int(mujoco.mjtGeom.mjGEOM_CAPSULE):  # trimesh's height: between the two sphere centres
+        shape = trimesh.creation.capsule(height=2.0 * size[1], radius=size[0], count=[ROUND_SEGMENTS, ROUND_SEGMENTS])
+    elif t == int(mujoco.mjtGeom.mjGEOM_CYLINDER):
+        shape = trimesh.creation.cylinder(radius=size[0], height=2.0 * size[1], sections=ROUND_SEGMENTS)
+    elif t in (int(mujoco.mjtGeom.mjGEOM_SPHERE), int(mujoco.mjtGeom.mjGEOM_ELLIPSOID)):
+        radii = size if t == int(mujoco.mjtGeom.mjGEOM_ELLIPSOID) else np.full(3, size[0])
+        shape = trimesh.creation.uv_sphere(radius=1.0, count=[ROUND_SEGMENTS, ROUND_SEGMENTS])
+        shape.apply_scale(radii)
+    else:
+        raise ExportError(f"robot geom {m.geom(g).name or g} is of a type (MuJoCo {t}) that cannot be drawn as a mesh")
+    return np.asarray(shape.vertices, np.float64), np.asarray(shape.faces, np.int32)
+
+
+def robot_meshes(placement: RobotPlacement, target: str) -> tuple[RobotMesh, ...]:
+    """The robot's look as world meshes (see :class:`RobotMesh`): each body's visual geoms (those
+    that collide with nothing, Menagerie's ``visual`` class), or its collision geoms where it has
+    no visual one (the built-in models). ``target`` names the export in errors."""
+    import mujoco
+
+    m, d = compiled_robot(placement, target)
+    world = placement.world_from_robot
+    out = []
+    for b in range(m.nbody):
+        first = int(m.body_geomadr[b])
+        geoms = [g for g in range(first, first + int(m.body_geomnum[b])) if int(m.geom_type[g]) != int(mujoco.mjtGeom.mjGEOM_PLANE)]
+        visual = [g for g in geoms if m.geom_contype[g] == 0 and m.geom_conaffinity[g] == 0]
+        for g in visual or geoms:
+            v, f = _geom_local_mesh(m, g)
+            rot = world[:3, :3] @ d.geom_xmat[g].reshape(3, 3)
+            pos = world[:3, :3] @ d.geom_xpos[g] + world[:3, 3]
+            mat = int(m.geom_matid[g])
+            rgba = m.mat_rgba[mat] if mat >= 0 else m.geom_rgba[g]
+            body = m.body(b).name or f"body_{b}"
+            out.append(RobotMesh(f"{body}/geom_{g - first}", v @ rot.T + pos, f, np.array(rgba, np.float64)))
+    return tuple(out)
+

@@ -249,6 +249,55 @@ def test_no_free_spot_is_one_line_input_error(tmp_path):
     assert "\n" not in str(err.value) and "--robot panda" in str(err.value)
 
 
+def test_robot_meshes_lie_on_mujocos_geoms_and_reach_rerun_and_gltf(tmp_path, monkeypatch):
+    """The robot as rerun and glTF draw it (exporters.robot.robot_meshes): every mesh, taken into
+    the frame of its geom in the compiled scene.xml (start pose, robot at its placement), spans
+    that geom's bounding box within 1 mm, for the built-in Panda (collision primitives only) and
+    a Menagerie-layout Panda whose link0 has a visual mesh (drawn instead of link0's collision
+    geoms); the rerun recording and scene.glb carry one entity / node per mesh."""
+    import mujoco
+    import trimesh
+    from rerun.chunk import RrdReader
+
+    from exporters import record_scene
+    from exporters.gltf import write_gltf
+    from exporters.robot import robot_meshes
+    from generation.robot import load_robot
+    from layout.robot import place_robot
+
+    src, _ = _menagerie_archive(tmp_path, "franka_emika_panda", "ef" * 20)
+    monkeypatch.setenv("MENAGERIE_ROOT", str(src.parent))
+    for model in (_robot("panda", tmp_path), load_robot("panda", tmp_path / "menagerie", offline=True)):
+        scene = dataclasses.replace(boxes_scene(), robot=place_robot(boxes_scene(), model)[0])
+        out = tmp_path / model.source
+        m = mujoco.MjModel.from_xml_path(str(_write_scene(scene, out)))
+        d = mujoco.MjData(m)
+        mujoco.mj_kinematics(m, d)
+        meshes = robot_meshes(scene.robot, "test")
+        link0 = [x.name for x in meshes if x.name.startswith("link0/")]
+        drawn = {x.name.split("/")[0] for x in meshes}
+        assert drawn == {m.body(b).name[len("robot/"):] for b in range(1, m.nbody)
+                         if m.body(b).name.startswith("robot/") and m.body_geomnum[b] > 0}
+        for mesh in meshes:
+            body, geom = mesh.name.split("/")
+            g = int(m.body_geomadr[m.body("robot/" + body).id]) + int(geom[len("geom_"):])
+            local = (mesh.vertices_m - d.geom_xpos[g]) @ d.geom_xmat[g].reshape(3, 3)
+            centre, half = m.geom_aabb[g][:3], m.geom_aabb[g][3:]
+            assert np.allclose(local.min(axis=0), centre - half, atol=1e-3), mesh.name
+            assert np.allclose(local.max(axis=0), centre + half, atol=1e-3), mesh.name
+            assert trimesh.Trimesh(mesh.vertices_m, mesh.faces).is_watertight
+        if model.source == "menagerie":  # link0's visual mesh replaces its collision geoms
+            g = int(m.body_geomadr[m.body("robot/link0").id]) + int(link0[0].split("_")[-1])
+            assert link0 == [link0[0]] and m.geom_contype[g] == 0 and m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH
+        else:
+            assert len(link0) == int(m.body_geomnum[m.body("robot/link0").id])
+        rrd = record_scene(out / "scene.rrd", scene=scene)
+        entities = {c.entity_path for c in RrdReader(str(rrd)).store().stream()}
+        assert {f"/world/robot/{x.name}" for x in meshes} | {"/world/robot_target"} <= entities
+        glb = trimesh.load(str(write_gltf(scene, out)), force="scene")
+        assert {f"robot/{x.name}" for x in meshes} <= set(glb.graph.nodes_geometry)
+
+
 def test_usd_robot_is_a_valid_articulation_whose_joint_frames_agree(tmp_path):
     """scene.usda with the robot passes every UsdValidation validator; the robot is an
     articulation with one driven revolute joint per arm joint (Franka's limits in degrees); each
