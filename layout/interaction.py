@@ -49,6 +49,8 @@ CLEARANCE_CAP_M = 0.3  # free space is measured up to this far
 CLEARANCE_STEP_M = 0.01
 BLOCK_DEPTH_M = 0.002
 DRAG_COS = 0.5  # a push must leave a side-touching neighbour at least 60 deg off its contact normal
+NEAR_M = 0.01  # a neighbour this close beside an object counts as touching it (a push swerves;
+# the layout leaves 2 mm between neighbours)
 SUPPORT_DROP_M = 0.03  # a bottom point is supported by anything within this below it
 SUPPORT_MARGIN_M = 0.03  # support is checked this much beyond the push travel
 SUPPORT_INSET_M = 0.01  # the centre of mass must stay this far inside the support polygon
@@ -271,8 +273,11 @@ def _clearance(m, d, objects: _Objects, movers: set[str], direction: np.ndarray)
 
 
 def _touching(m, d, objects: _Objects, name: str, riders: set[str]) -> list[tuple[str, np.ndarray]]:
-    """Free objects touching ``name`` from the side at rest (not riders): (neighbour, horizontal
-    unit normal from ``name`` toward it), one per contact."""
+    """Free objects beside ``name`` at rest (not riders): touching it, or within NEAR_M of its
+    side (a push that swerves a little closes that gap and drags them by friction); (neighbour,
+    horizontal unit normal from ``name`` toward it), one per contact or near pair of geoms."""
+    import mujoco
+
     out = []
     for i in range(d.ncon):
         c = d.contact[i]
@@ -287,6 +292,20 @@ def _touching(m, d, objects: _Objects, name: str, riders: set[str]) -> list[tupl
             continue
         n[2] = 0.0
         out.append((other, n / max(float(np.linalg.norm(n)), 1e-9)))
+    mine = objects.geoms(name)
+    others = [g for g in np.flatnonzero(objects.colliding) if objects.geom_object[g] not in ("", name) and objects.geom_object[g] not in riders]
+    fromto = np.zeros(6)
+    for g0 in mine:
+        for g1 in others:
+            gap = float(np.linalg.norm(d.geom_xpos[g0] - d.geom_xpos[g1])) - float(m.geom_rbound[g0] + m.geom_rbound[g1])
+            if gap > NEAR_M:
+                continue
+            dist = mujoco.mj_geomDistance(m, d, int(g0), int(g1), NEAR_M, fromto)
+            n = fromto[3:] - fromto[:3]
+            if not 0.0 < dist <= NEAR_M or abs(n[2]) >= RIDER_NORMAL_Z * np.linalg.norm(n):
+                continue
+            n[2] = 0.0
+            out.append((str(objects.geom_object[g1]), n / max(float(np.linalg.norm(n)), 1e-9)))
     return out
 
 
@@ -331,14 +350,14 @@ def _plan(m, d, objects: _Objects, name: str, riders: set[str], travel_m: float)
     for k, u in enumerate(_face_directions(d, root)):
         clear = _clearance(m, d, objects, skip, u)
         supported = _supported(m, d, objects, pts, com, (travel_m + SUPPORT_MARGIN_M) * u, accept)
-        # a neighbour touching its side is dragged along by friction unless the push leaves it
+        # a neighbour touching its side (or near it) is dragged along by friction unless the push leaves it
         dragged = sorted({n for n, normal in touching if float(normal @ u) > -DRAG_COS})
         if clear < MIN_CLEARANCE_M:
             why = f"{clear * 100:.0f} cm free"
         elif not supported:
             why = f"no support {(travel_m + SUPPORT_MARGIN_M) * 100:.0f} cm ahead"
         elif dragged:
-            why = f"would drag {', '.join(dragged)} touching its side"
+            why = f"would drag {', '.join(dragged)} at (or within 1 cm of) its side"
         else:
             why = ""
         tried.append((-clear, k, u, clear, why))

@@ -105,6 +105,23 @@ def test_an_object_that_would_fall_off_its_support_is_not_pushable_and_says_why(
     assert not plan.pushable and plan.reason.count("no support 9 cm ahead") == 4, plan.reason
 
 
+def test_a_neighbour_just_beside_is_not_dragged_along_its_side(tmp_path):
+    """Two boxes 5 mm apart, not touching: a push along the gap would close it as soon as the
+    box swerves and drag the neighbour by friction, so each box is pushed only straight away
+    from the other (nyuv2_metric3d_00050: a sofa pushed past a shelf 2 mm beside it moved the
+    shelf 1.1 cm)."""
+    from layout.interaction import plan_push, push_object
+
+    a = PlacedObject(box_asset("box_a", (0.4, 0.4, 0.3)), pose(np.eye(3), (0.6, 0.0, 0.0)), "floor")
+    b = PlacedObject(box_asset("box_b", (0.3, 0.3, 0.3)), pose(np.eye(3), (0.6, 0.2 + 0.005 + 0.15, 0.0)), "floor")
+    path = _mjcf(Scene(fixture_camera(), fixture_room(), (a, b)), tmp_path)
+    plans = {p.name: p for p in plan_push(path)}
+    assert plans["box_a"].pushable and plans["box_a"].direction_xy == pytest.approx((0.0, -1.0), abs=1e-6)
+    assert plans["box_b"].pushable and plans["box_b"].direction_xy == pytest.approx((0.0, 1.0), abs=1e-6)
+    for p in plans.values():
+        assert_good_push(push_object(path, p.name, p.direction_xy))
+
+
 @pytest.mark.parametrize("fixed", [False, True], ids=["free", "fixed"])
 def test_cabinet_door_and_drawer_open_along_their_joints_within_limits(tmp_path, fixed):
     from layout.interaction import joint_names, open_joint
