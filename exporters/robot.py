@@ -103,17 +103,43 @@ def quat_matrix(q: np.ndarray) -> np.ndarray:
 
 def position_drives(m) -> dict[int, tuple[float, float, float, float]]:
     """joint id -> (kp, kv, max force (0: none), target at zero control) of its position
-    actuator; joints coupled to a driven one by an equality (the second finger) get the same."""
+    actuator (an affine-bias actuator: force = gain ctrl + b0 + b1 q + b2 dq/dt, so kp = -b1,
+    kv = -b2, and the target is where the force vanishes with the control clamped to its
+    range); joints coupled to a driven one by an equality (the second finger) get the same.
+
+    A position actuator on a fixed tendon (Menagerie's Panda splits its gripper force between
+    the fingers with one) drives each of the tendon's joints: with the tendon length
+    L = sum(c_i q_i) and the joints moving together (as the equality holds them), joint j
+    feels c_j * (-kp L - kv dL/dt) = -(kp c_j S) q - (kv c_j S) dq/dt with S = sum(c_i), so its
+    drive is kp c_j S, kv c_j S, the force limit times |c_j|. A spatial tendon is not a joint
+    drive and is left out."""
     import mujoco
 
     out = {}
     for a in range(m.nu):
-        if int(m.actuator_trntype[a]) != int(mujoco.mjtTrn.mjTRN_JOINT) or int(m.actuator_biastype[a]) != int(mujoco.mjtBias.mjBIAS_AFFINE):
+        if int(m.actuator_biastype[a]) != int(mujoco.mjtBias.mjBIAS_AFFINE):
             continue
-        j = int(m.actuator_trnid[a, 0])
+        trn = int(m.actuator_trntype[a])
+        if trn == int(mujoco.mjtTrn.mjTRN_JOINT):
+            coefs = {int(m.actuator_trnid[a, 0]): 1.0}
+        elif trn == int(mujoco.mjtTrn.mjTRN_TENDON):
+            t = int(m.actuator_trnid[a, 0])
+            wraps = range(int(m.tendon_adr[t]), int(m.tendon_adr[t]) + int(m.tendon_num[t]))
+            if any(int(m.wrap_type[w]) != int(mujoco.mjtWrap.mjWRAP_JOINT) for w in wraps):
+                continue
+            coefs = {int(m.wrap_objid[w]): float(m.wrap_prm[w]) for w in wraps}
+        else:
+            continue
+        kp, kv = -float(m.actuator_biasprm[a, 1]), -float(m.actuator_biasprm[a, 2])
         force = float(np.max(np.abs(m.actuator_forcerange[a]))) if m.actuator_forcelimited[a] else 0.0
-        target = float(np.clip(0.0, *m.jnt_range[j])) if m.jnt_limited[j] else 0.0
-        out[j] = (float(m.actuator_gainprm[a, 0]), -float(m.actuator_biasprm[a, 2]), force, target)
+        total = sum(coefs.values())
+        if kp <= 0.0 or total == 0.0:
+            continue
+        # the length (or position) it holds at zero control, the control clamped to its range
+        ctrl = float(np.clip(0.0, *m.actuator_ctrlrange[a])) if m.actuator_ctrllimited[a] else 0.0
+        held = (float(m.actuator_gainprm[a, 0]) * ctrl + float(m.actuator_biasprm[a, 0])) / kp
+        for j, c in coefs.items():
+            out[j] = (kp * c * total, kv * c * total, force * abs(c), held / total)
     for e in range(m.neq):
         if int(m.eq_type[e]) == int(mujoco.mjtEq.mjEQ_JOINT):
             j1, j2 = int(m.eq_obj1id[e]), int(m.eq_obj2id[e])

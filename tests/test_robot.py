@@ -298,6 +298,64 @@ def test_robot_meshes_lie_on_mujocos_geoms_and_reach_rerun_and_gltf(tmp_path, mo
         assert {f"robot/{x.name}" for x in meshes} <= set(glb.graph.nodes_geometry)
 
 
+def _tendon_gripper_panda():
+    """The built-in Panda with its gripper driven as Menagerie's is: one position actuator on a
+    fixed tendon that splits the force equally between the fingers, its control 0-255."""
+    import mujoco
+
+    from generation.robot_builtin import build_panda
+
+    spec = build_panda()
+    spec.delete(spec.actuator("actuator8"))
+    split = spec.add_tendon(name="split")
+    split.wrap_joint("finger_joint1", 0.5)
+    split.wrap_joint("finger_joint2", 0.5)
+    grip = spec.add_actuator(name="actuator8", target="split", trntype=mujoco.mjtTrn.mjTRN_TENDON)
+    grip.gainprm[0] = 0.04 / 255.0
+    grip.biastype = mujoco.mjtBias.mjBIAS_AFFINE
+    grip.biasprm[:3] = [0.0, -100.0, -10.0]
+    grip.forcerange, grip.forcelimited = [-100.0, 100.0], True
+    grip.ctrlrange, grip.ctrllimited = [0.0, 255.0], True
+    return spec.compile()
+
+
+@pytest.mark.parametrize("gripper", ["joint", "tendon"])
+def test_joint_drives_exert_mujocos_actuator_forces(gripper, tmp_path):
+    """The joint drives the USD and SDF writers give the robot (exporters.robot.position_drives)
+    exert the generalized forces MuJoCo's actuators exert at zero control (clamped to each
+    control range), over random poses and velocities, for the built-in Panda (a position servo
+    per joint) and for a Panda whose gripper is driven through a fixed tendon as Menagerie's
+    (the fingers moving together, as the equality holds them). Every actuated joint has one."""
+    import mujoco
+
+    from exporters.robot import position_drives
+
+    m = mujoco.MjModel.from_xml_path(str(_robot("panda", tmp_path).mjcf_path)) if gripper == "joint" else _tendon_gripper_panda()
+    drives = position_drives(m)
+    actuated = {int(m.actuator_trnid[a, 0]) for a in range(m.nu) if m.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT}
+    for t in {int(m.actuator_trnid[a, 0]) for a in range(m.nu) if m.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_TENDON}:
+        actuated |= {int(m.wrap_objid[w]) for w in range(m.tendon_adr[t], m.tendon_adr[t] + m.tendon_num[t])}
+    f1, f2 = m.joint("finger_joint1").id, m.joint("finger_joint2").id
+    assert actuated <= set(drives) and {f1, f2} <= set(drives)
+    assert drives[f1][3] == pytest.approx(0.0)  # at zero control the gripper is held closed
+    rng = np.random.default_rng(0)
+    d = mujoco.MjData(m)
+    for _ in range(5):
+        lo, hi = m.jnt_range[:, 0], m.jnt_range[:, 1]
+        d.qpos[:] = lo + rng.uniform(0.1, 0.9, m.nq) * (hi - lo)
+        d.qvel[:] = rng.normal(0.0, 0.3, m.nv)
+        d.qpos[m.jnt_qposadr[f2]] = d.qpos[m.jnt_qposadr[f1]]  # the fingers move together
+        d.qvel[m.jnt_dofadr[f2]] = d.qvel[m.jnt_dofadr[f1]]
+        d.ctrl[:] = 0.0
+        mujoco.mj_forward(m, d)
+        for j in sorted(actuated):
+            kp, kv, force, target = drives[j]
+            expected = -kp * (d.qpos[m.jnt_qposadr[j]] - target) - kv * d.qvel[m.jnt_dofadr[j]]
+            if force > 0.0:
+                expected = float(np.clip(expected, -force, force))
+            assert d.qfrc_actuator[m.jnt_dofadr[j]] == pytest.approx(expected, rel=1e-6, abs=1e-9), m.joint(j).name
+
+
 def test_usd_robot_is_a_valid_articulation_whose_joint_frames_agree(tmp_path):
     """scene.usda with the robot passes every UsdValidation validator; the robot is an
     articulation with one driven revolute joint per arm joint (Franka's limits in degrees); each
