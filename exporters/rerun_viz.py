@@ -135,34 +135,107 @@ def viewer_binary() -> str:
 
 def screenshot(rrd_path: Path, png_path: Path, size_px: tuple[int, int] = (1600, 1000), timeout_s: float = 180.0) -> Path:
     """Render the recording's default view (photo beside the input-camera render, 3D view,
-    masks, depth, report) to ``png_path`` with the viewer in headless mode (no display needed;
-    Mesa's Vulkan driver renders on the CPU). Raises ExportError with the viewer's last line
-    when no picture comes out."""
+    masks, depth, report) at its first time (the solved scene, before the settle simulation) to
+    ``png_path`` with the viewer in headless mode (no display needed; Mesa's Vulkan driver
+    renders on the CPU). Raises ExportError with the viewer's last line when no picture comes out.
+
+    The viewer is driven through rerun's ViewerClient, not ``--screenshot-to``: that one shoots
+    after a fixed number of frames, before a real scene's recording (10 MB) has loaded (an empty
+    picture, twice in a row on an idle machine). Here the recording is loaded, the time set,
+    and pictures are taken until two in a row are the same (every texture drawn)."""
     import os
     import signal
     import subprocess
     import tempfile
+    import time
 
     from scene_builder.errors import ExportError
 
     png_path = Path(png_path)
     png_path.parent.mkdir(parents=True, exist_ok=True)
-    cmd = [viewer_binary(), str(rrd_path), "--headless", "--screenshot-to", str(png_path), "--window-size", f"{size_px[0]}x{size_px[1]}", "--port", "0"]
+    cmd = [viewer_binary(), str(rrd_path), "--headless", "--bind", "127.0.0.1", "--port", "0", "--hide-welcome-screen",
+           "--window-size", f"{size_px[0]}x{size_px[1]}"]
+    deadline = time.monotonic() + timeout_s
     with tempfile.TemporaryFile("w+") as log:
-        # --port 0: never stream into a viewer someone else runs; its own process group so that a
-        # timeout kills the real binary, not only a wrapper.
+        # Only 127.0.0.1, a free port (never a viewer someone else runs); its own process group so
+        # that the real binary is killed whatever happens.
         proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
         try:
-            proc.wait(timeout=timeout_s)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
+            port = _wait_for_port(proc, log, deadline)
+            png = _settled_picture(port, rrd_path, deadline) if port else None
+        finally:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
         log.seek(0)
         text = log.read().strip()
-    if not png_path.is_file():
+    if png is None:
         last = text.splitlines()[-1] if text else "no output"
-        raise ExportError(f"the rerun viewer wrote no screenshot ({last}); it needs Mesa's Vulkan driver (apt install mesa-vulkan-drivers)")
+        raise ExportError(f"the rerun viewer gave no screenshot ({last}); it needs Mesa's Vulkan driver (apt install mesa-vulkan-drivers)")
+    png_path.write_bytes(png)
     return png_path
+
+
+def _wait_for_port(proc, log, deadline: float) -> int | None:
+    """The port the headless viewer listens on, read from its log (None if it exits first)."""
+    import re
+    import time
+
+    while time.monotonic() < deadline and proc.poll() is None:
+        log.seek(0)
+        found = re.search(r"Listening for gRPC connections on [0-9.]+:(\d+)", log.read())
+        if found:
+            return int(found.group(1))
+        time.sleep(0.1)
+    return None
+
+
+#: Pictures taken this far apart until two in a row are the same.
+SHOT_INTERVAL_S = 0.5
+
+
+def _settled_picture(port: int, rrd_path: Path, deadline: float) -> bytes | None:
+    """PNG bytes of the viewer's window once the recording is shown at its first time and two
+    pictures in a row agree (the last one taken when time runs out; None without any)."""
+    import time
+
+    from rerun.experimental import ViewerClient
+
+    client = None
+    while client is None and time.monotonic() < deadline:
+        try:
+            client = ViewerClient.connect(f"rerun+http://127.0.0.1:{port}/proxy")
+            client.get_state()
+        except Exception:  # the server is not answering yet: retried until the deadline
+            client = None
+            time.sleep(0.2)
+    if client is None:
+        return None
+    while time.monotonic() < deadline and not client.get_state().recordings:
+        time.sleep(0.2)
+    state = client.get_state()
+    if state.recordings:
+        timeline = state.recordings[0].current_timeline
+        start = next((t.start for t in state.recordings[0].timelines if t.name == timeline), None)
+        if timeline and start is not None:
+            client.set_time(timeline, duration=start / 1e9, play_state="paused")
+    previous, png = None, None
+    while time.monotonic() < deadline:
+        png = client.take_screenshot()
+        if previous is not None and _same_picture(previous, png):
+            break
+        previous = png
+        time.sleep(SHOT_INTERVAL_S)
+    return png
+
+
+def _same_picture(a: bytes, b: bytes) -> bool:
+    import io
+
+    from PIL import Image
+
+    pa, pb = (np.asarray(Image.open(io.BytesIO(x)).convert("RGB")) for x in (a, b))
+    return pa.shape == pb.shape and bool(np.array_equal(pa, pb))
 
 
 def _blueprint(scene: Scene, with_images: bool, with_render: bool = False):
