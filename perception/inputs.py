@@ -70,6 +70,11 @@ MIN_VALID_DEPTH_FRACTION = 0.05
 #: :data:`_EXPLICIT_MEDIAN_DEPTH_M` applies (the user said what the units are).
 ROOM_MEDIAN_DEPTH_M = (0.4, 15.0)
 _EXPLICIT_MEDIAN_DEPTH_M = (0.05, 100.0)
+#: Depth nearer than this (metres) is taken as invalid: the sensors that capture rooms measure
+#: from farther (Kinect v1 and v2 0.5 m, Azure Kinect 0.25 m, RealSense D435 about 0.2 m), so
+#: such values are flying pixels and saturation artefacts (esanet_sample, a Kinect v2 frame: 322
+#: pixels at 1-30 cm in a room 1.7-4 m deep, which became a 'bowl' 7 cm from the lens).
+MIN_ROOM_DEPTH_M = 0.2
 #: Focal lengths giving a horizontal field of view outside this range (degrees) are no camera's.
 _FOV_RANGE_DEG = (2.0, 170.0)
 #: fx / fy beyond this ratio (either way) is not a camera's pixel aspect.
@@ -233,7 +238,8 @@ def load_depth(path: Path, depth_scale: float | None = None) -> np.ndarray:
     ``depth_scale`` is metres per unit of the file. None (the default) infers it: integer images
     (16- or 32-bit single channel, e.g. a uint16 PNG) and integer ``.npy`` arrays are millimetres,
     floating-point images (32-bit TIFF, mode ``F``) and float ``.npy`` arrays metres. NaN,
-    infinite and negative values are invalid (0).
+    infinite and negative values are invalid (0), and so are values nearer than
+    :data:`MIN_ROOM_DEPTH_M` (with an :class:`InputWarning` saying how many).
 
     Raises InputError for an unreadable file, an 8-bit image without an explicit scale (8 bits
     hold 0-255 mm: such files are visualisations, not measurements), and a median depth outside
@@ -293,6 +299,11 @@ def load_depth(path: Path, depth_scale: float | None = None) -> np.ndarray:
         depth = raw.astype(np.float64) * scale
     depth[~np.isfinite(depth) | (depth < 0.0)] = 0.0
     _check_depth_units(depth, path, scale, explicit, is_float)
+    near = (depth > 0.0) & (depth < MIN_ROOM_DEPTH_M)
+    if near.any():
+        warnings.warn(f"{path}: {int(near.sum())} depth pixels nearer than {MIN_ROOM_DEPTH_M:g} m taken as invalid "
+                      "(no room-scale depth sensor measures there: artefacts)", InputWarning, stacklevel=2)
+        depth[near] = 0.0
     return depth.astype(np.float32)
 
 

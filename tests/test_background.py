@@ -33,7 +33,8 @@ def test_background_reproduces_the_observed_depth(built):
     verts = mesh.vertices_m[:n_grid]
     p, u, v = _camera_coords(cam, verts)
     # Nodes sit on pixel corners; one with measured (not filled) depth takes the depth of one of
-    # the pixels it touches.
+    # the pixels it touches, except where that depth along the corner's ray would put it under
+    # the floor: there it lies on the floor, nearer than its pixels.
     seen = bg.surface_observed[:n_grid]
     assert seen.mean() > 0.6
     d = obs.depth_m.astype(np.float64)
@@ -43,7 +44,11 @@ def test_background_reproduces_the_observed_depth(built):
             ui = np.clip(np.round(u + du).astype(int), 0, tf.W - 1)
             vi = np.clip(np.round(v + dv).astype(int), 0, tf.H - 1)
             lo, hi = np.minimum(lo, d[vi, ui]), np.maximum(hi, d[vi, ui])
-    assert np.all(p[seen, 2] >= lo[seen] * (1 - 1e-6)) and np.all(p[seen, 2] <= hi[seen] * (1 + 1e-6))
+    on_floor = np.abs(verts[:, 2]) < 1e-9
+    assert np.all(p[seen, 2] <= hi[seen] * (1 + 1e-6))
+    assert np.all((p[seen, 2] >= lo[seen] * (1 - 1e-6)) | on_floor[seen])
+    assert np.all(verts[:, 2] >= -1e-9)  # nothing under the floor
+    assert 0 < np.count_nonzero(on_floor[seen] & (p[:, 2] < lo * (1 - 1e-6))[seen]) < 0.2 * seen.sum()
     # The mesh covers the whole image: its outer nodes are on the image border.
     assert u.min() == pytest.approx(-0.5) and u.max() == pytest.approx(tf.W - 0.5)
     assert v.min() == pytest.approx(-0.5) and v.max() == pytest.approx(tf.H - 0.5)

@@ -298,6 +298,27 @@ def test_depth_formats_agree(tmp_path):
     np.testing.assert_allclose(from_8bit, from_png, atol=0.021)
 
 
+def test_depth_nearer_than_a_room_sensor_measures_is_invalid_with_a_warning(tmp_path):
+    """A Kinect v2 frame holds flying pixels at a few centimetres (esanet_sample: 322 of them,
+    which became a 'bowl' 7 cm from the lens): values under MIN_ROOM_DEPTH_M read as invalid
+    (0), with a warning that counts them; depth at the limit and beyond is kept."""
+    from perception.inputs import MIN_ROOM_DEPTH_M
+
+    img = _photo(tmp_path / "a.png")
+    mm = _ramp_mm()
+    mm[10:15, 10:20] = 68  # 50 px at 6.8 cm
+    mm[20, 10] = int(MIN_ROOM_DEPTH_M * 1000)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        depth = load_input(InputSpec(img, _depth_png(tmp_path / "d.png", mm)), CFG).depth_m
+    assert np.all(depth[10:15, 10:20] == 0.0) and depth[20, 10] == pytest.approx(MIN_ROOM_DEPTH_M)
+    keep = np.ones(mm.shape, bool)
+    keep[10:15, 10:20] = False
+    np.testing.assert_allclose(depth[keep], mm[keep] / 1000.0, atol=1e-6)
+    near = [w for w in caught if issubclass(w.category, InputWarning) and "nearer than" in str(w.message)]
+    assert len(near) == 1 and "50 depth pixels" in str(near[0].message)
+
+
 def test_large_image_is_downscaled_with_depth_and_intrinsics(tmp_path):
     w, h = 2000, 1500
     photo = np.zeros((h, w, 3), dtype=np.uint8)
