@@ -105,6 +105,21 @@ def _rss_mb() -> tuple[float, float]:
     return psutil.Process().memory_info().rss / 1e6, peak_kib * 1024 / 1e6
 
 
+def _return_freed_memory() -> None:
+    """Hand the heap pages a build freed back to the system (glibc's ``malloc_trim``). glibc keeps
+    freed pages in its per-thread arenas (torch, MuJoCo, onnxruntime and rerun run threads), so a
+    worker building photo after photo grew from 1.4 to 2.9 GB over 8 builds of one photo, where
+    with a trim after each it stays at 0.8-0.9 GB. Does nothing where the C library has no
+    ``malloc_trim`` (not glibc)."""
+    import ctypes
+    import ctypes.util
+
+    name = ctypes.util.find_library("c")
+    trim = getattr(ctypes.CDLL(name), "malloc_trim", None) if name else None
+    if trim is not None:
+        trim(0)
+
+
 def run_item(task: ItemTask, job: WorkerJob) -> ItemOutcome:
     """Build one photo into ``task.out_dir`` exactly as ``scene-builder build`` does (staging
     folder renamed into place at the end) and say how it went. Any exception of the build becomes
@@ -121,9 +136,11 @@ def run_item(task: ItemTask, job: WorkerJob) -> ItemOutcome:
         try:
             result = build(inputs, task.out_dir, job.config, progress=False, overwrite=job.overwrite)
         except Exception as err:  # recorded as this item's failure (see the docstring)
+            _return_freed_memory()
             rss, peak = _rss_mb()
             return ItemOutcome(task, "failed", f"{type(err).__name__}: {one_line(err)}", worker=worker, rss_mb=rss, peak_rss_mb=peak, warm_s=warm_s)
     lines = tuple(sorted({one_line(w.message) for w in caught if issubclass(w.category, InputWarning)}))
+    _return_freed_memory()
     rss, peak = _rss_mb()
     total = dict(result.timings_s).get("total")
     return ItemOutcome(task, "done", None, False, total, len(result.scene.objects), lines, worker, rss, peak, warm_s)

@@ -305,3 +305,20 @@ def test_ray_path_on_a_local_cluster_builds_the_good_items_and_fails_the_bad_alo
         assert (again.done, again.failed, again.skipped) == (0, 0, 4)
     finally:
         ray.shutdown()
+
+
+def test_a_build_leaves_mujocos_asset_cache_empty(tmp_path):
+    """MuJoCo keeps every mesh and texture file it compiled in a process-wide cache (500 MB):
+    a build's files come from its staging folder, renamed at the end, so the pipeline empties
+    the cache when it is done (a batch worker grew about 80 MB per photo before). Loading the
+    built scene.xml afterwards fills the cache again: the cache is on, and the build emptied it."""
+    import mujoco
+
+    cache = mujoco.mj_getCache()
+    assert mujoco.mj_getCacheCapacity(cache) > 0
+    _good_inputs(tmp_path / "src", 1)
+    src = next((tmp_path / "src").iterdir())
+    result = build(InputSpec(src / "rgb.png", src / "depth.png"), tmp_path / "out", CONFIG)
+    assert mujoco.mj_getCacheSize(cache) == 0
+    mujoco.MjModel.from_xml_path(str(result.files.mjcf))
+    assert mujoco.mj_getCacheSize(cache) > 0
