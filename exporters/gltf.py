@@ -69,11 +69,9 @@ def build_trimesh_scene(scene: Scene):
             out.add_geometry(_trimesh(part.visual, part.material.rgba, images), node_name=name, geom_name=name,
                              transform=GLTF_FROM_WORLD @ placed.world_from_asset)
     if scene.robot is not None:
-        for mesh in robot_meshes(scene.robot, "glTF"):
-            name = f"robot/{mesh.name}"
-            colors = np.tile(np.round(np.clip(mesh.rgba, 0.0, 1.0) * 255).astype(np.uint8), (len(mesh.vertices_m), 1))
-            geometry = trimesh.Trimesh(vertices=mesh.vertices_m, faces=mesh.faces, vertex_colors=colors, process=False)
-            out.add_geometry(geometry, node_name=name, geom_name=name, transform=GLTF_FROM_WORLD)
+        for geom in robot_meshes(scene.robot, "glTF"):
+            name = f"robot/{geom.name}"
+            out.add_geometry(_trimesh(geom.mesh, geom.rgba, images), node_name=name, geom_name=name, transform=GLTF_FROM_WORLD)
     return out
 
 

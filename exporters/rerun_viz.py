@@ -162,7 +162,7 @@ def screenshot(rrd_path: Path, png_path: Path, size_px: tuple[int, int] = (1600,
         proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
         try:
             port = _wait_for_port(proc, log, deadline)
-            png = _settled_picture(port, rrd_path, deadline) if port else None
+            png = _settled_picture(port, deadline) if port else None
         finally:
             if proc.poll() is None:
                 os.killpg(proc.pid, signal.SIGKILL)
@@ -194,7 +194,7 @@ def _wait_for_port(proc, log, deadline: float) -> int | None:
 SHOT_INTERVAL_S = 0.5
 
 
-def _settled_picture(port: int, rrd_path: Path, deadline: float) -> bytes | None:
+def _settled_picture(port: int, deadline: float) -> bytes | None:
     """PNG bytes of the viewer's window once the recording is shown at its first time and two
     pictures in a row agree (the last one taken when time runs out; None without any)."""
     import time
@@ -436,11 +436,14 @@ def _log_robot(rec, scene: Scene) -> None:
     r = scene.robot
     if r is None:
         return
-    for mesh in robot_meshes(r, "rerun"):
-        ent = "world/robot/" + "/".join(rr.escape_entity_path_part(p) for p in mesh.name.split("/"))
-        normals = trimesh.Trimesh(mesh.vertices_m, mesh.faces, process=False).vertex_normals
-        rec.log(ent, rr.Mesh3D(vertex_positions=mesh.vertices_m, triangle_indices=mesh.faces, vertex_normals=normals,
-                               albedo_factor=np.round(np.clip(mesh.rgba, 0.0, 1.0) * 255).astype(np.uint8)), static=True)
+    for geom in robot_meshes(r, "rerun"):
+        ent = "world/robot/" + "/".join(rr.escape_entity_path_part(p) for p in geom.name.split("/"))
+        v, f = geom.mesh.vertices_m, geom.mesh.faces
+        # With its normals the viewer shades it; without (as _mesh3d logs the photo-textured
+        # objects) a one-colour robot is drawn as a flat silhouette.
+        normals = trimesh.Trimesh(v, f, process=False).vertex_normals
+        rec.log(ent, rr.Mesh3D(vertex_positions=v, triangle_indices=f, vertex_normals=normals,
+                               albedo_factor=np.round(np.clip(geom.rgba, 0.0, 1.0) * 255).astype(np.uint8)), static=True)
     rec.log("world/robot_target", rr.Points3D([r.target_m], labels=[f"{r.model.name} reach target: {r.target_kind} of {r.target_support}"],
                                               colors=[255, 190, 0], radii=0.015), static=True)
 

@@ -17,6 +17,7 @@ import numpy as np
 
 from exporters.textures import TEXTURE_DIR
 from scene_builder.errors import ExportError
+from scene_builder.model import TriangleMesh
 from scene_builder.robot import RobotPlacement
 
 PREFIX = "robot/"
@@ -163,13 +164,12 @@ class RobotMesh:
     scene.xml and scene.usda start in) moved to the placement.
 
     name: ``BODY/geom_K`` (BODY the robot's body name, K the geom's index within the body).
-    vertices_m: (N, 3) world. faces: (M, 3) int32, counter-clockwise seen from outside.
+    mesh: the triangles, world frame (no colours of its own).
     rgba: (4,) in [0, 1], the geom's material colour (its own colour without a material).
     """
 
     name: str
-    vertices_m: np.ndarray
-    faces: np.ndarray
+    mesh: TriangleMesh
     rgba: np.ndarray
 
 
@@ -219,6 +219,6 @@ def robot_meshes(placement: RobotPlacement, target: str) -> tuple[RobotMesh, ...
             mat = int(m.geom_matid[g])
             rgba = m.mat_rgba[mat] if mat >= 0 else m.geom_rgba[g]
             body = m.body(b).name or f"body_{b}"
-            out.append(RobotMesh(f"{body}/geom_{g - first}", v @ rot.T + pos, f, np.array(rgba, np.float64)))
+            out.append(RobotMesh(f"{body}/geom_{g - first}", TriangleMesh(v @ rot.T + pos, f), np.array(rgba, np.float64)))
     return tuple(out)
 

@@ -49,6 +49,8 @@ BEHIND_MARGIN_M = 0.02
 #: Filled depth never exceeds this multiple of the farthest observed depth (rays that meet no
 #: plane and no observation, e.g. through a window).
 MAX_FILL_FACTOR = 1.5
+#: The floor, z = 0 (world frame): nothing of the background lies under it.
+FLOOR = Plane(np.array([0.0, 0.0, 1.0]), 0.0, "floor")
 #: Colour inpainting runs on an image of at most this many pixels on its long side, and is
 #: upsampled into the masked pixels of the full-resolution texture.
 INPAINT_MAX_SIDE_PX = 1024
@@ -103,8 +105,7 @@ def fill_depth_behind(
     idx = np.flatnonzero(need)
     if len(idx) == 0:
         return out
-    floor = Plane(np.array([0.0, 0.0, 1.0]), 0.0, "floor")
-    planes = [floor, *walls]
+    planes = [FLOOR, *walls]
     t = _plane_depths(rays_cam.reshape(-1, 3)[idx], camera, planes)  # (P, n)
     t_floor = t[0].copy()
     low = lower_m.reshape(-1)[idx]
@@ -210,7 +211,7 @@ def observed_background(
     # node is a depth error (a Kinect v2 frame of a dark carpet, emsanet_sample: a fifth of its
     # floor nodes 5-25 cm under the fitted floor, where the drawn floor showed through as dark
     # patches). It moves along its own ray onto the floor: its pixel is unchanged.
-    t_floor = _plane_depths(rays.reshape(-1, 3), camera, [Plane(np.array([0.0, 0.0, 1.0]), 0.0, "floor")])[0].reshape(filled.shape)
+    t_floor = _plane_depths(rays.reshape(-1, 3), camera, [FLOOR])[0].reshape(filled.shape)
     filled = np.where(np.isfinite(t_floor) & (filled > t_floor), t_floor, filled)
 
     pts_cam = rays * filled[..., None]
@@ -250,8 +251,7 @@ def _tuck_stretched(verts, faces, uv, observed, rays, depth, camera: Camera):
     new_depth = np.repeat(far[stretched], 3)
     # Not pushed under the floor: a near floor node tucked back to a far corner's depth stops
     # where its ray meets the floor.
-    floor = Plane(np.array([0.0, 0.0, 1.0]), 0.0, "floor")
-    new_depth = np.minimum(new_depth, _plane_depths(rays[sf.ravel()], camera, [floor])[0])
+    new_depth = np.minimum(new_depth, _plane_depths(rays[sf.ravel()], camera, [FLOOR])[0])
     new_cam = rays[sf.ravel()] * new_depth[:, None]
     new_verts = transform_points(camera.world_from_camera, new_cam)
     faces = faces.copy()

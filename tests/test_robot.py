@@ -281,11 +281,11 @@ def test_robot_meshes_lie_on_mujocos_geoms_and_reach_rerun_and_gltf(tmp_path, mo
         for mesh in meshes:
             body, geom = mesh.name.split("/")
             g = int(m.body_geomadr[m.body("robot/" + body).id]) + int(geom[len("geom_"):])
-            local = (mesh.vertices_m - d.geom_xpos[g]) @ d.geom_xmat[g].reshape(3, 3)
+            local = (mesh.mesh.vertices_m - d.geom_xpos[g]) @ d.geom_xmat[g].reshape(3, 3)
             centre, half = m.geom_aabb[g][:3], m.geom_aabb[g][3:]
             assert np.allclose(local.min(axis=0), centre - half, atol=1e-3), mesh.name
             assert np.allclose(local.max(axis=0), centre + half, atol=1e-3), mesh.name
-            assert trimesh.Trimesh(mesh.vertices_m, mesh.faces).is_watertight
+            assert trimesh.Trimesh(mesh.mesh.vertices_m, mesh.mesh.faces).is_watertight
         if model.source == "menagerie":  # link0's visual mesh replaces its collision geoms
             g = int(m.body_geomadr[m.body("robot/link0").id]) + int(link0[0].split("_")[-1])
             assert link0 == [link0[0]] and m.geom_contype[g] == 0 and m.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH
