@@ -14,7 +14,9 @@ of the piece outside the convex hull of the object's collision pieces (``layout.
 a cut convex piece is still convex). A direction qualifies when every blocker reaches
 :data:`MIN_DEPTH_M` or more into that hull (into its compartments: a neighbour touching its side
 or a support under it is not cut; a piece wholly inside, a bed leg in its base, goes) and every
-static object keeps at least :data:`MIN_KEPT_SHARE` of its collision volume; of those, the one
+static object keeps at least :data:`MIN_KEPT_SHARE` of its collision volume and every part of it
+at least one collision piece (a piece wholly inside the hull goes only when its part has
+another: a door handle whose one piece lies in the compartment keeps it); of those, the one
 removing the least volume is cut, if the object can then slide that way. Nothing
 moves: poses, visual meshes, masses and the movable object itself are unchanged; the report says
 whose collision was cut, for whom. An object no direction frees stays caged.
@@ -154,8 +156,10 @@ def uncage(moving: list[np.ndarray], statics: list[tuple[ObjectAsset, np.ndarray
     the module docstring), in the order given (unchanged ones as they are); None when the
     object is not caged or no direction frees it."""
     ids, world, owner = [], [], []
+    pieces_of: dict[tuple[int, int], int] = {}  # (static, part) -> its number of collision pieces
     for k, (asset, t) in enumerate(statics):
         for j, part in enumerate(asset.parts):
+            pieces_of[(k, j)] = len(part.collision)
             for i, piece in enumerate(part.collision):
                 ids.append((k, j, i))
                 world.append(piece.vertices_m @ t[:3, :3].T + t[:3, 3])
@@ -180,6 +184,12 @@ def uncage(moving: list[np.ndarray], statics: list[tuple[ObjectAsset, np.ndarray
         removed_of = np.bincount([owner[p] for p in b], weights=[cuts[p][2] for p in b], minlength=len(statics))
         if any(cuts[p][1] < MIN_DEPTH_M for p in b) or np.any(removed_of > (1.0 - MIN_KEPT_SHARE) * total):
             continue
+        gone: dict[tuple[int, int], int] = {}  # part -> its pieces this direction removes whole
+        for p in b:
+            if cuts[p][0] is None:
+                gone[ids[p][:2]] = gone.get(ids[p][:2], 0) + 1
+        if any(n >= pieces_of[part] for part, n in gone.items()):
+            continue  # a part would lose its last collision piece
         removed = sum(cuts[p][2] for p in b)
         if removed < best_removed:
             best, best_removed = b, removed

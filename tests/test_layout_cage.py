@@ -78,3 +78,27 @@ def test_a_neighbour_touching_its_side_is_not_cut():
     statics = [(neighbour, t), (neighbour, other), (front, tf)]
     assert caged(SHELF, [v for a, ta in statics for v in _pieces(a, ta)], WALL)
     assert uncage(SHELF, statics, WALL) is None
+
+
+
+def test_a_part_whose_only_piece_sits_inside_the_caged_object_keeps_it():
+    """A static cabinet whose door handle (a part with one small collision piece) lies wholly
+    inside the shelf's compartment, the wall behind the shelf and a neighbour touching its other
+    side: every direction that frees the shelf would cut the handle's only piece away, leaving a
+    part with no collision (``ValueError: Part door_handle: needs at least one collision piece``
+    on an unseen photo). A direction whose cuts would take a part's last piece does not qualify:
+    the shelf stays caged and every part keeps its piece."""
+    from scene_builder.model import AssetKind, Joint, JointType, ObjectAsset
+
+    from tests.fixtures_scenes import part_from_boxes
+
+    body = part_from_boxes("body", [((0.6, 0.5, 0.0), (1.0, 0.9, 0.9))], WOOD)
+    lo, hi = (0.03, -0.37, 0.7), (0.07, -0.33, 0.74)  # 4 cm inside the back-left corner
+    handle = part_from_boxes("door_handle", [(lo, hi)], WOOD, parent="body",
+                             joint=Joint(JointType.FIXED, np.array([0.0, 0.0, 1.0]), np.array(lo)))
+    cabinet = ObjectAsset("cabinet", "cabinet", AssetKind.ARTICULATED, (body, handle), np.array([0.97, 0.57, 0.9]), is_fixed=True)
+    neighbour = box_asset("counter", (0.4, 0.5, 0.9), WOOD, is_fixed=True, label="counter")
+    statics = [(cabinet, np.eye(4)), (neighbour, pose(np.eye(3), (0.2, -0.4 + 0.005 - 0.25, 0.0)))]
+    assert caged(SHELF, [v for a, t in statics for v in _pieces(a, t)], WALL)
+    # Before parts kept their last piece this raised ValueError (the handle cut away).
+    assert uncage(SHELF, statics, WALL) is None
