@@ -342,7 +342,7 @@ def _add_object(spec, placed: PlacedObject, out_dir: Path, looks: "_Looks") -> N
     kids = _children(asset)
 
     def fill(body, part: Part) -> None:
-        _set_inertial(body, part)
+        _set_inertial(body, asset, part)
         vis, cols = mesh_files(asset, part)
         bname = names.body_name(asset, part)
         spec.add_mesh(name=f"{bname}/visual", file=vis)
@@ -369,8 +369,15 @@ def _add_object(spec, placed: PlacedObject, out_dir: Path, looks: "_Looks") -> N
     fill(root, asset.root)
 
 
-def _set_inertial(body, part: Part) -> None:
+def _set_inertial(body, asset: ObjectAsset, part: Part) -> None:
     moments, axes = part.inertial.principal()
+    a, b, c = (float(x) for x in moments)
+    # MuJoCo's own test of the moments it is given (no tolerance): said here with the object's
+    # name instead of its compiler's "inertia must satisfy A + B >= C". The data model keeps
+    # every Inertial inside it with a margin (scene_builder.arrays.inertia_problem).
+    if not (a > 0.0 and a + b >= c):
+        raise ExportError(f"object {asset.name}: part {part.name} has principal moments {a:.6g}, {b:.6g}, {c:.6g} kg m^2, "
+                          "which break A + B >= C (no body has them); its mass properties must come from a closed, unfolded mesh")
     body.explicitinertial = True
     body.mass = part.inertial.mass_kg
     body.ipos = part.inertial.com_m

@@ -157,10 +157,14 @@ SNAP_MAX_VOLUME_CHANGE = 0.25
 
 
 def _inertia_ok(mesh) -> bool:
-    """Whether a closed mesh has positive volume and a positive-definite inertia tensor."""
+    """Whether a closed mesh has positive volume and the inertia tensor of a body (positive
+    definite is not enough: a surface folded over itself can give moments that break the
+    triangle inequality, which MuJoCo rejects)."""
+    from generation.physics import is_mass_distribution
+
     if not float(mesh.volume) > 0.0:
         return False
-    return bool(np.linalg.eigvalsh(np.asarray(mesh.moment_inertia, dtype=np.float64)).min() > 0.0)
+    return is_mass_distribution(np.asarray(mesh.moment_inertia, dtype=np.float64))
 
 
 def _visual(spec: PartSpec, config: GenerationConfig):
@@ -237,8 +241,8 @@ def assemble_asset_with_offset(
         if surface_snap is not None and isinstance(spec.geometry, VoxelGeometry):
             # The marching-cubes surface lies up to a voxel off the observed one: its vertices
             # seen by the camera go onto the observed depth (positions only: still watertight).
-            # A snap that folds the surface (volume lost, inertia no longer positive definite:
-            # a thin part seen edge-on) is not kept.
+            # A snap that folds the surface (volume lost, inertia no longer a body's: a thin
+            # part seen edge-on, a lamp's shade) is not kept.
             before = np.array(v.vertices, dtype=np.float64)
             volume = float(v.volume)
             v.vertices = np.asarray(surface_snap(before))

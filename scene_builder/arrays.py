@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["as_array"]
+__all__ = ["INERTIA_MARGIN", "as_array", "inertia_problem"]
 
 
 def as_array(value, dtype, shape: tuple[int | None, ...], name: str) -> np.ndarray:
@@ -35,3 +35,30 @@ def _check_rigid(t: np.ndarray, name: str) -> None:
         raise ValueError(f"{name}: rotation block is not a proper rotation")
     if not np.allclose(t[3], [0.0, 0.0, 0.0, 1.0]):
         raise ValueError(f"{name}: last row must be [0, 0, 0, 1]")
+
+
+#: The principal moments A <= B <= C of every inertia tensor satisfy A + B >= (1 + INERTIA_MARGIN) C.
+#: Any mass distribution has A + B - C = 2 * (its second moment along C's axis) >= 0; the margin
+#: keeps the inequality true after the exporters round the tensor (MJCF 12 digits, URDF and SDF 9,
+#: USD float32: relative errors up to 1e-7), so MuJoCo ("inertia must satisfy A + B >= C"),
+#: libsdformat and PhysX never see a tensor they reject. A plate 1 m wide meets it from 1 mm thick.
+INERTIA_MARGIN = 1e-6
+
+
+def inertia_problem(inertia) -> str:
+    """Why ``inertia`` (3, 3), kg m^2 about the centre of mass, is not the inertia tensor of a mass
+    distribution ("" when it is): finite, symmetric, positive definite and its principal moments
+    satisfy the triangle inequality with :data:`INERTIA_MARGIN`."""
+    i = np.asarray(inertia, dtype=np.float64)
+    if i.shape != (3, 3) or not np.all(np.isfinite(i)):
+        return "must be a finite 3 x 3 matrix"
+    scale = float(np.abs(i).max())
+    if not np.allclose(i, i.T, atol=1e-12 + 1e-9 * scale):
+        return "must be symmetric"
+    a, b, c = np.linalg.eigvalsh(0.5 * (i + i.T))
+    if not a > 0:
+        return f"must be positive definite (principal moments {a:.3g}, {b:.3g}, {c:.3g} kg m^2)"
+    if a + b < (1.0 + INERTIA_MARGIN) * c:
+        return (f"principal moments {a:.6g}, {b:.6g}, {c:.6g} kg m^2 break the triangle inequality A + B >= C "
+                "(no mass distribution has them; MuJoCo rejects them)")
+    return ""

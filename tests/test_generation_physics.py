@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -172,3 +174,66 @@ def test_door_stays_put_in_mujoco_on_tilted_floor():
         angles.append(abs(float(data.qpos[0])))
     assert angles[0] < 0.01
     assert angles[1] > 0.05
+
+
+def _folding_snap(v: np.ndarray) -> np.ndarray:
+    """A snap onto observed depth that pushes the middle of a plate's top 3 cm down through its
+    bottom (a lamp's shade seen edge-on): the surface folds over itself, its volume stays within
+    the snap's 25 % and its solid inertia stays positive definite, but no body has those moments."""
+    v = np.array(v, dtype=np.float64)
+    c = v[:, :2].mean(axis=0)
+    sel = (v[:, 2] > v[:, 2].mean()) & np.all(np.abs(v[:, :2] - c) <= 0.01, axis=1)
+    v[sel, 2] -= 0.03
+    return v
+
+
+@pytest.mark.parametrize("shell", [None, 0.002])
+def test_a_snap_that_folds_a_thin_part_is_not_kept_and_mujoco_accepts_its_inertia(tmp_path, shell):
+    """Before the snap checked the triangle inequality (not only positive definiteness), this plate
+    became an asset MuJoCo rejected: ``inertia must satisfy A + B >= C`` (a lamp on an unseen photo)."""
+    import trimesh
+
+    from exporters import write_mjcf
+    from generation.assembly import PartSpec, VoxelGeometry, assemble_asset_with_offset
+    from scene_builder.arrays import inertia_problem
+
+    occ = np.zeros((14, 14, 3), bool)
+    occ[1:-1, 1:-1, 1] = True  # a 12 x 12 x 1 cm plate
+    folded = trimesh.Trimesh(_folding_snap(mesh_from_occupancy(occ, 0.01, np.zeros(3)).vertices),
+                             mesh_from_occupancy(occ, 0.01, np.zeros(3)).faces)
+    moments = np.linalg.eigvalsh(np.asarray(folded.moment_inertia))
+    assert moments[0] > 0 and moments[0] + moments[1] < moments[2]  # the fold is what MuJoCo rejects
+    spec = PartSpec("body", None, VoxelGeometry(occ, 0.01, np.zeros(3)), "plastic_abs", shell_thickness_m=shell)
+    asset, _ = assemble_asset_with_offset("lamp_1", "lamp", [spec], surface_snap=_folding_snap)
+    inertia = asset.parts[0].inertial.inertia_kg_m2
+    assert inertia_problem(inertia) == ""
+    a, b, c = np.linalg.eigvalsh(inertia)
+    assert a + b > c
+    from tests.fixtures_scenes import boxes_scene
+
+    base = boxes_scene()
+    scene = dataclasses.replace(base, objects=(dataclasses.replace(base.objects[0], asset=asset),))
+    write_mjcf(scene, tmp_path)  # MuJoCo compiles, loads and steps it
+
+
+def test_mass_properties_of_a_flat_part_are_a_bodys_and_a_folded_mesh_is_refused():
+    """A closed box 1 m x 1 m x 1 nm: its exact second moment across is about 1e-19 of the largest,
+    round-off can make it negative; the Inertial's is raised to SECOND_MOMENT_FLOOR and MuJoCo's
+    triangle inequality holds with the data model's margin. A mesh folded over itself (moments no
+    body has, far beyond round-off) is a ValueError, not an asset."""
+    from generation.physics import SECOND_MOMENT_FLOOR, second_moments
+    from scene_builder.arrays import INERTIA_MARGIN
+
+    for props in (surface_shell_mass_properties(box_solid((0, 0, 0), (1, 1, 1e-9)), RHO, 0.002),
+                  mass_properties(box_solid((0, 0, 0), (1, 1, 1e-9)), RHO)):
+        s, _ = second_moments(props.inertia_kg_m2)
+        a, b, c = np.linalg.eigvalsh(props.inertia_kg_m2)
+        assert s.min() == pytest.approx(SECOND_MOMENT_FLOOR * c, rel=1e-6)
+        assert a + b >= (1 + INERTIA_MARGIN) * c
+        assert c == pytest.approx(props.mass_kg / 6.0, rel=1e-4)  # the plate's own moment, unchanged
+    occ = np.zeros((14, 14, 3), bool)
+    occ[1:-1, 1:-1, 1] = True
+    mesh = mesh_from_occupancy(occ, 0.01, np.zeros(3))
+    mesh.vertices = _folding_snap(mesh.vertices)
+    with pytest.raises(ValueError, match="fold"):
+        mass_properties(mesh, RHO)

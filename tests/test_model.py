@@ -20,7 +20,8 @@ def _box_mesh(sx=0.4, sy=0.3, sz=0.2) -> m.TriangleMesh:
 def _scene(rng: np.random.Generator) -> m.Scene:
     mesh = _box_mesh()
     mat = m.Material("wood", 700.0, 0.5, 0.4, 0.3, 1e10, 0.35, (0.5, 0.3, 0.1, 1.0), "table")
-    inertia = np.diag(rng.uniform(0.01, 0.1, 3))
+    second = rng.uniform(0.005, 0.05, 3)  # int x_i^2 dm: a body's moments are sums of two of them
+    inertia = np.diag(second.sum() - second)
     inertial = m.Inertial(1.7 + rng.random(), rng.normal(size=3) * 0.01, inertia)
     root = m.Part("body", None, None, mesh, (mesh,), mat, inertial, 3, "support", "a box")
     door = m.Part(
@@ -84,6 +85,13 @@ def test_arrays_are_frozen_and_validated():
         m.Inertial(1.0, (np.nan, 0, 0), np.eye(3))
     with pytest.raises(ValueError, match="positive definite"):
         m.Inertial(1.0, (0, 0, 0), np.diag([1.0, 1.0, -1.0]))
+    # Positive definite but no body's: MuJoCo would reject it ("inertia must satisfy A + B >= C").
+    with pytest.raises(ValueError, match="triangle inequality"):
+        m.Inertial(1.0, (0, 0, 0), np.diag([0.01, 0.02, 0.05]))
+    # A flat plate's moments (A + B = C) within round-off fall short of the exporters' margin.
+    with pytest.raises(ValueError, match="triangle inequality"):
+        m.Inertial(1.0, (0, 0, 0), np.diag([1.0, 1.0, 2.0]))
+    m.Inertial(1.0, (0, 0, 0), np.diag([1.0, 1.0, 2.0 - 1e-5]))
     with pytest.raises(ValueError, match="rotation"):
         m.Camera(m.CameraIntrinsics(1, 1, 0, 0, 2, 2), np.diag([1.0, 1.0, -1.0, 1.0]))
 
@@ -106,7 +114,8 @@ def test_intrinsics_project_unproject_and_scale():
 def test_inertial_principal_axes_reconstruct_tensor():
     rng = np.random.default_rng(0)
     a = rng.normal(size=(3, 3))
-    tensor = a @ a.T + np.eye(3) * 0.1
+    second = a @ a.T + np.eye(3) * 0.1  # int x x^T dm about the centre of mass
+    tensor = np.trace(second) * np.eye(3) - second
     moments, axes = m.Inertial(2.0, (0, 0, 0), tensor).principal()
     assert np.isclose(np.linalg.det(axes), 1.0)
     assert np.allclose(axes @ np.diag(moments) @ axes.T, tensor)
