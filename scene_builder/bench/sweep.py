@@ -317,6 +317,7 @@ def run_item(item: Item, work: Path, *, max_width: int = 640, models_dir: Path |
     message or the whole traceback, objects built."""
     folder = work / re.sub(r"[^A-Za-z0-9_.+-]", "_", item.name)
     shutil.rmtree(folder, ignore_errors=True)
+    folder.mkdir(parents=True)
     try:
         image, depth = prepare(item, folder / "in", max_width)
         cmd = [python, "-m", "scene_builder.cli", "build", str(image), "-o", str(folder / "out"), "--viz", "off", "--offline", "-q"]
