@@ -101,7 +101,10 @@ def mesh_from_occupancy(
     pad = 2
     field = np.pad(occ.astype(np.float32), pad)
     if smooth_sigma_vox > 0:
-        field = ndimage.gaussian_filter(field, smooth_sigma_vox)
+        blurred = ndimage.gaussian_filter(field, smooth_sigma_vox)
+        # Voxels with no neighbour (a speck, a grid of isolated voxels) all fall below the
+        # surface level once blurred, and marching cubes finds no surface: they keep their edges.
+        field = blurred if float(blurred.max()) > 0.5 else field
     verts, faces, _, _ = measure.marching_cubes(field, level=0.5, spacing=(voxel_size_m,) * 3)
     # sample (idx) sits at the centre of voxel idx - pad
     verts = verts + np.asarray(origin_m, dtype=np.float64) + (0.5 - pad) * voxel_size_m
