@@ -370,6 +370,8 @@ def _add_object(spec, placed: PlacedObject, out_dir: Path, looks: "_Looks") -> N
 
 
 def _set_inertial(body, asset: ObjectAsset, part: Part) -> None:
+    import mujoco
+
     moments, axes = part.inertial.principal()
     a, b, c = (float(x) for x in moments)
     # MuJoCo's own test of the moments it is given (no tolerance): said here with the object's
@@ -378,6 +380,9 @@ def _set_inertial(body, asset: ObjectAsset, part: Part) -> None:
     if not (a > 0.0 and a + b >= c):
         raise ExportError(f"object {asset.name}: part {part.name} has principal moments {a:.6g}, {b:.6g}, {c:.6g} kg m^2, "
                           "which break A + B >= C (no body has them); its mass properties must come from a closed, unfolded mesh")
+    if min(part.inertial.mass_kg, a) <= mujoco.mjMINVAL and (part.parent is not None or not asset.is_fixed):
+        raise ExportError(f"object {asset.name}: part {part.name} weighs {part.inertial.mass_kg:.3g} kg with a smallest moment of "
+                          f"{a:.3g} kg m^2, under what MuJoCo simulates ({mujoco.mjMINVAL:g}); make it larger or part of the background")
     body.explicitinertial = True
     body.mass = part.inertial.mass_kg
     body.ipos = part.inertial.com_m

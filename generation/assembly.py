@@ -224,7 +224,7 @@ def assemble_asset_with_offset(
     surface_snap: optional callable mapping (V, 3) vertices of a voxel part's visual mesh (input
     frame) to new positions, before mass properties are computed (``generation.visibility``
     moves the vertices the camera saw onto the observed depth)."""
-    from generation.collision import _hull, _merge_smallest, convex_pieces, is_convex_enough, voxel_convex_pieces
+    from generation.collision import _hull, _merge_smallest, convex_pieces, is_convex_enough, solid_piece, voxel_convex_pieces
     from generation.meshing import to_model_mesh, vertex_colors
     from generation.physics import combine_inertials, joint_resistance, mass_properties, shell_mass_properties
     from scene_builder.vocabulary import category
@@ -288,7 +288,9 @@ def assemble_asset_with_offset(
                 seed=seed,
                 cache_dir=config.cache_dir,
             )
-        collisions[spec.name] = tuple(to_model_mesh(p) for p in pieces)
+        if not pieces:  # a decomposition that found nothing: the part's hull
+            pieces = [_hull(v.vertices)]
+        collisions[spec.name] = tuple(to_model_mesh(solid_piece(p)) for p in pieces)
         fallback = np.round(np.asarray(spec.rgba or mat.rgba)[:3] * 255).astype(np.uint8)
         observed = pts is not None and observed_colors_rgb is not None
         # Far from observed points the root part takes the object's median observed colour, other

@@ -34,6 +34,29 @@ def _hull(points: np.ndarray):
     return hull
 
 
+def solid_piece(piece):
+    """``piece`` (a convex ``trimesh.Trimesh``) as a solid the data model accepts: along each of
+    its principal axes where it is thinner than twice ``MIN_PIECE_THICKNESS_M`` (a sliver of a
+    thin part's decomposition, a box of a needle-thin prior, a speck), its vertices are spread
+    to that thickness and the hull taken again; other pieces are returned as they are. The
+    piece grows by at most 0.2 mm."""
+    from scene_builder.arrays import MIN_PIECE_THICKNESS_M, thickness_m
+
+    v = np.asarray(piece.vertices, dtype=np.float64)
+    target = 2.0 * MIN_PIECE_THICKNESS_M
+    if len(v) >= 4 and thickness_m(v) >= target:
+        return piece
+    centre = v.mean(axis=0)
+    axes = np.linalg.svd(v - centre, full_matrices=False)[2] if len(v) > 1 else np.eye(3)
+    axes = np.vstack([axes, np.eye(3)])[:3] if len(axes) < 3 else axes
+    for axis in axes:
+        along = (v - centre) @ axis
+        grow = target - float(along.max() - along.min())
+        if grow > 0:
+            v = np.concatenate([v - 0.5 * grow * axis, v + 0.5 * grow * axis])
+    return _hull(v)
+
+
 def is_convex_enough(tm, ratio: float = CONVEX_VOLUME_RATIO) -> bool:
     """True when ``volume(mesh) / volume(hull) >= ratio``."""
     hull_volume = float(tm.convex_hull.volume)

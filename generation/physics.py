@@ -43,6 +43,8 @@ __all__ = [
     "combine_inertials",
     "is_mass_distribution",
     "second_moments",
+    "too_small",
+    "MIN_SIMULATED",
     "joint_resistance",
     "JointResistance",
 ]
@@ -85,6 +87,17 @@ def is_mass_distribution(inertia: np.ndarray) -> bool:
     s, _ = second_moments(inertia)
     largest = float(s.sum() - s.min())
     return largest > 0.0 and float(s.min()) >= -SECOND_MOMENT_FLOOR * largest
+
+
+#: MuJoCo simulates no moving body whose mass or a principal moment is under mjMINVAL (1e-15 kg,
+#: kg m^2): a part lighter than 1000 x that (a speck of a few tenths of a millimetre) is too small
+#: to simulate (:func:`too_small`), and generation builds something else for it.
+MIN_SIMULATED = 1e-12
+
+
+def too_small(inertial: Inertial) -> bool:
+    """Whether MuJoCo could not simulate a body of these mass properties (see :data:`MIN_SIMULATED`)."""
+    return inertial.mass_kg < MIN_SIMULATED or float(np.linalg.eigvalsh(inertial.inertia_kg_m2).min()) < MIN_SIMULATED
 
 
 def _make_inertial(mass_kg: float, com_m: np.ndarray, inertia: np.ndarray) -> Inertial:

@@ -14,6 +14,7 @@ category's typical depth when the camera saw only a face (never through a wall),
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import replace
 
 import numpy as np
@@ -149,6 +150,7 @@ class ShapePriorGenerator:
         from generation.assembly import ConvexSolids, PartSpec, assemble_asset_with_offset, box_solid
         from generation.completion import complete_occupancy, superellipsoid_occupancy
         from generation.materials import category_material, deformable_settings
+        from generation.physics import too_small
         from scipy.spatial import cKDTree
 
         from generation.pose import fit_box, floor_snap_height_m
@@ -280,6 +282,12 @@ class ShapePriorGenerator:
             return transform_points(box_from_world, space.snap(transform_points(fit.world_from_box, v_box), SNAP_VOXELS * voxel_m))
 
         out = assemble(specs, None, None, description, config, snap)
+        if any(too_small(q.inertial) for q in out.asset.parts):
+            # Carved down to a speck MuJoCo cannot simulate (another object seen at the same
+            # place took its voxels): the object is the box fitted to its points (1 cm or more).
+            box = ConvexSolids((box_solid([-size[0] / 2, -size[1] / 2, 0.0], [size[0] / 2, size[1] / 2, size[2]]),))
+            specs = [dataclasses.replace(specs[0], geometry=box, shell_thickness_m=None, description=f"{label}: fitted box")]
+            out = assemble(specs, None, None, f"{description.split('; ')[0]}; the fitted box (the completion was carved to a speck)", config)
         if structure_mass_kg is not None and out.asset.mass_kg > structure_mass_kg:
             out = replace(out, asset=with_structure_mass(out.asset, structure_mass_kg))
         return replace(out, asset=replace(out.asset, observed_shape=True))

@@ -22,6 +22,7 @@ import dataclasses
 
 import numpy as np
 
+from scene_builder.arrays import MIN_PIECE_THICKNESS_M, thickness_m
 from scene_builder.model import ObjectAsset, TriangleMesh
 
 __all__ = ["MAX_TRIM_M", "clip_convex", "separating_plane", "trim_pair"]
@@ -86,8 +87,8 @@ def clip_convex(vertices: np.ndarray, normal: np.ndarray, offset: float) -> Tria
         hull = ConvexHull(pts)
     except (QhullError, ValueError):
         return None
-    if hull.volume < MIN_PIECE_VOLUME_M3:
-        return None
+    if hull.volume < MIN_PIECE_VOLUME_M3 or thickness_m(pts[hull.vertices]) < MIN_PIECE_THICKNESS_M:
+        return None  # nothing a collision piece can be (the data model's rule) is left
     used = np.unique(hull.simplices)
     remap = -np.ones(len(pts), dtype=np.int64)
     remap[used] = np.arange(len(used))

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["INERTIA_MARGIN", "as_array", "inertia_problem"]
+__all__ = ["INERTIA_MARGIN", "MIN_PIECE_THICKNESS_M", "as_array", "inertia_problem", "thickness_m"]
 
 
 def as_array(value, dtype, shape: tuple[int | None, ...], name: str) -> np.ndarray:
@@ -62,3 +62,21 @@ def inertia_problem(inertia) -> str:
         return (f"principal moments {a:.6g}, {b:.6g}, {c:.6g} kg m^2 break the triangle inequality A + B >= C "
                 "(no mass distribution has them; MuJoCo rejects them)")
     return ""
+
+
+#: Every collision piece is a solid at least this thick (m) along its thinnest principal axis:
+#: MuJoCo cannot take the convex hull of a flat or straight piece ("mesh has coplanar vertices")
+#: nor the volume of a micrometre one ("mesh volume is too small").
+MIN_PIECE_THICKNESS_M = 1e-4
+
+
+def thickness_m(vertices) -> float:
+    """Extent (m) of the points (N, 3) along their least principal axis: 0 for a flat, straight
+    or single-point set (and fewer than 4 points); never less than the width of their hull."""
+    v = np.asarray(vertices, dtype=np.float64)
+    if len(v) < 4 or not np.all(np.isfinite(v)):
+        return 0.0
+    centred = v - v.mean(axis=0)
+    axis = np.linalg.svd(centred, full_matrices=False)[2][-1]
+    along = centred @ axis
+    return float(along.max() - along.min())

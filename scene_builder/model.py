@@ -77,7 +77,7 @@ __all__ = [
 ]
 
 
-from scene_builder.arrays import _check_rigid, _freeze, as_array, inertia_problem  # noqa: E402  (re-exported: as_array is public)
+from scene_builder.arrays import MIN_PIECE_THICKNESS_M, _check_rigid, _freeze, as_array, inertia_problem, thickness_m  # noqa: E402  (as_array is public)
 from scene_builder.robot import RobotModel, RobotPlacement  # noqa: E402  (re-exported)
 
 
@@ -549,7 +549,8 @@ class Part:
     parent: name of the parent part, None for the root part (exactly one per asset).
     joint: joint to the parent, None for the root.
     visual: watertight visual mesh in the asset frame.
-    collision: convex pieces (each a closed convex mesh) in the asset frame.
+    collision: convex pieces (each a closed convex mesh, a solid ``MIN_PIECE_THICKNESS_M`` thick or
+      more) in the asset frame; at least one.
     affordance_rank: 1..10, 1 = most likely to be touched or grasped (PhysX convention).
     affordance: short verb phrase ("pull handle to open", "sit", "place objects on top").
     """
@@ -570,6 +571,9 @@ class Part:
             raise ValueError(f"Part {self.name}: the root part has no joint; every other part has one")
         if not self.collision:
             raise ValueError(f"Part {self.name}: needs at least one collision piece")
+        for k, piece in enumerate(self.collision):
+            if thickness_m(piece.vertices_m) < MIN_PIECE_THICKNESS_M:
+                raise ValueError(f"Part {self.name}: collision piece {k} is flat or tiny; each must be a solid {MIN_PIECE_THICKNESS_M * 1000:g} mm thick or more")
         if not 1 <= self.affordance_rank <= 10:
             raise ValueError(f"Part {self.name}: affordance_rank must be in 1..10")
 

@@ -188,3 +188,178 @@ def test_convex_solids_of_any_proportions_become_an_asset(sizes, seed):
         assert str(err) and "\n" not in str(err)
         return
     _check_asset(asset)
+
+
+@st.composite
+def piece_clouds(draw):
+    """(N, 3) points whose hull is a collision piece: a box or a random hull of any proportions
+    (flat, straight, a single point), centred near the origin."""
+    extents = np.array([draw(LENGTHS), draw(LENGTHS), draw(LENGTHS)])
+    rng = np.random.default_rng(draw(SEEDS))
+    kind = draw(st.sampled_from(["box", "cloud", "flat", "line", "point"]))
+    if kind == "box":
+        pts = _box(extents)[0]
+    else:
+        pts = rng.normal(size=(draw(st.integers(4, 30)), 3)) * extents
+        if kind == "flat":
+            pts[:, 2] = 0.0
+        elif kind == "line":
+            pts[:, 1:] = 0.0
+        elif kind == "point":
+            pts[:] = 0.0
+    return pts @ _rotation(int(rng.integers(2**31))).T + rng.normal(size=3) * 0.05
+
+
+def _asset(name: str, parts_pieces: list[list[np.ndarray]], fixed: bool = False):
+    """An asset whose part k has these pieces (each made a solid as generation does) and their
+    bounding box as its visual."""
+    from generation.assembly import box_solid
+    from generation.collision import _hull, solid_piece
+    from generation.meshing import to_model_mesh, to_trimesh
+    from generation.physics import mass_properties
+    from scene_builder.model import AssetKind, Joint, JointType, Material, ObjectAsset, Part
+
+    wood = Material("wood", 600.0, 0.5, 0.4, 0.3, 1.0e10, 0.35, (0.6, 0.45, 0.3, 1.0), "test")
+    parts = []
+    for k, clouds in enumerate(parts_pieces):
+        pieces = [solid_piece(_hull(c)) for c in clouds]
+        every = np.concatenate([p.vertices for p in pieces])
+        visual = to_trimesh(box_solid(every.min(axis=0), every.max(axis=0)))  # the pieces' bounds: closed
+        parent = None if k == 0 else "part_0"
+        joint = None if k == 0 else Joint(JointType.FIXED, np.array([0.0, 0.0, 1.0]), np.zeros(3))
+        parts.append(Part(f"part_{k}", parent, joint, to_model_mesh(visual), tuple(to_model_mesh(p) for p in pieces), wood,
+                          mass_properties(visual, wood.density_kg_m3)))
+    lo = np.min([p.visual.vertices_m.min(axis=0) for p in parts], axis=0)
+    hi = np.max([p.visual.vertices_m.max(axis=0) for p in parts], axis=0)
+    return ObjectAsset(name, "object", AssetKind.RIGID, tuple(parts), hi - lo, is_fixed=fixed)
+
+
+ASSET_PIECES = st.lists(st.lists(piece_clouds(), min_size=1, max_size=3), min_size=1, max_size=3)
+
+
+def _placement(seed: int, spread: float) -> np.ndarray:
+    from scene_builder.frames import pose, rot_z
+
+    rng = np.random.default_rng(seed)
+    return pose(rot_z(float(rng.uniform(-np.pi, np.pi))), rng.normal(size=3) * spread)
+
+
+@settings(max_examples=200, **QUICK)
+@given(a=ASSET_PIECES, b=ASSET_PIECES, seed=SEEDS, spread=st.sampled_from([0.0, 0.01, 0.05, 0.3]))
+def test_trimming_degenerate_pieces_keeps_a_solid_piece_in_every_part(a, b, seed, spread):
+    from layout.trim import trim_pair
+
+    asset_a, asset_b = _asset("a", a), _asset("b", b)
+    ta, tb = _placement(seed, spread), _placement(seed + 1, spread)
+    new_a, new_b, cut, left = trim_pair(asset_a, ta, asset_b, tb)  # Part() checks every piece is a solid
+    assert np.isfinite(cut) and np.isfinite(left) and cut >= 0 and left >= 0
+    for old, new in ((asset_a, new_a), (asset_b, new_b)):
+        assert [p.name for p in new.parts] == [p.name for p in old.parts]
+        assert all(p.collision for p in new.parts)
+
+
+@settings(max_examples=150, **QUICK)
+@given(moving=ASSET_PIECES, static=ASSET_PIECES, seed=SEEDS, wall=st.booleans())
+def test_uncaging_among_degenerate_pieces_keeps_a_solid_piece_in_every_part(moving, static, seed, wall):
+    from layout.cage import caged, uncage
+    from scene_builder.model import Plane
+
+    mover, holder = _asset("mover", moving), _asset("holder", static, fixed=True)
+    tm, ts = _placement(seed, 0.02), _placement(seed + 1, 0.02)
+    pieces = [p.vertices_m @ tm[:3, :3].T + tm[:3, 3] for part in mover.parts for p in part.collision]
+    walls = (Plane(np.array([1.0, 0.0, 0.0]), 0.2, "wall", 10),) if wall else ()
+    cut = uncage(pieces, [(holder, ts)], walls)
+    if cut is not None:
+        (freed,) = cut
+        assert all(p.collision for p in freed.parts)
+        statics = [p.vertices_m @ ts[:3, :3].T + ts[:3, 3] for part in freed.parts for p in part.collision]
+        assert not caged(pieces, statics, walls)
+
+
+@st.composite
+def perceived_clouds(draw, index: int = 0):
+    """Observed points of one object (perception keeps objects of 3 points or more): a blob, a
+    plane at any tilt, a vertical sheet, a line, a needle, a speck of micrometres, three points
+    repeated, a sliver; 1 mm to 3 m across, anywhere in front of the camera, never below the floor."""
+    kind = draw(st.sampled_from(["blob", "plane", "vertical_sheet", "line", "needle", "speck", "repeated", "sliver"]))
+    scale = draw(st.floats(-3.0, 0.5).map(lambda e: float(10.0**e)))
+    rng = np.random.default_rng(draw(SEEDS))
+    m = draw(st.integers(3, 300))
+    c = np.array([rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0), rng.uniform(0.0, 1.5)])
+    if kind == "plane":
+        a, b = rng.normal(size=3), rng.normal(size=3)
+        p = c + (np.outer(rng.uniform(-1, 1, m), a) + np.outer(rng.uniform(-1, 1, m), b)) * scale
+    elif kind == "vertical_sheet":
+        p = c + np.column_stack([np.zeros(m), rng.uniform(-1, 1, m), rng.uniform(0, 1, m)]) * scale
+    elif kind == "line":
+        p = c + np.outer(rng.uniform(0, 1, m), rng.normal(size=3)) * scale
+    elif kind == "needle":
+        p = c + np.column_stack([rng.normal(0, 1e-4, m), rng.normal(0, 1e-4, m), rng.uniform(0, 3, m) * scale])
+    elif kind == "speck":
+        p = c + rng.normal(0, 1e-5, (m, 3))
+    elif kind == "repeated":
+        p = np.repeat(c + rng.normal(0, scale, (3, 3)), max(1, m // 3), axis=0)
+    elif kind == "sliver":
+        p = c + np.column_stack([rng.uniform(-1, 1, m) * scale, rng.normal(0, 1e-3, m), rng.uniform(0, 1, m) * scale])
+    else:
+        p = c + rng.normal(0, scale, (m, 3))
+    p[:, 2] = np.maximum(p[:, 2], 0.0)
+    return p
+
+
+def _perception(clouds: list[np.ndarray], labels: list[str]):
+    from scene_builder.bench.synthetic_boxes import SyntheticBox, synthetic_perception
+    from scene_builder.model import PerceivedObject
+
+    base = synthetic_perception([SyntheticBox("box", (0.4, 0.4, 0.4), 0.0, (0.0, 0.0, 0.0))])
+    objects = []
+    for i, (p, label) in enumerate(zip(clouds, labels)):
+        mask = np.zeros(base.observation.rgb.shape[:2], dtype=bool)
+        mask[i, :4] = True
+        objects.append(PerceivedObject(i + 1, f"{label}_{i}", label, 0.9, mask, p, np.full((len(p), 3), 128, np.uint8)))
+    return dataclasses.replace(base, objects=tuple(objects))
+
+
+LABEL = st.sampled_from(__import__("scene_builder.vocabulary", fromlist=["LABELS"]).LABELS)
+
+
+@pytest.mark.slow
+@settings(max_examples=100, **QUICK)
+@given(cloud=perceived_clouds(), label=LABEL)
+def test_the_shape_prior_makes_an_asset_of_any_perceived_object(cloud, label):
+    """Every category (articulation templates, shape priors, soft bodies, completed shells) from
+    points that are flat, straight, a speck or a needle."""
+    from generation import generate_assets
+    from scene_builder.config import GenerationConfig
+
+    perception = _perception([cloud], [label])
+    (generated,) = generate_assets(perception, GenerationConfig(), 0)
+    _check_asset(generated.asset)
+    assert np.all(np.isfinite(generated.world_from_asset))
+
+
+@pytest.mark.slow
+@settings(max_examples=30, **QUICK)
+@given(clouds=st.lists(perceived_clouds(), min_size=2, max_size=3), labels=st.lists(LABEL, min_size=3, max_size=3),
+       near=st.floats(0.0, 1.0))
+def test_the_layout_of_degenerate_objects_exports_to_mujoco(tmp_path_factory, clouds, labels, near):
+    """Degenerate objects close together (their completions overlap, get trimmed, cage each
+    other): the layout places them all and MuJoCo loads and steps the written scene."""
+    from exporters import write_mjcf
+    from generation import generate_assets
+    from layout import solve_layout
+    from scene_builder.config import GenerationConfig, LayoutConfig
+
+    centre = clouds[0].mean(axis=0)
+    clouds = [centre + near * (c - c.mean(axis=0)) + (c.mean(axis=0) - centre) * near for c in clouds]
+    clouds = [np.column_stack([c[:, :2], np.maximum(c[:, 2], 0.0)]) for c in clouds]
+    perception = _perception(clouds, labels[: len(clouds)])
+    generated = generate_assets(perception, GenerationConfig(), 0)
+    result = solve_layout(perception, generated, LayoutConfig(), 0)
+    background = result.scene.room.background
+    placed = [o.name for o in result.scene.objects]
+    static = {n for n in (background.static_names if background is not None else ()) if "/" not in n}  # roots, not parts
+    assert sorted(placed + sorted(static)) == sorted(o.name for o in perception.objects)  # placed, or background where seen
+    for placed in result.scene.objects:
+        _check_asset(placed.asset)
+    write_mjcf(result.scene, tmp_path_factory.mktemp("scene"))  # compiles, loads and steps it

@@ -156,9 +156,12 @@ def test_deformable_is_a_flex_that_rests_on_its_support(tmp_path):
 def test_rejected_object_is_named(tmp_path):
     scene = cabinet_scene()
     cab = scene.objects[0].asset
-    # A flat (zero-volume) "convex piece": MuJoCo refuses to compute its hull.
+    # A flat (zero-volume) visual mesh: MuJoCo refuses to compute its hull. (A flat collision
+    # piece is refused by the data model itself, before any exporter.)
     flat = TriangleMesh(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], float), np.array([[0, 1, 2], [1, 3, 2]]))
-    parts = (dataclasses.replace(cab.parts[0], collision=(flat,)),) + cab.parts[1:]
+    with pytest.raises(ValueError, match="flat or tiny"):
+        dataclasses.replace(cab.parts[0], collision=(flat,))
+    parts = (dataclasses.replace(cab.parts[0], visual=flat),) + cab.parts[1:]
     bad = dataclasses.replace(cab, name="broken_cabinet", parts=parts)
     scene = Scene(scene.camera, scene.room, (PlacedObject(bad, scene.objects[0].world_from_asset),))
     with pytest.raises(ExportError, match="broken_cabinet"):
@@ -186,3 +189,15 @@ def test_flex_steps_without_mujoco_warnings_and_rests(tmp_path, young_pa, dampin
     assert [int(w.number) for w in data.warning] == [0] * len(data.warning)
     assert np.linalg.norm(data.flexvert_xpos.mean(axis=0) - start) < 0.01
     assert 0.29 < data.flexvert_xpos[:, 2].min() < 0.31
+
+
+def test_a_part_too_light_for_mujoco_is_named_before_mujoco_refuses_it(tmp_path):
+    """A moving 0.2 mm foam cube weighs 2e-10 kg with moments of 2e-18 kg m^2, under MuJoCo's
+    mjMINVAL (1e-15): the exporter says which object and part, in one line."""
+    from generation.assembly import ConvexSolids, PartSpec, assemble_asset, box_solid
+
+    speck = assemble_asset("speck", "object", [PartSpec("body", None, ConvexSolids((box_solid([0, 0, 0], [2e-4, 2e-4, 2e-4]),)), "foam")])
+    scene = cabinet_scene()
+    scene = Scene(scene.camera, scene.room, scene.objects + (PlacedObject(speck, scene.objects[0].world_from_asset @ np.diag([1, 1, 1, 1.0])),))
+    with pytest.raises(ExportError, match="object speck: part body weighs .* under what MuJoCo simulates"):
+        write_mjcf(scene, tmp_path)

@@ -117,3 +117,21 @@ def test_an_observed_shape_standing_in_for_a_rejected_prior_weighs_what_the_real
     assert len(checked) >= 3, checked
     for name, mass, true_mass in checked:
         assert abs(mass - true_mass) / true_mass < 0.35, (name, mass, true_mass)
+
+
+def test_an_object_carved_to_a_speck_is_its_fitted_box():
+    """Two objects perceived at one place (the same three points): the second one's completion
+    loses every voxel to the first's surface but one. Before, that voxel became a 20 um body
+    (3e-11 kg) and MuJoCo refused the scene ("mass and inertia of moving bodies must be larger
+    than mjMINVAL"); a completion too small to simulate is the box fitted to the points."""
+    from generation import generate_assets
+    from generation.physics import too_small
+    from scene_builder.config import GenerationConfig
+    from tests.test_degenerate_shapes import _perception
+
+    points = np.tile([0.3, -0.5, 0.18], (3, 1))
+    table, bench = generate_assets(_perception([points, points.copy()], ["table", "bench"]), GenerationConfig(), 0)
+    assert not any(too_small(p.inertial) for p in bench.asset.parts)
+    assert "fitted box" in bench.asset.description
+    assert np.allclose(bench.asset.size_m, 0.01)  # fit_box's smallest box
+    assert bench.asset.mass_kg == pytest.approx(1e-6 * bench.asset.parts[0].material.density_kg_m3)
