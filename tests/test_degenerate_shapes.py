@@ -213,16 +213,24 @@ def piece_clouds(draw):
 def _asset(name: str, parts_pieces: list[list[np.ndarray]], fixed: bool = False):
     """An asset whose part k has these pieces (each made a solid as generation does) and their
     bounding box as its visual."""
+    import trimesh
+    from scipy.spatial import ConvexHull
+
     from generation.assembly import box_solid
-    from generation.collision import _hull, solid_piece
+    from generation.collision import solid_piece
     from generation.meshing import to_model_mesh, to_trimesh
     from generation.physics import mass_properties
     from scene_builder.model import AssetKind, Joint, JointType, Material, ObjectAsset, Part
 
+    def piece(cloud):
+        solid = np.asarray(solid_piece(trimesh.Trimesh(cloud, process=False)).vertices)  # as generation makes it
+        hull = ConvexHull(solid)
+        return trimesh.Trimesh(solid[hull.vertices], np.searchsorted(hull.vertices, hull.simplices), process=False)
+
     wood = Material("wood", 600.0, 0.5, 0.4, 0.3, 1.0e10, 0.35, (0.6, 0.45, 0.3, 1.0), "test")
     parts = []
     for k, clouds in enumerate(parts_pieces):
-        pieces = [solid_piece(_hull(c)) for c in clouds]
+        pieces = [piece(c) for c in clouds]
         every = np.concatenate([p.vertices for p in pieces])
         visual = to_trimesh(box_solid(every.min(axis=0), every.max(axis=0)))  # the pieces' bounds: closed
         parent = None if k == 0 else "part_0"
@@ -244,6 +252,7 @@ def _placement(seed: int, spread: float) -> np.ndarray:
     return pose(rot_z(float(rng.uniform(-np.pi, np.pi))), rng.normal(size=3) * spread)
 
 
+@pytest.mark.slow
 @settings(max_examples=200, **QUICK)
 @given(a=ASSET_PIECES, b=ASSET_PIECES, seed=SEEDS, spread=st.sampled_from([0.0, 0.01, 0.05, 0.3]))
 def test_trimming_degenerate_pieces_keeps_a_solid_piece_in_every_part(a, b, seed, spread):
@@ -258,6 +267,7 @@ def test_trimming_degenerate_pieces_keeps_a_solid_piece_in_every_part(a, b, seed
         assert all(p.collision for p in new.parts)
 
 
+@pytest.mark.slow
 @settings(max_examples=150, **QUICK)
 @given(moving=ASSET_PIECES, static=ASSET_PIECES, seed=SEEDS, wall=st.booleans())
 def test_uncaging_among_degenerate_pieces_keeps_a_solid_piece_in_every_part(moving, static, seed, wall):
