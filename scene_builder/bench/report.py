@@ -125,6 +125,18 @@ EXTRAS: tuple[Extra, ...] = (
         timeout_s=5400.0,
     ),
     Extra(
+        "No crash on any photo: every shared image as it is and perturbed",
+        "Every image of `../shared/data` (photos, photos_gt, real, multiview) built as it is, plain and with its depth, and "
+        "6 perturbed copies of each (crops, rotations by 90 / 180 / 270 degrees and small angles, mirror, downscales to a 64 px "
+        "thumbnail, JPEG quality 10-30, dark, overexposed, grey, low contrast, noise, blur; depth and intrinsics moved along) "
+        "through `scene-builder build` (`scene_builder.bench.sweep`): how many ended in a scene, a documented one-line refusal "
+        "(exit status per `scene_builder.errors`) or a traceback (none may). Every 5th build runs every exporter. Several "
+        "hours on 2 shared cores: `--resume` goes on after an interruption.",
+        ("-m", "scene_builder.bench.sweep", "--json", "sweep.json"),
+        markdown=True,
+        timeout_s=6 * 3600.0,
+    ),
+    Extra(
         "A robot in the real scenes (`--robot panda`)",
         "Every real RGB-D sample built with the built-in Franka Panda (`scene_builder.bench.robot`): the target the "
         "placement chose, the robot's clearance, seconds of the `robot` stage and of the build, then 4 s of the scripted "
