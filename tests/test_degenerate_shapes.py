@@ -20,6 +20,7 @@ from hypothesis import strategies as st
 
 from scene_builder.arrays import inertia_problem
 from scene_builder.model import TriangleMesh
+from scene_builder.vocabulary import LABELS
 
 QUICK = dict(deadline=None, derandomize=True, database=None, suppress_health_check=list(HealthCheck))
 
@@ -330,7 +331,7 @@ def _perception(clouds: list[np.ndarray], labels: list[str]):
     return dataclasses.replace(base, objects=tuple(objects))
 
 
-LABEL = st.sampled_from(__import__("scene_builder.vocabulary", fromlist=["LABELS"]).LABELS)
+LABEL = st.sampled_from(LABELS)
 
 
 @pytest.mark.slow
