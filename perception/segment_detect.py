@@ -63,6 +63,11 @@ _SEMANTIC_COVER = 0.15
 _DEPTH_SEES = 0.25
 #: Pixels this far (metres) behind an object's median depth are probably background.
 _BEHIND_M = 0.6
+#: A depth cluster that an object's cut reaches into and that lies this much inside its box is
+#: part of it (:meth:`DetectionSegmenter._whole_cluster`).
+_WHOLE_INSIDE = 0.8
+#: A person's box where the semantic map's people pixels fill this share is outlined by them.
+_PEOPLE_SEEN = 0.15
 #: A depth cluster that instances cover less than this share of is unexplained.
 _UNEXPLAINED = 0.3
 #: Boxes of any class down to this (rescaled) score are object proposals for the classifier ...
@@ -274,7 +279,9 @@ class DetectionSegmenter:
         # over its legs), and cut with the confident masks as background.
         # Pass 3: boxes of any class (or of none the vocabulary has) that nothing explains yet,
         # when the classifier sees a vocabulary object in them (a night stand boxed as "oven").
-        claimed = np.zeros((h, w), dtype=bool)
+        # People and animals are cut first: their pixels are no object's and no witness.
+        removed, n_removed = self._people(rgb, dets, depth_m, valid, background, clusters, sem, sem_labels, points, focal)
+        claimed = removed.copy()
         cands: list[_Candidate] = []
         for stage in ("strong", "weak", "classifier"):
             if stage == "classifier":
@@ -282,17 +289,20 @@ class DetectionSegmenter:
             else:
                 batch = self._confirm(dets, stage == "strong", clusters, sem_labels, claimed, h, w)
             self._outline(rgb, batch, depth_m, valid, background, clusters, sem_labels, points, focal, claimed)
+            for c in batch:
+                if c.mask is not None:
+                    c.mask = c.mask & ~removed
             batch = [c for c in batch if c.mask is not None and c.mask.sum() >= max(30, self.min_points // 3)]
             cands = self._drop_duplicates(self._merge_parts(cands + batch, points, valid & ~background, focal))
-            claimed = np.zeros((h, w), dtype=bool)
+            claimed = removed.copy()
             for c in cands:
                 claimed |= c.mask
         labels, kept = self._paint(cands, depth_m, valid, h, w)
         self._check_names(rgb, kept, labels)
         n_det = len(kept)
-        extras = self._extras(rgb, clusters, cluster_sizes, labels, kept, sem_labels, points, depth_m, valid, background, up_cam, h, w)
+        extras = self._extras(rgb, clusters, cluster_sizes, labels, kept, sem_labels, points, depth_m, valid, background, up_cam, h, w, removed)
         for c in extras:
-            free = c.mask & (labels == 0)
+            free = c.mask & (labels == 0) & ~removed
             if free.sum() >= self.min_points:
                 kept.append(c)
                 labels[free] = len(kept)
@@ -300,7 +310,31 @@ class DetectionSegmenter:
         scores = np.asarray([c.score for c in kept], dtype=np.float32)
         boxes = np.asarray([np.full(4, np.nan) if c.witness.startswith("extra") else c.box for c in kept], dtype=np.float64).reshape(-1, 4)
         self._record(dets, kept, n_det)
-        return InstanceMasks(labels.astype(np.int32), scores, names, boxes)
+        return InstanceMasks(labels.astype(np.int32), scores, names, boxes, removed=removed, removed_count=n_removed)
+
+    def _people(self, rgb, dets: Detections, depth_m, valid, background, clusters, sem, sem_labels, points, focal) -> tuple[np.ndarray, int]:
+        """(H, W) bool pixels of the detected people and animals (:mod:`perception.people`), and
+        how many there are: in each box, the semantic map's people pixels when it sees one
+        there, else the box segmenter's cut."""
+        from perception.people import people_boxes, people_pixels, removal_mask
+
+        h, w = depth_m.shape
+        seen = people_pixels(sem)
+        boxes = people_boxes(dets, seen)
+        if not len(boxes):
+            return np.zeros((h, w), dtype=bool), 0
+        found = [_Candidate(b, 1.0, "person", "people") for b in boxes]
+        cut = [c for c in found if seen is None or seen[_box_slices(c.box, h, w)].mean() < _PEOPLE_SEEN]
+        self._outline(rgb, cut, depth_m, valid, background, clusters, sem_labels, points, focal, np.zeros((h, w), dtype=bool))
+        masks = []
+        for c in found:
+            if c.mask is None:  # the semantic map sees this one: its people pixels in the box
+                c.mask = np.zeros((h, w), dtype=bool)
+                rs, cs = _box_slices(c.box, h, w)
+                c.mask[rs, cs] = seen[rs, cs]
+            if c.mask.any():
+                masks.append(c.mask)
+        return removal_mask(masks, (h, w)), len(masks)
 
     def _confirm(self, dets: Detections, strong: bool, clusters, sem_labels, claimed, h: int, w: int) -> list[_Candidate]:
         """The detections of one pass (``strong``: at CONFIDENT or more; else the weak ones with
@@ -412,6 +446,7 @@ class DetectionSegmenter:
             m = np.asarray(m, dtype=bool)
             if c.depth_sees and m.any() and valid[m].mean() >= 0.5:  # sparse depth: no 3D trim
                 m = self._trim_3d(m, points, off_room, focal)
+                m = m | self._whole_cluster(c, m, clusters, claimed)
             c.mask = m
 
     def _hint(self, c: _Candidate, depth_m, valid, background, clusters, sem_labels) -> np.ndarray:
@@ -459,6 +494,26 @@ class DetectionSegmenter:
                 # Pixels the semantic map gives to another object class belong to that object.
                 sub[(sl != "") & ~same & (sub == 0)] = HINT_PROBABLY_BACKGROUND
         return hint
+
+    @staticmethod
+    def _whole_cluster(c: _Candidate, mask: np.ndarray, clusters: np.ndarray, claimed: np.ndarray) -> np.ndarray:
+        """The pixels of the depth clusters that make the box's object whole: each cluster that
+        the cut ``mask`` reaches into and that lies mostly (:data:`_WHOLE_INSIDE`) inside the
+        box, less what other instances ``claimed``. A box segmenter cuts by colour: a bed's dark
+        wooden footboard from its white mattress, a sofa's legs from its cushions; depth joins
+        them (a cluster reaching far out of the box is another thing, or things, touching it)."""
+        h, w = mask.shape
+        rs, cs = _box_slices(c.box, h, w)
+        ids, inside = np.unique(clusters[rs, cs][mask[rs, cs]], return_counts=True)
+        out = np.zeros_like(mask)
+        for cl, n in zip(ids, inside):
+            if cl == 0 or n < 0.05 * np.count_nonzero(mask):
+                continue
+            pix = clusters == cl
+            in_box = np.count_nonzero(pix[rs, cs])
+            if in_box >= _WHOLE_INSIDE * np.count_nonzero(pix):
+                out |= pix
+        return out & ~claimed
 
     def _trim_3d(self, mask: np.ndarray, points: np.ndarray, off_room: np.ndarray, focal: float) -> np.ndarray:
         """``mask`` less the pixels of its small 3D clusters (bleed onto what is behind or beside
@@ -620,13 +675,14 @@ class DetectionSegmenter:
             out.append((best, p) if best and p >= _CLASSIFIER_SURE else ("", 0.0))
         return out
 
-    def _extras(self, rgb, clusters, cluster_sizes, labels, kept, sem_labels, points, depth_m, valid, background, up_cam, h: int, w: int) -> list[_Candidate]:
-        """Depth clusters and semantic regions no detection explains, when they are clear objects."""
+    def _extras(self, rgb, clusters, cluster_sizes, labels, kept, sem_labels, points, depth_m, valid, background, up_cam, h: int, w: int, removed) -> list[_Candidate]:
+        """Depth clusters and semantic regions no detection explains, when they are clear objects
+        (people and animals, ``removed``, explain what they cover)."""
         import cv2
 
         out = []
         unclear: list[tuple[int, np.ndarray]] = []
-        claimed = labels > 0
+        claimed = (labels > 0) | removed
         up = None if up_cam is None else np.asarray(up_cam, dtype=np.float64)
         for c in np.flatnonzero(cluster_sizes >= 2 * self.min_points):
             if c == 0:
