@@ -11,30 +11,55 @@ import dataclasses
 
 import numpy as np
 
-from layout.background import CARVE_CLEARANCE_M, absorb, carve, column_boxes, observed_structure
+from layout.background import CARVE_CLEARANCE_M, absorb, carve, clip_pad, column_boxes, observed_structure
 from layout.bodies import Body
 from layout.pushes import Solver
-from layout.support import BACKGROUND, UNSUPPORTED, pad_bounds, pad_box
+from layout.support import BACKGROUND, UNSUPPORTED, pad_box
 from scene_builder.model import AssetKind, Background, Plane, TriangleMesh
 
 
+def _pad_frame(b: Body) -> tuple[np.ndarray, float, float, float]:
+    """The pad under ``b``: its rectangle (lo_x, lo_y, hi_x, hi_y) in ``b``'s yawed axes relative
+    to its position, its yaw, and its height band (bottom, top less the carve clearance)."""
+    centre, half, yaw = pad_box(b, b.bottom_m)
+    c, s = np.cos(yaw), np.sin(yaw)
+    mid = (centre[:2] - b.position_m[:2]) @ np.array([[c, -s], [s, c]])
+    rect = np.concatenate([mid - half[:2], mid + half[:2]])
+    return rect, yaw, float(centre[2] - half[2]), float(centre[2] + half[2] - CARVE_CLEARANCE_M)
+
+
+def _obstacles(b: Body, bodies: list[Body]) -> list[np.ndarray]:
+    """World vertices of every collision piece of the bodies other than ``b``."""
+    return [p.verts_rel_m + o.position_m for o in bodies if o is not b for p in o.pieces]
+
+
 def _pad_blocked(b: Body, bodies: list[Body]) -> bool:
-    """Whether the pad under ``b`` (resting on the background) would reach into another body."""
-    lo, hi = pad_bounds(*pad_box(b, b.bottom_m))
-    hi[2] -= CARVE_CLEARANCE_M
-    return any(np.any(np.all(lo < o.piece_hi_rel_m + o.position_m, axis=1) & np.all(hi > o.piece_lo_rel_m + o.position_m, axis=1))
-               for o in bodies if o is not b)
+    """Whether the pad under ``b`` (resting on the background) reaches into another body's
+    pieces (their extent in the pad's axes, within its height band)."""
+    rect, yaw, z_lo, z_hi = _pad_frame(b)
+    return clip_pad(rect, yaw, b.position_m, z_lo, z_hi, _obstacles(b, bodies), np.zeros(2), 0.0, probe=True) is None
 
 
 def unsupport_blocked_pads(bodies: list[Body]) -> None:
     """A body resting on the background whose pad would reach into another body (one placed
-    after it in the support graph, e.g. overlapping it from the side) has no clear support seen
-    under it: it is left where it was seen (``UNSUPPORTED``), like any object with nothing under
+    after it in the support graph, e.g. overlapping it from the side) gets its pad cut back clear
+    of it (``layout.background.clip_pad``, keeping its centre of mass over the pad); only when no
+    cut does is it left where it was seen (``UNSUPPORTED``), like any object with nothing under
     it; what rests on it then rests on the background."""
+    from layout.pushes import support_inset_m
+
     for b in bodies:
-        if b.parent == BACKGROUND and _pad_blocked(b, bodies):
-            b.parent = UNSUPPORTED
-            b.unsupported_reason = "what is under it is another object's, with no face to rest on"
+        if b.parent != BACKGROUND or not _pad_blocked(b, bodies):
+            continue
+        rect, yaw, z_lo, z_hi = _pad_frame(b)
+        c, s = np.cos(yaw), np.sin(yaw)
+        com = b.com_rel_m[:2] @ np.array([[c, -s], [s, c]])
+        clipped = clip_pad(rect, yaw, b.position_m, z_lo, z_hi, _obstacles(b, bodies), com, support_inset_m(b))
+        if clipped is not None:
+            b.pad_rect_m = clipped
+            continue
+        b.parent = UNSUPPORTED
+        b.unsupported_reason = "what is under it is another object's, with no face to rest on"
 
 
 def unsupport_in_walls(solver: Solver, max_push_m: float) -> None:

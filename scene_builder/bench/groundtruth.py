@@ -380,6 +380,8 @@ def run_item(set_name: str, sample: Path, out_dir: Path, config, with_depth: boo
     inter = set(interactive_names(scene))
     objects = tuple((o.name, o.asset.label, o.name in inter) for o in scene.objects)
     item = Item(set_name, sample.name, "built", seconds, fates=fates, objects=objects)
+    if set_name == "real":
+        return item
     if set_name.startswith("sun"):
         true, rtilt = sun_boxes(sample)
         t = sun_gt_from_world(scene.camera.world_from_camera, rtilt)
@@ -407,6 +409,8 @@ def inputs_of(data_dir: Path, sets: tuple[str, ...]) -> list[tuple[str, Path, bo
         out += [("sun-rgbd", p, True) for p in sun]
     if "sun-plain" in sets:
         out += [("sun-plain", p, False) for p in sun]
+    if "real" in sets:  # every RGB-D sample of the real suite: what became of its objects
+        out += [("real", p, True) for p in sorted((data_dir / "real").iterdir()) if (p / "depth.png").exists()]
     if "coco" in sets:
         out += [("coco", p, False) for p in sorted((data_dir / "photos_gt").glob("*")) if (p / "gt_instances.json").exists()]
     return out
@@ -459,7 +463,7 @@ def summarize(items: list[Item]) -> dict:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA, help="the shared data folder (default ../shared/data)")
-    parser.add_argument("--sets", default="sun-rgbd,sun-plain,coco", help="comma-separated: sun-rgbd, sun-plain, coco")
+    parser.add_argument("--sets", default="sun-rgbd,sun-plain,coco,real", help="comma-separated: sun-rgbd, sun-plain, coco, real (every RGB-D sample: fates only)")
     parser.add_argument("--models-dir", type=Path, default=None, help="models dir (default: the bundled offline models)")
     parser.add_argument("--segmentation", default="auto", help="segmentation backend (default auto)")
     parser.add_argument("--keep", type=Path, default=None, help="build into this folder and keep the builds")
