@@ -1,10 +1,11 @@
 """Detection-driven instances: the ``"detections"`` segmentation backend (Grounded-SAM style, with
 geometry and a classifier as second witnesses).
 
-1. **Detect**: every available detector (COCO CenterNet, Open Images SSD) gives boxes down to a
-   low score; :func:`perception.detection.merge_detections` puts them on one scale (a detector's
-   own trust score becomes :data:`~perception.detection.CONFIDENT`) and fuses boxes that several
-   detectors agree on.
+1. **Detect**: every available detector (Grounding DINO prompted with the room vocabulary, COCO
+   CenterNet, Open Images SSD) gives boxes down to a low score;
+   :func:`perception.detection.merge_detections` puts them on one scale (a detector's own trust
+   score becomes :data:`~perception.detection.CONFIDENT`) and fuses boxes that several detectors
+   agree on.
 2. **Confirm** (two passes): a detection at :data:`~perception.detection.CONFIDENT` or more
    stands alone. A weaker one (down to :data:`FLOOR_SCORE`) is kept only when geometry or the
    semantic map confirms it among the pixels the confident ones left: a depth cluster
