@@ -1,10 +1,11 @@
 """Detection-driven instances: the ``"detections"`` segmentation backend (Grounded-SAM style, with
 geometry and a classifier as second witnesses).
 
-1. **Detect**: every available detector (COCO CenterNet, Open Images SSD) gives boxes down to a
-   low score; :func:`perception.detection.merge_detections` puts them on one scale (a detector's
-   own trust score becomes :data:`~perception.detection.CONFIDENT`) and fuses boxes that several
-   detectors agree on.
+1. **Detect**: every available detector (Grounding DINO prompted with the room vocabulary, COCO
+   CenterNet, Open Images SSD) gives boxes down to a low score;
+   :func:`perception.detection.merge_detections` puts them on one scale (a detector's own trust
+   score becomes :data:`~perception.detection.CONFIDENT`) and fuses boxes that several detectors
+   agree on.
 2. **Confirm** (two passes): a detection at :data:`~perception.detection.CONFIDENT` or more
    stands alone. A weaker one (down to :data:`FLOOR_SCORE`) is kept only when geometry or the
    semantic map confirms it among the pixels the confident ones left: a depth cluster
@@ -202,6 +203,7 @@ class DetectionSegmenter:
         self.max_depth_m = float(max_depth_m)
         #: What answered the last ``segment`` call, for ``Perception.backends``.
         self.uses: list[BackendUse] = []
+        self._boxes_per_detector: list[tuple[str, int]] = []
 
     # -- the stages ---------------------------------------------------------------------------
 
@@ -211,6 +213,7 @@ class DetectionSegmenter:
         for nb in self.detectors:
             det: ObjectDetector = nb.backend
             parts.append((det.detect(rgb), float(getattr(det, "accept_score", CONFIDENT))))
+        self._boxes_per_detector = [(nb.name, len(d)) for nb, (d, _) in zip(self.detectors, parts)]
         return merge_detections(parts)
 
     def segment(
@@ -705,8 +708,9 @@ class DetectionSegmenter:
         said = ", ".join(f"{n} by {k}" for k, n in sorted(witnesses.items()))
         names = "+".join(nb.name for nb in self.detectors)
         n_named = sum(1 for lab in dets.labels if lab)
+        each = ", ".join(f"{name} {n}" for name, n in self._boxes_per_detector)
         self.uses = [
-            BackendUse("detection", names, f"{len(dets)} boxes ({n_named} of vocabulary classes); {len(kept)} objects: {said or 'none'}"),
+            BackendUse("detection", names, f"{len(dets)} boxes ({n_named} of vocabulary classes; before merging: {each}); {len(kept)} objects: {said or 'none'}"),
             BackendUse("box-segmentation", self.box_segmenter.name, f"{n_det} box prompts"),
         ]
         if self.semantic is not None:
