@@ -68,6 +68,7 @@ _BEHIND_M = 0.6
 #: A depth cluster that an object's cut reaches into and that lies this much inside its box is
 #: part of it (:meth:`DetectionSegmenter._whole_cluster`).
 _WHOLE_INSIDE = 0.8
+_WHOLE_CUT_SHARE = 0.2
 #: A person's box where the semantic map's people pixels fill this share is outlined by them.
 _PEOPLE_SEEN = 0.15
 #: A depth cluster that instances cover less than this share of is unexplained.
@@ -476,8 +477,10 @@ class DetectionSegmenter:
                 continue
             pix = clusters == cl
             in_box = np.count_nonzero(pix[rs, cs])
-            if in_box >= _WHOLE_INSIDE * np.count_nonzero(pix):
-                out |= pix
+            # Mostly inside the box, and the cut holds a fair share of it (a cluster the cut
+            # only grazes is something the object touches: a wall's pillar behind a wardrobe).
+            if in_box >= _WHOLE_INSIDE * np.count_nonzero(pix) and n >= _WHOLE_CUT_SHARE * in_box:
+                out[rs, cs] |= pix[rs, cs]
         return out & ~claimed
 
     def _trim_3d(self, mask: np.ndarray, points: np.ndarray, off_room: np.ndarray, focal: float) -> np.ndarray:

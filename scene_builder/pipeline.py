@@ -40,7 +40,7 @@ from scene_builder.model import ExportedFiles, Fidelity, LayoutResult, Perceptio
 
 #: Rounds of turning objects that do not stay at rest into static background (what rested on
 #: them may in turn move).
-UNSTABLE_ROUNDS = 2
+UNSTABLE_ROUNDS = 3
 
 
 @dataclass(frozen=True)
@@ -163,7 +163,7 @@ def build(
     # Stages are imported here, not at module level, so `scene-builder --help` stays instant.
     from exporters import export_scene, record_scene, write_mjcf
     from generation import generate_assets
-    from layout import make_background, settled_scene, solve_layout, unstable_objects, verify_scene
+    from layout import make_background, reseat_objects, reseatable, settled_scene, solve_layout, unstable_objects, verify_scene
     from perception import perceive
     from perception.inputs import check_paths
     from scene_builder.report import build_report, write_report
@@ -191,14 +191,23 @@ def build(
         with log.live("physics check", lambda: _verdict_summary(verdict)) as step:
             step(f"{config.layout.settle_s:g} s of simulation, then render-and-compare")
             verdict, fidelity = verify_scene(mjcf_path, scene, config.layout, perceived)
-        for _ in range(UNSTABLE_ROUNDS):
-            # An object that does not stay at rest where it was seen (a thin frame toppling off
-            # a shelf) cannot stand there physically: it becomes static background, not moved.
+        reseated: set[str] = set()
+        for round_ in range(UNSTABLE_ROUNDS):
+            # An object that settled a little and came to rest is re-seated there (once); one
+            # that does not stay at rest where it was seen (a thin frame toppling off a shelf)
+            # cannot stand there physically: it becomes static background, not moved.
             unstable = unstable_objects(verdict, scene, config.layout)
             if not unstable:
                 break
-            with log.stage("unstable to background", lambda: f"{len(unstable)} objects; {_verdict_summary(verdict)}"):
-                layout = make_background(layout, unstable)
+            last = round_ == UNSTABLE_ROUNDS - 1  # the last round re-seats nothing: it must end at rest
+            reseat = {} if last else {n: r for n, r in reseatable(verdict, unstable).items() if n not in reseated}
+            give_up = {n: r for n, r in unstable.items() if n not in reseat}
+            with log.stage("unstable repaired", lambda: f"{len(reseat)} re-seated, {len(give_up)} to background; {_verdict_summary(verdict)}"):
+                if reseat:
+                    layout = reseat_objects(layout, verdict, reseat)
+                    reseated |= set(reseat)
+                if give_up:
+                    layout = make_background(layout, give_up)
                 scene = layout.scene
                 shutil.rmtree(staging / "meshes", ignore_errors=True)  # the old objects' meshes
                 mjcf_path = write_mjcf(scene, staging)
