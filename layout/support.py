@@ -70,6 +70,9 @@ STANDS_ON_LEGS = frozenset(
     {"chair", "stool", "bench", "table", "desk", "sofa", "bed", "cabinet", "drawer_unit", "shelf", "wardrobe", "lamp", "plant", "tv", "monitor"}
 )
 LEGS_MAX_DROP_M = 1.5
+# Anything else with its underside hidden stands on legs down to an object's top at most this
+# share of its own height below it (its hidden lower part).
+HIDDEN_LEGS_SHARE = 1.0
 # ... on the floor, not on low clutter seen under it (a box under a desk, the floor's own depth
 # noise): background under legs counts from this height up (a counter, a static dresser's top).
 LEGS_MIN_BACKGROUND_M = 0.25
@@ -231,8 +234,14 @@ def build_support(
             # (Not onto another object: a hidden support under it would be seen beside it.)
             options = search(HIDDEN_MAX_DROP_M, objects=False)
             hidden_under = bool(options)
-        if not options and seen_under and b.asset.label in STANDS_ON_LEGS:
-            # Its legs (or stem, or base) were not seen, but what it stands on was: legs down to it.
+            if not options:
+                # Nor the floor or background within reach: another object's top under it, hidden
+                # (a box on a shelf unit whose front hides the box's lower half). It stands on
+                # legs down to it when the gap is no more than its own hidden lower part could be.
+                options = [o for o in search(HIDDEN_MAX_DROP_M) if o[3] >= 0 and bottom - o[2] <= max(MAX_DROP_M, HIDDEN_LEGS_SHARE * b.height_m)]
+        if not options and not soft and not b.fixed and hidden is not None and b.asset.label in STANDS_ON_LEGS:
+            # Its legs (or stem, or base) were not seen, or were hidden: legs down to what it
+            # stands on.
             options = search(LEGS_MAX_DROP_M, min_background_m=LEGS_MIN_BACKGROUND_M)
         if options:
             _, _, h, j, k = min(options)
