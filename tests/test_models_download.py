@@ -138,7 +138,8 @@ def test_offline_says_which_fallback_and_why_in_one_line_without_asking_the_hub(
     assert "\n" not in line and "HF_HUB_OFFLINE" in line
     assert f"depth: {depth_fallback} instead of depth-anything-v2" in line
     assert f"segmentation: {seg_fallback} instead of sam2" in line
-    assert f"detection: no detector instead of {GD.name}" in line
+    # The bundled offline detectors answer in Grounding DINO's place.
+    assert f"detection: centernet-mbv3-coco+ssd-mobilenet-oid instead of {GD.name}" in line
     assert "scene-builder models fetch" in line and f"{ALL_MB} MB" in line
     monkeypatch.setenv("HF_HUB_OFFLINE", "0")
     (line,) = prepare_learned_weights(config, need_depth=True, offline=True)
