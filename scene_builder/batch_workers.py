@@ -25,7 +25,7 @@ from multiprocessing.connection import Connection, wait
 from pathlib import Path
 
 from scene_builder.config import BuildConfig, InputSpec
-from scene_builder.errors import SceneBuilderError
+from scene_builder.errors import InputError, SceneBuilderError
 
 
 @dataclass(frozen=True)
@@ -352,7 +352,10 @@ class RayPool:
     input and output paths (a shared filesystem)."""
 
     def __init__(self, address: str, workers: int | None, job: WorkerJob, retries: int, max_items_per_worker: int | None = None) -> None:
-        import ray
+        try:
+            import ray
+        except ImportError as err:  # the optional extra is not installed
+            raise InputError(f"--ray needs Ray, which is not installed ({err}); pip install 'scene-builder[ray]'") from err
 
         self.stats = PoolStats()
         if not ray.is_initialized():
@@ -360,7 +363,14 @@ class RayPool:
             if address == "local":
                 ray.init(num_cpus=workers or os.cpu_count(), include_dashboard=False, log_to_driver=False)
             else:
-                ray.init(address=address, log_to_driver=False)
+                try:
+                    ray.init(address=address, log_to_driver=False)
+                except ConnectionError as err:  # what ray.init documents for no cluster at the address
+                    where = "running on this machine (`ray start --head` starts one)" if address == "auto" else f"at {address}"
+                    raise InputError(
+                        f"--ray {address}: no Ray cluster {where} ({one_line(err)}); "
+                        "pass --ray local to start one here for this batch, or leave --ray out for local workers"
+                    ) from err
         self._ray = ray
         cpus = int(ray.cluster_resources().get("CPU", 1))
         self.slots = max(1, min(workers, cpus) if workers else cpus)

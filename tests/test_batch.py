@@ -140,10 +140,26 @@ def test_cli_errors_are_one_line_with_the_input_exit_status(tmp_path, capsys):
     assert usage.value.code == 2 and "expected 1 or more" in capsys.readouterr().err
 
 
+def test_ray_auto_without_a_cluster_says_that_ray_local_starts_one(tmp_path):
+    """`--ray auto` with no cluster running: one line naming --ray local, exit 3 (Ray's own
+    ConnectionError said neither). RAY_TMPDIR keeps Ray from finding a cluster another test
+    started on this machine."""
+    pytest.importorskip("ray")
+    (tmp_path / "in" / "a").mkdir(parents=True)
+    (tmp_path / "in" / "a" / "rgb.jpg").write_bytes(b"")  # never read: the cluster is looked for first
+    env = {k: v for k, v in _env().items() if k != "RAY_ADDRESS"} | {"RAY_TMPDIR": str(tmp_path / "ray")}
+    run = subprocess.run([*_cli(str(tmp_path / "in"), "-o", str(tmp_path / "out"), "--ray", "auto")], env=env,
+                         capture_output=True, text=True, timeout=300)
+    errors = [line for line in run.stderr.splitlines() if line.startswith("error:")]
+    assert run.returncode == 3 and len(errors) == 1, run.stderr[-2000:]
+    assert errors[0].startswith("error: --ray auto: no Ray cluster running on this machine (`ray start --head` starts one)")
+    assert errors[0].endswith("pass --ray local to start one here for this batch, or leave --ray out for local workers")
+
+
 def test_resume_adopts_a_complete_output_rebuilds_an_interrupted_item_and_clears_its_staging(tmp_path):
     from scene_builder.batch import Manifest, _remove_stale_staging, plan
     from scene_builder.batch_workers import ItemTask
-    from scene_builder.pipeline import write_marker
+    from scene_builder.outdir import write_marker
 
     src, out = tmp_path / "in", tmp_path / "out"
     for name in ("a", "b", "c"):
@@ -162,7 +178,11 @@ def test_resume_adopts_a_complete_output_rebuilds_an_interrupted_item_and_clears
     write_marker(out / "a", InputSpec(src / "a" / "rgb.jpg"))
     (out / ".b.tmp-k2j4").mkdir()
     (out / ".b.tmp-k2j4" / "scene.xml").write_text("<mujoco/>")
+    # a folder named like a set-aside output that scene-builder did not write is the user's: kept
+    (out / ".c.old-x").mkdir()
+    (out / ".c.old-x" / "notes.txt").write_text("mine")
     assert _remove_stale_staging(out, {it.name for it in items}) == 1 and not (out / ".b.tmp-k2j4").exists()
+    assert (out / ".c.old-x" / "notes.txt").read_text() == "mine"
     todo, skipped = plan(manifest, items, out, BatchOptions())
     assert [it.name for it in todo] == ["b", "c"] and skipped == 1
     rows = manifest.rows()
