@@ -599,100 +599,13 @@ def write_description(desc: PhysxDescription, separator: str | None = None) -> s
     return "\n".join(lines)
 
 
-# --------------------------------------------------------------------------------------------
-# basic_info.json (the upstream parsers' output / the annotation schema)
-# --------------------------------------------------------------------------------------------
-
-
 def description_from_basic_info(data: dict, grid: int) -> tuple[PhysxDescription, ParseReport]:
-    """Load an upstream ``basic_info.json`` (PhysX-Anything strings or PhysX-Omni floats, README
-    G6) into the same dataclasses. Normalised params are turned back into the text's grid units.
+    """Load an upstream ``basic_info.json`` into the same dataclasses: see
+    :func:`generation.physx.basic_info.description_from_basic_info` (its own module, which
+    checks every value's type; imported here when called, as it imports this module)."""
+    from generation.physx.basic_info import description_from_basic_info as read
 
-    Raises ProtocolError (one line) when the data does not follow that schema."""
-    try:
-        return _from_basic_info(data, grid)
-    except ProtocolError:
-        raise
-    except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError, RecursionError) as err:
-        raise ProtocolError(f"basic_info does not follow the PhysX schema ({type(err).__name__}: {str(err)[:80]})") from err
-
-
-def _from_basic_info(data: dict, grid: int) -> tuple[PhysxDescription, ParseReport]:
-    warnings: list[str] = []
-    parts: list[PhysxPart] = []
-    for entry in data.get("parts", []):
-        label = int(entry["label"])
-        where = f"l_{label}"
-
-        def q(key: str, kind: str) -> float | None:
-            v = entry.get(key)
-            if v is None:
-                warnings.append(f"{where}: {key} is null")
-                return None
-            if isinstance(v, (int, float)):
-                return _sig(float(v) * _DEFAULT_SCALE[kind])
-            return _quantity(str(v), kind, f"{where} {key}", warnings)
-
-        rank = int(entry.get("priority_rank", 5))
-        parts.append(
-            PhysxPart(
-                label=label,
-                name=str(entry.get("name", "")),
-                affordance_rank=min(max(rank, 1), 10),
-                material=str(entry.get("material", "")),
-                density_kg_m3=q("density", "density"),
-                youngs_modulus_pa=q("Young's Modulus (GPa)", "modulus"),
-                poisson_ratio=q("Poisson's Ratio", "ratio"),
-                description=str(entry.get("Basic_description", "")),
-            )
-        )
-    groups: list[PhysxGroup] = []
-    for key, value in sorted(data.get("group_info", {}).items(), key=lambda kv: int(kv[0])):
-        gid = int(key)
-        if gid == 0:
-            groups.append(PhysxGroup(0, tuple(int(v) for v in value), MovementType.FIXED))
-            continue
-        members, parent_s, params, type_s = value
-        parent = int(parent_s) if str(parent_s).isdigit() else None
-        mt = MovementType(str(type_s).upper())
-        p = [float(v) for v in params]
-
-        def pos(v: list[float]) -> tuple[float, float, float]:
-            return tuple(_sig((c + 0.5) * grid) for c in v)  # type: ignore[return-value]
-
-        kw: dict = {}
-        if mt is MovementType.SLIDE:
-            kw = {"slide_direction": tuple(p[0:3]), "slide_range_vox": (_sig(p[6] * grid), _sig(p[7] * grid))}
-        elif mt is MovementType.REVOLUTE:
-            kw = {
-                "axis_direction": tuple(p[0:3]),
-                "axis_position_vox": pos(p[3:6]),
-                "revolute_range_deg": (_sig(p[6] * 180.0), _sig(p[7] * 180.0)),
-            }
-        elif mt is MovementType.BALL:
-            kw = {"axis_position_vox": pos(p[3:6])}
-        elif mt is MovementType.REVOLUTE_SLIDE:
-            kw = {
-                "axis_direction": tuple(p[0:3]),
-                "axis_position_vox": pos(p[3:6]),
-                "revolute_range_deg": (_sig(p[6] * 180.0), _sig(p[7] * 180.0)),
-                "slide_direction": tuple(p[8:11]),
-                "slide_range_vox": (_sig(p[14] * grid), _sig(p[15] * grid)),
-            }
-        groups.append(PhysxGroup(gid, tuple(int(m) for m in members), mt, parent, **kw))
-    labels = [p.label for p in parts]
-    if not parts:
-        raise ProtocolError("basic_info has no parts")
-    dimension = _parse_dimension(str(data.get("dimension", "")), warnings)
-    desc = PhysxDescription(
-        name=str(data.get("object_name", "")),
-        category=str(data.get("category", "")),
-        dimension_cm=dimension,
-        parts=tuple(sorted(parts, key=lambda p: p.label)),
-        groups=_repair_groups(groups, sorted(labels), warnings),
-        grid=grid,
-    )
-    return desc, ParseReport(tuple(warnings))
+    return read(data, grid)
 
 
 # --------------------------------------------------------------------------------------------

@@ -13,7 +13,7 @@ ranges-lenient      ``tokens.decode_ranges_lenient``             nothing
 omni-strict         ``tokens.decode_omni``                       ``TokenFormatError``
 omni-lenient        ``tokens.decode_omni_lenient``               nothing
 description         ``generation.physx.protocol.parse_description``  ``ProtocolError``
-basic-info          ``protocol.description_from_basic_info``     ``ProtocolError``
+basic-info          ``generation.physx.basic_info.description_from_basic_info``  ``ProtocolError``
 scene-json          ``scene_builder.serialize.scene_from_json``  ``SceneFileError``
 depth-file          ``perception.inputs.load_depth``             ``InputError``
 camera-json         ``perception.inputs.read_camera_json``       ``InputError``
