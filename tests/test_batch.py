@@ -342,3 +342,44 @@ def test_a_build_leaves_mujocos_asset_cache_empty(tmp_path):
     assert mujoco.mj_getCacheSize(cache) == 0
     mujoco.MjModel.from_xml_path(str(result.files.mjcf))
     assert mujoco.mj_getCacheSize(cache) > 0
+
+
+def test_run_item_records_a_refused_photo_and_raises_a_bug(tmp_path, monkeypatch):
+    """The errors a build documents (SceneBuilderError; OSError of the machine) are the item's
+    one-line error; anything else is a bug and is not dressed up as the photo's fault."""
+    import scene_builder.pipeline as pipeline
+    from scene_builder.batch_workers import ItemTask, WorkerJob, internal_error, run_item
+
+    monkeypatch.setattr("scene_builder.batch_workers.warm_up", lambda job: 0.0)
+    task = ItemTask("a", tmp_path / "a.png", None, tmp_path / "out", 1)
+
+    def refused(*args, **kwargs):
+        raise InputError("cannot read a.png as an image (truncated); pass a JPEG or PNG photo")
+
+    monkeypatch.setattr(pipeline, "build", refused)
+    outcome = run_item(task, WorkerJob(CONFIG))
+    assert (outcome.state, outcome.error) == ("failed", "InputError: cannot read a.png as an image (truncated); pass a JPEG or PNG photo")
+
+    def buggy(*args, **kwargs):
+        return {}["missing"]
+
+    monkeypatch.setattr(pipeline, "build", buggy)
+    with pytest.raises(KeyError) as bug:
+        run_item(task, WorkerJob(CONFIG))
+    line = internal_error(bug.value)
+    assert line.startswith("internal error (a bug of scene-builder; please report it): KeyError: 'missing' at test_batch.py:")
+
+
+@pytest.mark.slow
+def test_a_bug_in_a_local_worker_fails_its_item_with_the_cause_and_is_not_retried(tmp_path):
+    """A worker whose build raises an exception no build documents (here: it was given no
+    configuration at all) reports it before it dies; the item fails once with that cause."""
+    from PIL import Image
+
+    (tmp_path / "in" / "a").mkdir(parents=True)
+    Image.new("RGB", (32, 32)).save(tmp_path / "in" / "a" / "rgb.png")
+    summary = run_batch(tmp_path / "in", tmp_path / "out", None, BatchOptions(retries=2, progress=False))
+    assert (summary.done, summary.failed) == (0, 1)
+    error = _items(tmp_path / "out")["a"]["error"]
+    assert error.startswith("internal error (a bug of scene-builder; please report it): AttributeError: ") and "pipeline.py:" in error
+    assert len(_attempts(tmp_path / "out", "a")) == 1  # a bug is not retried
