@@ -87,8 +87,9 @@ def build_registries(config: PerceptionConfig) -> PerceptionRegistries:
         lambda: _detection_segmenter(registries, config),
         priority=150,
         available=detectors_missing,
-        description="detector boxes (COCO CenterNet, Open Images SSD) confirmed by depth clusters and the semantic map, "
-        "outlined by SAM 2 or GrabCut; clear unexplained depth clusters as extra objects",
+        description="detector boxes (Grounding DINO prompted with the room vocabulary, COCO CenterNet, Open Images SSD) "
+        "confirmed by depth clusters and the semantic map, outlined by SAM 2 or GrabCut; clear unexplained depth clusters "
+        "as extra objects",
     )
     return registries
 
@@ -121,18 +122,22 @@ def prepare_learned_weights(
     progress: bool = True,
 ) -> tuple[str, ...]:
     """Make the default learned perception models usable for a build, the first time downloading
-    them (Depth Anything V2 when ``need_depth``, SAM 2) with progress bars, unless ``offline``,
-    ``HF_HUB_OFFLINE`` or no network (``perception.models.offline_reason``, decided in about
-    ``timeout_s``). Only the models of tasks whose backend is "auto" or that model's backend are
-    considered. Returns one-line notes for the user: what was downloaded, or which fallback each
-    task will use and why (empty when every weight was already here)."""
+    them (Depth Anything V2 when ``need_depth``, SAM 2, Grounding DINO) with progress bars, unless
+    ``offline``, ``HF_HUB_OFFLINE`` or no network (``perception.models.offline_reason``, decided in
+    about ``timeout_s``). Only the models of tasks whose backend is "auto" or that model's backend
+    are considered (SAM 2 and Grounding DINO also for the ``"detections"`` segmenter, whose
+    detector and box prompts they are). Returns one-line notes for the user: what was downloaded,
+    or which fallback each task will use and why (empty when every weight was already here)."""
     from perception import models
 
     wanted: list[tuple[str, str, str]] = []  # (task, backend, model)
     if need_depth and config.depth_backend in ("auto", "depth-anything-v2"):
         wanted.append(("depth", "depth-anything-v2", models.default_model("depth").name))
-    if config.segmentation_backend in ("auto", "sam2"):
+    if config.segmentation_backend in ("auto", "sam2", "detections"):
         wanted.append(("segmentation", "sam2", models.default_model("segmentation").name))
+    if config.segmentation_backend in ("auto", "detections"):
+        detector = models.default_model("detection").name
+        wanted.append(("detection", detector, detector))
     missing = [w for w in wanted if models.resolve_weights(w[2], config.models_dir) is None]
     if not missing:
         return ()
@@ -159,7 +164,11 @@ def prepare_learned_weights(
     registries = build_registries(config)
     uses = []
     for task, backend, _ in missing:
-        fallback = next((e.name for e in getattr(registries, task).entries() if e.name != backend and e.available() is None), "none")
+        others = [e.name for e in getattr(registries, task).entries() if e.name != backend and e.available() is None]
+        if task == "detection":  # the "detections" segmenter runs every available detector
+            fallback = "+".join(others) if others else "no detector"
+        else:
+            fallback = others[0] if others else "none"
         uses.append(f"{task}: {fallback} instead of {backend}")
     return (
         f"no {' or '.join(names)} weights here and no download ({why}): {'; '.join(uses)}. "

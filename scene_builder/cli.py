@@ -105,8 +105,8 @@ def _add_scene_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--offline",
         action="store_true",
-        help="never download weights (also HF_HUB_OFFLINE=1); by default the first run downloads Depth Anything V2 "
-        "and SAM 2 (about 255 MB) when the network allows, else says which fallback it uses",
+        help="never download weights (also HF_HUB_OFFLINE=1); by default the first run downloads Depth Anything V2, "
+        "SAM 2 and Grounding DINO (about 945 MB) when the network allows, else says which fallback it uses",
     )
     p.add_argument("--depth-backend", default="auto", help="depth backend when no depth map is given (default auto; see `models list`)")
     p.add_argument(
@@ -218,7 +218,7 @@ def make_parser() -> argparse.ArgumentParser:
     ml = msub.add_parser("list", help="show each known model and whether its weights are available locally")
     ml.add_argument("--models-dir", type=Path, help="folder with model weights (also $SCENE_BUILDER_MODELS)")
     mf = msub.add_parser("fetch", help="download model weights (needs a network; HF_ENDPOINT selects a mirror)")
-    mf.add_argument("names", nargs="*", help="model names (default: the ones a build uses, Depth Anything V2 and SAM 2, about 255 MB)")
+    mf.add_argument("names", nargs="*", help="model names (default: the ones a build uses, Depth Anything V2, SAM 2 and Grounding DINO, about 945 MB)")
     mf.add_argument("--models-dir", type=Path, help="where to put them (default: the Hugging Face cache)")
     return parser
 

@@ -329,7 +329,6 @@ def load_stages(threads: int = 0) -> None:
     """Import every stage and the heavy libraries a build uses, once per process: what a batch
     worker loads before its first photo instead of during it. ``threads`` > 0 caps torch's
     intra-op threads (workers sharing a machine's cores)."""
-    import coacd  # noqa: F401
     import mujoco  # noqa: F401
     import pxr.Usd  # noqa: F401
     import rerun  # noqa: F401
@@ -338,9 +337,12 @@ def load_stages(threads: int = 0) -> None:
 
     import exporters  # noqa: F401
     import generation  # noqa: F401
+    from generation.collision import import_coacd
     import layout  # noqa: F401
     import perception  # noqa: F401
     from perception.backends import build_registries  # noqa: F401
+
+    import_coacd()  # onnxruntime first: the other order crashes at the first detection
 
     if threads > 0:
         torch.set_num_threads(threads)

@@ -1,5 +1,5 @@
 """``basic_info.json`` (the upstream parsers' output / the annotation schema, README G6 of
-``shared/data/physx_protocol``) read into the dataclasses of :mod:`generation.physx.protocol`.
+``shared/data/physx_protocol``) read into the dataclasses of :mod:`generation.physx.description`.
 
 Every value is checked for its type before it is used, and a value of the wrong type or range
 raises :class:`~generation.physx.protocol.ProtocolError` naming the field: no exception is turned
@@ -25,20 +25,9 @@ from __future__ import annotations
 import math
 import re
 
-from generation.physx.protocol import (
-    _DEFAULT_SCALE,
-    _MAX_DIGITS,
-    MovementType,
-    ParseReport,
-    PhysxDescription,
-    PhysxGroup,
-    PhysxPart,
-    ProtocolError,
-    _parse_dimension,
-    _quantity,
-    _repair_groups,
-    _sig,
-)
+from generation.physx.description import MovementType, ParseReport, PhysxDescription, PhysxGroup, PhysxPart, ProtocolError
+from generation.physx.description import round_sig as _sig
+from generation.physx.protocol import _DEFAULT_SCALE, _MAX_DIGITS, _parse_dimension, _quantity, _repair_groups
 
 #: How many params each movement type reads (direction, position, range; both for CB).
 _PARAMS_NEEDED = {
