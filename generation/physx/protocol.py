@@ -105,7 +105,10 @@ def _quantity(text: str, kind: str, what: str, warnings: list[str]) -> float | N
         return None
     if len(values) > 1:
         warnings.append(f"{what}: {len(values)} values in {raw!r}, using their mean")
-    value = math.fsum(values) / len(values)
+    # fsum raises on inf + -inf (ValueError) and on an intermediate sum beyond float range
+    # (OverflowError): such values are out of range for any quantity, and dropped below.
+    finite = all(math.isfinite(v) and abs(v) < 1e300 for v in values)
+    value = math.fsum(values) / len(values) if finite else math.inf
     if not math.isfinite(value):
         warnings.append(f"{what}: {raw[:40]!r} is out of range, dropped")
         return None
