@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 
 from perception.protocols import BoxPromptSegmenter, DepthEstimator, InstanceSegmenter, ObjectDetector, ObjectNamer, SemanticSegmenter
 from scene_builder.config import PerceptionConfig
+from scene_builder.errors import ModelUnavailableError
 from scene_builder.registry import Registry
 
 __all__ = ["PerceptionRegistries", "build_registries"]
@@ -144,10 +145,18 @@ def prepare_learned_weights(
     size_mb = sum(models.model_spec(m).download_mb for m in names)
     why = models.offline_reason(offline, timeout_s)
     if why is None:
+        from huggingface_hub import errors as hf_errors
+
+        # What a failed download raises: fetch_models' ModelUnavailableError (the hub went away
+        # since the check above); what snapshot_download documents (OSError, which its HTTP errors
+        # RepositoryNotFoundError, RevisionNotFoundError... are, and ValueError); and its HTTP
+        # client's transport errors (a connection dropped mid-file), whose base HTTPError is not an
+        # OSError (huggingface_hub.errors subclasses it). The build goes on with its fallbacks; the
+        # note says why.
+        download_errors = (ModelUnavailableError, OSError, ValueError, hf_errors.HTTPError)
         try:
             paths = models.fetch_models(names, config.models_dir, endpoint_timeout_s=max(timeout_s, 5.0), progress=progress)
-        except Exception as err:  # noqa: BLE001 - any failed optional download (HTTP, disk, the hub client's
-            # own transport errors, which are not OSErrors) leaves the build on its fallbacks; the note says why
+        except download_errors as err:
             why = f"download failed: {type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}".rstrip(": ")
         else:
             where = ", ".join(str(p) for p in paths)

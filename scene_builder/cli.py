@@ -33,10 +33,11 @@ and glTF, with a rerun recording to inspect it.
 
 Frames: world Z up, metres, kilograms, floor at z = 0; camera frame OpenCV (x right, y down, z forward).
 
-Output folder: -o may replace only a folder scene-builder wrote (it holds .scene-builder and
-report.json); anything else is refused unless --overwrite. The current folder and a folder holding
-the input are always refused. Without -o the output is ./<image stem>_scene, which is replaced only
-by a build of the same image.
+Output folder: -o replaces only a folder scene-builder wrote (its .scene-builder marker records
+every file with its hash) and only if nothing in it was added or changed since; --overwrite
+replaces such a folder even so. A folder scene-builder did not write is never replaced. The
+current folder and a folder holding the input are always refused. Without -o the output is
+./<image stem>_scene, which is replaced only by a build of the same image.
 
 Exit status: 0 ok, 1 other failure, 2 usage error (bad command line), 3 input error (bad or
 missing file, implausible depth or intrinsics, output folder refused), 4 model weights missing,
@@ -85,7 +86,8 @@ def _add_build_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="replace the output folder even if scene-builder did not write it (its content is deleted)",
+        help="replace the output folder scene-builder wrote even if files in it were added or changed since (they are "
+        "deleted); a folder scene-builder did not write is never replaced",
     )
     _add_scene_options(p)
 
@@ -187,7 +189,7 @@ def make_parser() -> argparse.ArgumentParser:
 
     d = sub.add_parser("demo", help="render a procedural room with MuJoCo, rebuild it, and compare with the truth")
     d.add_argument("-o", "--out", type=Path, default=Path("demo_scene"), help="output folder (default demo_scene/)")
-    d.add_argument("--overwrite", action="store_true", help="replace the output folder even if scene-builder did not write it")
+    d.add_argument("--overwrite", action="store_true", help="replace the output folder scene-builder wrote even if it was changed since")
     d.add_argument("--seed", type=int, default=0, help="room and build seed (default 0)")
     d.add_argument("--objects", type=int, default=6, help="number of objects in the room (default 6)")
     d.add_argument("--viz", choices=("save", "spawn", "off"), default="save", help="rerun recording (default save)")
@@ -268,7 +270,7 @@ def _add_batch_parser(sub) -> None:
     ba.add_argument("--max-worker-memory-gb", type=_positive, default=8.0, metavar="GB",
                     help="resident memory limit of one worker: a worker over it is killed and replaced, its item failed and retried (default 8)")
     ba.add_argument("--max-items-per-worker", type=_positive_int, metavar="N", help="replace a worker after N photos (default never)")
-    ba.add_argument("--overwrite", action="store_true", help="replace OUT_ROOT/<name> even if scene-builder did not write it")
+    ba.add_argument("--overwrite", action="store_true", help="replace OUT_ROOT/<name> scene-builder wrote even if it was changed since")
     _add_scene_options(ba)
 
 
@@ -382,7 +384,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     from scene_builder.config import BuildConfig, ExportConfig, InputSpec
     from scene_builder.bench.render import write_demo_input
     from scene_builder.bench.truth import compare_to_ground_truth
-    from scene_builder.pipeline import add_to_marker, build, stderr_console
+    from scene_builder.outdir import add_to_marker
+    from scene_builder.pipeline import build, stderr_console
 
     with tempfile.TemporaryDirectory(prefix="scene-builder-demo-") as tmp:
         sample = write_demo_input(Path(tmp) / "room", seed=args.seed, n_objects=args.objects)
@@ -416,6 +419,8 @@ def _cmd_check(args: argparse.Namespace) -> int:
 
     if not args.out.is_dir():
         raise InputError(f"{args.out} is not an output folder; pass the folder written by `scene-builder build`")
+    if args.interact:
+        _check_interaction_writable(args.out)  # before anything runs: --interact writes into the folder
     problems = check_output(args.out)
     if args.interact:
         problems = problems + _interact(args.out)
@@ -428,14 +433,32 @@ def _cmd_check(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_interaction_writable(out: Path) -> None:
+    """Raise InputError unless ``out`` is a build of scene-builder whose interaction.json is
+    absent or the one scene-builder wrote (so writing it destroys nothing of the user's)."""
+    from scene_builder.errors import InputError
+    from scene_builder.outdir import MARKER, owns_file, read_marker
+
+    if read_marker(out) is None:
+        raise InputError(
+            f"{out} is not an output folder of scene-builder (no {MARKER} beside report.json), and --interact writes "
+            "interaction.json into it; run `scene-builder check` without --interact, or pass a build's folder"
+        )
+    if not owns_file(out, "interaction.json"):
+        raise InputError(
+            f"{out / 'interaction.json'} was not written by scene-builder or was changed since; move it away, then run --interact again"
+        )
+
+
 def _interact(out: Path) -> tuple[str, ...]:
     """Run the interaction probes on OUT/scene.xml, print one line per probe, write
-    OUT/interaction.json; returns the probes that miss the bar."""
+    OUT/interaction.json (``out`` checked by :func:`_check_interaction_writable`); returns the
+    probes that miss the bar."""
     import dataclasses
     import json
 
     from layout.interaction import interaction_problems, probe_lines, probe_scene
-    from scene_builder.pipeline import add_to_marker
+    from scene_builder.outdir import add_to_marker, replace_file
 
     plans, pushes, joints = probe_scene(out / "scene.xml")
     for line in probe_lines(plans, pushes, joints):
@@ -447,9 +470,8 @@ def _interact(out: Path) -> tuple[str, ...]:
         "joints": [{f.name: getattr(j, f.name) for f in dataclasses.fields(j) if f.name not in ("times_s", "positions")} for j in joints],
         "problems": list(problems),
     }
-    tmp = out / "interaction.json.tmp"
-    tmp.write_text(json.dumps(doc, indent=2) + "\n")
-    tmp.replace(out / "interaction.json")
+    _check_interaction_writable(out)  # again: the probes took a while
+    replace_file(out, "interaction.json", json.dumps(doc, indent=2) + "\n")
     add_to_marker(out, "interaction.json")
     return problems
 

@@ -117,6 +117,21 @@ def test_a_build_downloads_once_then_the_learned_backends_answer(online, tmp_pat
     assert len(online.requests) == n
 
 
+def test_a_failed_download_leaves_the_build_on_its_fallbacks_and_says_why(online, monkeypatch, tmp_path):
+    """The hub answers but lacks the repo (huggingface_hub's RepositoryNotFoundError, an OSError),
+    or goes away between the reachability check and the download: one note each naming the
+    fallback and the cause, never a traceback."""
+    config = PerceptionConfig(models_dir=tmp_path / "models")
+    online.repos.pop(SAM.repo_id)
+    (line,) = prepare_learned_weights(config, need_depth=False, progress=False)
+    assert line.startswith(f"no {SAM.name} or {GD.name} weights here and no download (download failed: RepositoryNotFoundError")
+    assert "segmentation: " in line and "instead of sam2" in line and "\n" not in line
+    monkeypatch.setenv("HF_ENDPOINT", f"http://127.0.0.1:{_closed_port()}")
+    monkeypatch.setattr(models, "offline_reason", lambda *a, **k: None)  # it was reachable a moment ago
+    (line,) = prepare_learned_weights(config, need_depth=False, progress=False)
+    assert line.startswith(f"no {SAM.name} or {GD.name} weights here and no download (download failed: ")
+
+
 def test_sensor_depth_needs_no_depth_model(online, tmp_path):
     config = PerceptionConfig(models_dir=tmp_path / "models")
     notes = prepare_learned_weights(config, need_depth=False, progress=False)

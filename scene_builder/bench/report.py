@@ -116,6 +116,14 @@ EXTRAS: tuple[Extra, ...] = (
         markdown=True,
     ),
     Extra(
+        "Output folder: what the marker's hashes cost",
+        "Real RGB-D samples built with every output (`scene_builder.bench.outdir`): files and MB written, build seconds, "
+        "seconds to hash them into the marker `.scene-builder` and to hash them again when a rebuild checks the folder, "
+        "beside reading them without hashing.",
+        ("-m", "scene_builder.bench.outdir"),
+        markdown=True,
+    ),
+    Extra(
         "Parser fuzzing",
         "Every parser of outside data (`scene_builder.bench.fuzz`): PhysX geometry token decoders (strict and lenient), the "
         "PhysX text protocol, basic_info.json, scene.json, depth, camera.json and image files, on mutated real seeds. "
