@@ -323,3 +323,56 @@ def simulate_reach(m, d, arm: ArmIds, target: np.ndarray, seconds: float, on_ste
         if on_step is not None:
             on_step(k)
     return ReachResult(float(np.linalg.norm(d.site_xpos[arm.site] - target)), min_err, contacts)
+
+
+#: A target of the reach figure counts as reached when the simulated tool ends this close to it
+#: with no robot-scene contact on the way.
+SCORE_TOL_M = 0.02
+SCORE_REACH_S = 4.0
+
+
+@dataclass
+class TargetReach:
+    """One target of the fixed set (``layout.robot.reach_targets``) tried from the placed robot.
+
+    target_m: (3,) the point; owner: the top it is above; in_workspace: within the arm's reach
+    (``RobotModel.reach_m``) of its shoulder; reached: the simulated reach ended within
+    SCORE_TOL_M without a robot-scene contact (the tool's axis held down, else free);
+    final_error_m / contacts: of the last reach tried (nan / 0 outside the workspace);
+    hold_tool_axis: whether the reach that counted held the tool's axis."""
+
+    target_m: np.ndarray
+    owner: str
+    in_workspace: bool
+    reached: bool = False
+    final_error_m: float = float("nan")
+    contacts: int = 0
+    hold_tool_axis: bool = True
+
+
+def score_reach(mjcf_path: Path, placement: RobotPlacement, targets: np.ndarray, owners: tuple[str, ...],
+                seconds: float = SCORE_REACH_S) -> list[TargetReach]:
+    """Try every target of ``targets`` (T, 3) within the workspace of the robot of the scene
+    ``mjcf_path`` (written with ``placement``): from the home pose, :func:`simulate_reach` for
+    ``seconds`` with the tool's axis held, and again with it free when that misses (as the
+    placement's alternatives do). The figure is the share of in-workspace targets reached."""
+    import mujoco
+
+    m = mujoco.MjModel.from_xml_path(str(mjcf_path))
+    d = mujoco.MjData(m)
+    arm = _arm(m, placement)
+    model = placement.model
+    shoulder = placement.world_from_robot[:3, :3] @ model.arm_mount_m + placement.position_m
+    out = []
+    for target, owner in zip(np.asarray(targets, dtype=np.float64), owners):
+        if float(np.linalg.norm(target - shoulder)) > model.reach_m:
+            out.append(TargetReach(target, owner, False))
+            continue
+        for hold in (True, False):
+            reset_home(m, d, arm)
+            r = simulate_reach(m, d, arm, target, seconds, hold_tool_axis=hold)
+            ok = r.final_error_m <= SCORE_TOL_M and not r.contacts
+            if ok or not hold:
+                out.append(TargetReach(target, owner, True, ok, r.final_error_m, len(r.contacts), hold))
+                break
+    return out

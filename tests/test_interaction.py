@@ -21,7 +21,7 @@ from scene_builder.frames import pose
 from scene_builder.model import AssetKind, PlacedObject, Scene
 
 from .conftest import PHOTOS, real_sample_params, real_samples, require
-from .fixtures_scenes import box_asset, boxes_scene, cabinet_scene, fixture_camera, fixture_room
+from .fixtures_scenes import WOOD, box_asset, boxes_scene, cabinet_scene, fixture_camera, fixture_room
 
 SAMPLES = real_samples(with_intrinsics=True)
 MOVE_M = (0.02, 0.10)
@@ -77,21 +77,46 @@ def test_what_rests_on_the_pushed_object_rides_along(tmp_path):
     assert carried_m > 0.5 * r.displacement_m  # it went along, not left behind
 
 
-def test_push_direction_has_room_ahead_and_a_push_into_a_wall_is_caught(tmp_path):
-    from layout.interaction import MIN_CLEARANCE_M, interaction_problems, plan_push, push_object
+def test_push_direction_has_room_ahead_and_a_push_into_a_wall_is_blocked(tmp_path):
+    from layout.interaction import MIN_CLEARANCE_M, PUSHER_FORCE_N, interaction_problems, plan_push, push_object
 
-    # a 40 cm box 2 cm in front of the back wall (x = 2), a fixed counter 3 cm beside it (+y)
+    # a 40 cm box 2 cm in front of the back wall (x = 2), a fixed counter 6 cm beside it (+y): the
+    # pusher (2 cm thick, starting 1 cm off) fits beside the counter, not between box and wall
     box = PlacedObject(box_asset("box", (0.4, 0.4, 0.3)), pose(np.eye(3), (2.0 - 0.22, 0.0, 0.0)), "floor")
-    counter = PlacedObject(box_asset("counter", (0.6, 0.6, 0.9), is_fixed=True, label="counter"), pose(np.eye(3), (1.7, 0.53, 0.0)), "floor")
+    counter = PlacedObject(box_asset("counter", (0.6, 0.6, 0.9), is_fixed=True, label="counter"), pose(np.eye(3), (1.7, 0.56, 0.0)), "floor")
     path = _mjcf(Scene(fixture_camera(), fixture_room(), (box, counter)), tmp_path)
     (plan,) = plan_push(path)
     assert plan.pushable and plan.clearance_m >= MIN_CLEARANCE_M
-    assert plan.direction_xy[0] < -0.9 or plan.direction_xy[1] < -0.9  # away from the wall, or along it away from the counter
+    assert plan.direction_xy == pytest.approx((0.0, -1.0), abs=1e-6)  # along the wall, away from the counter
     assert_good_push(push_object(path, "box", plan.direction_xy))
     into_wall = push_object(path, "box", (1.0, 0.0))
     assert into_wall.clearance_m < 0.05 and into_wall.displacement_m < 0.03
+    # the pusher pressed with its whole force and stopped short; the wall took the push
+    assert into_wall.stalled and into_wall.max_force_n == pytest.approx(PUSHER_FORCE_N, rel=0.02)
+    assert into_wall.resisted_by[0][0].startswith("wall_") and into_wall.resisted_by[0][1] > 0.5 * PUSHER_FORCE_N
     problems = interaction_problems((into_wall,))
-    assert problems and all(p.startswith("push box: moved") for p in problems), problems
+    assert len(problems) == 1 and problems[0].startswith("push box: blocked by wall_"), problems
+    # toward -x the pusher would have to stand in the 2 cm between the wall and the box
+    behind_wall = push_object(path, "box", (-1.0, 0.0))
+    assert behind_wall.pusher_travel_m == 0.0 and behind_wall.displacement_m == 0.0
+    assert interaction_problems((behind_wall,)) == ("push box: no room for the pusher behind it: the paddle overlaps wall_0",) or \
+        interaction_problems((behind_wall,))[0].startswith("push box: no room for the pusher behind it: the paddle overlaps wall_")
+
+
+def test_an_object_too_heavy_for_the_force_limit_fails_and_a_stronger_pusher_moves_it(tmp_path):
+    from layout.interaction import PUSHER_FORCE_N, interaction_problems, push_object
+
+    # solid wood, 50 cm cube: 75 kg; sliding it on the floor takes about 75 x 9.81 x 0.5 N
+    heavy = PlacedObject(box_asset("chest", (0.5, 0.5, 0.5), WOOD), pose(np.eye(3), (0.8, 0.0, 0.0)), "floor")
+    path = _mjcf(Scene(fixture_camera(), fixture_room(), (heavy,)), tmp_path)
+    weak = push_object(path, "chest", (0.0, 1.0))
+    assert weak.mass_kg == pytest.approx(75.0, rel=0.01) and weak.slide_force_n > 2 * PUSHER_FORCE_N
+    assert weak.stalled and weak.displacement_m < 0.005 and weak.max_force_n == pytest.approx(PUSHER_FORCE_N, rel=0.02)
+    (problem,) = interaction_problems((weak,))
+    assert problem.startswith(f"push chest: too heavy for {PUSHER_FORCE_N:.0f} N: sliding it takes about"), problem
+    strong = push_object(path, "chest", (0.0, 1.0), force_n=2 * weak.slide_force_n)
+    assert_good_push(strong)
+    assert not strong.stalled and strong.max_force_n > weak.slide_force_n  # it took more than 100 N
 
 
 def test_an_object_that_would_fall_off_its_support_is_not_pushable_and_says_why(tmp_path):
@@ -105,21 +130,29 @@ def test_an_object_that_would_fall_off_its_support_is_not_pushable_and_says_why(
     assert not plan.pushable and plan.reason.count("no support 9 cm ahead") == 4, plan.reason
 
 
-def test_a_neighbour_just_beside_is_not_dragged_along_its_side(tmp_path):
-    """Two boxes 5 mm apart, not touching: a push along the gap would close it as soon as the
-    box swerves and drag the neighbour by friction, so each box is pushed only straight away
-    from the other (nyuv2_metric3d_00050: a sofa pushed past a shelf 2 mm beside it moved the
-    shelf 1.1 cm)."""
-    from layout.interaction import plan_push, push_object
+def test_a_neighbour_just_beside_blocks_the_pusher_and_is_pushed_along(tmp_path):
+    """Two boxes 5 mm apart: the pusher does not fit between them, so neither is pushed away
+    from the other (the push fails: no room for the pusher); pushed toward the other, a box
+    moves it too (a failure naming it); pushed along the gap on the line of its centre of mass,
+    it leaves the other where it was. The planner forecasts all of it (no side is safe: along the
+    gap a swerve would drag the other by friction)."""
+    from layout.interaction import interaction_problems, plan_push, push_object
 
     a = PlacedObject(box_asset("box_a", (0.4, 0.4, 0.3)), pose(np.eye(3), (0.6, 0.0, 0.0)), "floor")
     b = PlacedObject(box_asset("box_b", (0.3, 0.3, 0.3)), pose(np.eye(3), (0.6, 0.2 + 0.005 + 0.15, 0.0)), "floor")
     path = _mjcf(Scene(fixture_camera(), fixture_room(), (a, b)), tmp_path)
     plans = {p.name: p for p in plan_push(path)}
-    assert plans["box_a"].pushable and plans["box_a"].direction_xy == pytest.approx((0.0, -1.0), abs=1e-6)
-    assert plans["box_b"].pushable and plans["box_b"].direction_xy == pytest.approx((0.0, 1.0), abs=1e-6)
-    for p in plans.values():
-        assert_good_push(push_object(path, p.name, p.direction_xy))
+    assert not plans["box_a"].pushable
+    assert "toward its right (-y) 0 cm behind it for the pusher" in plans["box_a"].reason
+    assert plans["box_a"].reason.count("would drag box_b") == 2
+    away = push_object(path, "box_a", (0.0, -1.0))
+    assert interaction_problems((away,)) == ("push box_a: no room for the pusher behind it: the paddle overlaps box_b",)
+    assert away.displacement_m == 0.0 and away.max_other_m == 0.0
+    into = push_object(path, "box_a", (0.0, 1.0))
+    assert into.max_other_m > 0.02 and dict(into.others)["box_b"] == into.max_other_m
+    assert [p for p in interaction_problems((into,)) if "box_b moved" in p], interaction_problems((into,))
+    along = push_object(path, "box_a", plans["box_a"].direction_xy)
+    assert_good_push(along)
 
 
 @pytest.mark.parametrize("fixed", [False, True], ids=["free", "fixed"])
