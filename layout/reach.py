@@ -270,17 +270,22 @@ def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
-def robot_contacts(m, d, mine: set[int]) -> list[tuple[str, str, float]]:
-    """(robot geom, other geom, distance) of every contact between the robot and the scene."""
+def robot_contacts(m, d, mine) -> list[tuple[str, str, float]]:
+    """(robot geom, other geom, distance) of every contact between the robot and the scene;
+    ``mine``: the robot's geom ids (a set) or a (ngeom,) bool mask of them."""
+    n = d.ncon
+    if not n:
+        return []
+    mask = mine if isinstance(mine, np.ndarray) else np.isin(np.arange(m.ngeom), sorted(mine))
+    g = d.contact.geom[:n]
+    valid = (g >= 0).all(axis=1)
+    g = np.where(valid[:, None], g, 0)
     out = []
-    for i in range(d.ncon):
-        c = d.contact[i]
-        a, b = int(c.geom[0]), int(c.geom[1])
-        if a < 0 or b < 0 or (a in mine) == (b in mine):
-            continue
-        own, other = (a, b) if a in mine else (b, a)
+    for i in np.flatnonzero(valid & (mask[g[:, 0]] != mask[g[:, 1]])):
+        a, b = int(g[i, 0]), int(g[i, 1])
+        own, other = (a, b) if mask[a] else (b, a)
         out.append((m.geom(own).name or f"geom {own} of {m.body(int(m.geom_bodyid[own])).name}",
-                    m.geom(other).name or f"geom {other}", float(c.dist)))
+                    m.geom(other).name or f"geom {other}", float(d.contact.dist[i])))
     return out
 
 
@@ -307,7 +312,7 @@ def simulate_reach(m, d, arm: ArmIds, target: np.ndarray, seconds: float, on_ste
     rot = d.site_xmat[arm.site].reshape(3, 3).copy() if hold_tool_axis else None
     path = tool_path(start, np.asarray(target, dtype=np.float64), 0.8 * seconds)
     q = d.qpos[arm.qpos].copy()
-    mine = {int(g) for g in range(m.ngeom) if m.body(int(m.geom_bodyid[g])).name.startswith(PREFIX)}
+    mine = np.array([m.body(int(m.geom_bodyid[g])).name.startswith(PREFIX) for g in range(m.ngeom)], dtype=bool)
     every = max(1, int(round(CONTROL_DT_S / m.opt.timestep)))
     contacts: list[tuple[float, str, str, float]] = []
     min_err = np.inf
