@@ -5,10 +5,11 @@ the default configuration, then every movable object is pushed by the force-limi
 every door and drawer pulled open (``layout.interaction.probe_scene``, as ``scene-builder check
 --interact``).
 
-    .venv/bin/python -m scene_builder.bench.interaction [--data ../shared/data] [--built DIR ...] [--force-n 100]
+    .venv/bin/python -m scene_builder.bench.interaction [--data ../shared/data] [--built DIR ...] [--force-n 100 [250 ...]]
 
 ``--built`` probes output folders already written by ``scene-builder build`` instead of
-building; ``--force-n`` sets the pusher's force limit (default ``PUSHER_FORCE_N``, 100 N).
+building; ``--force-n`` sets the pusher's force limit (default ``PUSHER_FORCE_N``, 100 N; with
+several, each scene is probed with each and the first gets the full table).
 Prints a Markdown table per sample (pushes: movable objects, pushes that passed, the passed
 pushes' displacement median and range, the largest motion of any other object, the largest
 tilt; joints: how many opened, the smallest open fraction, the largest excursion beyond a
@@ -106,6 +107,28 @@ def _row(name: str, out: Path, force_n: float) -> tuple[str, list[tuple[str, str
     return row, fails, len(pushes), len(good)
 
 
+def _report(force_n: float, rows: list[str], fails: list, movable: int, passed: int, not_built: list[str], table: bool) -> None:
+    print(f"### Pusher force limit {force_n:g} N")
+    print()
+    if table:
+        print("| sample | pushes passed / movable | passed pushes moved, cm: median (range) | others moved, max mm | tilt, max deg "
+              "| joints opened, min share of range | beyond a limit, max (hinge / slide) | carcass moved, max mm | problems | probe s |")
+        print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+        print("\n".join(rows))
+        print()
+    push_fails = [f for f in fails if f[1]]
+    kinds = Counter(failure_kind(reason) for _, _, reason in push_fails)
+    rate = f"{passed}/{movable} = {passed / movable:.0%}" if movable else "0/0"
+    print(f"Push success rate at {force_n:g} N: {rate} of the movable objects of {len(rows)} built scenes"
+          + (f" ({len(not_built)} not built: {'; '.join(not_built)})" if not_built else "") + ".")
+    if kinds:
+        print("Failures by kind (first reason): " + ", ".join(f"{k} {v}" for k, v in kinds.most_common()) + ".")
+    if fails:
+        print()
+        print("\n".join(f"- {s}: {o + ': ' if o else ''}{reason}" for s, o, reason in fails))
+    print()
+
+
 def main(argv: list[str] | None = None) -> int:
     from layout.interaction import PUSHER_FORCE_N
     from scene_builder.errors import SceneBuilderError
@@ -113,19 +136,20 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="folder with real/ and photos/ (default ../shared/data)")
     ap.add_argument("--built", type=Path, nargs="*", help="probe these output folders instead of building")
-    ap.add_argument("--force-n", type=float, default=PUSHER_FORCE_N, help=f"the pusher's force limit (default {PUSHER_FORCE_N:g} N)")
+    ap.add_argument("--force-n", type=float, nargs="+", default=[PUSHER_FORCE_N],
+                    help=f"the pusher's force limit; several: each scene is probed with each (default {PUSHER_FORCE_N:g} N)")
     args = ap.parse_args(argv)
 
-    rows, fails, not_built = [], [], []
-    movable = passed = 0
+    runs = {f: ([], [], [0, 0]) for f in args.force_n}  # force -> (rows, fails, [movable, passed])
+    not_built: list[str] = []
 
     def add(name: str, out: Path) -> None:
-        nonlocal movable, passed
-        r, f, n, k = _row(name, out, args.force_n)
-        rows.append(r)
-        fails.extend(f)
-        movable += n
-        passed += k
+        for f, (rows, fails, counts) in runs.items():
+            r, fl, n, k = _row(name, out, f)
+            rows.append(r)
+            fails.extend(fl)
+            counts[0] += n
+            counts[1] += k
 
     if args.built:
         for out in args.built:
@@ -141,23 +165,8 @@ def main(argv: list[str] | None = None) -> int:
                     not_built.append(f"{src.name}: {type(err).__name__}: {str(err).splitlines()[0]}")
                     continue
                 add(src.name, out)
-    print(f"Pusher force limit {args.force_n:g} N.")
-    print()
-    print("| sample | pushes passed / movable | passed pushes moved, cm: median (range) | others moved, max mm | tilt, max deg "
-          "| joints opened, min share of range | beyond a limit, max (hinge / slide) | carcass moved, max mm | problems | probe s |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
-    print("\n".join(rows))
-    print()
-    push_fails = [f for f in fails if f[1]]
-    kinds = Counter(failure_kind(reason) for _, _, reason in push_fails)
-    rate = f"{passed}/{movable} = {passed / movable:.0%}" if movable else "0/0"
-    print(f"Push success rate: {rate} of the movable objects of {len(rows)} built scenes"
-          + (f" ({len(not_built)} not built: {'; '.join(not_built)})" if not_built else "") + ".")
-    if kinds:
-        print("Failures by kind (first reason): " + ", ".join(f"{k} {v}" for k, v in kinds.most_common()) + ".")
-    if fails:
-        print()
-        print("\n".join(f"- {s}: {o + ': ' if o else ''}{reason}" for s, o, reason in fails))
+    for k, (f, (rows, fails, (movable, passed))) in enumerate(runs.items()):
+        _report(f, rows, fails, movable, passed, not_built, table=k == 0)
     return 0
 
 
