@@ -92,8 +92,9 @@ def as_model(model, with_pusher: bool):
 
 
 class Objects:
-    """Free objects of the model: root body ``NAME`` with free joint ``NAME/free``; every body
-    and colliding geom of each object; and who owns each geom (:meth:`owner`)."""
+    """Movable objects of the model: rigid ones (root body ``NAME`` with free joint ``NAME/free``;
+    every body and colliding geom of each) and soft ones (a flex ``NAME`` whose vertices are
+    bodies on three world-aligned slide joints); who owns each geom and flex (:meth:`owner`)."""
 
     def __init__(self, m) -> None:
         import mujoco
@@ -106,6 +107,25 @@ class Objects:
             j = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, f"{name}/free")
             if j >= 0 and int(m.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_FREE) and int(m.jnt_bodyid[j]) == b:
                 self.root[name] = b
+        self.flex: dict[str, int] = {}
+        self.flex_qpos: dict[str, np.ndarray] = {}  # (V, 3) qpos addresses of each vertex's x, y, z slides
+        vertex_body = np.zeros(m.nbody, dtype=bool)
+        for f in range(m.nflex):
+            name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_FLEX, f)
+            if not name:
+                continue
+            bodies = m.flex_vertbodyid[int(m.flex_vertadr[f]) : int(m.flex_vertadr[f]) + int(m.flex_vertnum[f])]
+            adr = []
+            for b in bodies:
+                j0, nj = int(m.body_jntadr[b]), int(m.body_jntnum[b])
+                axes = [m.jnt_axis[j] for j in range(j0, j0 + nj)] if j0 >= 0 else []
+                if nj != 3 or not np.allclose(np.abs(np.array(axes)), np.eye(3)) or not np.allclose(m.body_quat[b], [1, 0, 0, 0]):
+                    break  # not free-moving vertices on world-aligned slides: not a movable soft body
+                adr.append([int(m.jnt_qposadr[j0 + int(np.argmax(np.abs(axes[k])))]) for k in range(3)])
+            else:
+                self.flex[name] = f
+                self.flex_qpos[name] = np.array(adr, dtype=int).reshape(-1, 3)
+                vertex_body[bodies] = True
         by_root = {b: n for n, b in self.root.items()}
         self.body_object = [by_root.get(int(m.body_rootid[b]), "") for b in range(m.nbody)]
         colliding = (m.geom_contype != 0) | (m.geom_conaffinity != 0)
@@ -115,12 +135,21 @@ class Objects:
         self.colliding = colliding.copy()
         if pusher >= 0:
             self.colliding[pusher] = False
-        self.names = sorted(self.root)
+        self.rigid = sorted(self.root)
+        self.names = sorted(self.root) + sorted(self.flex)  # rigid first, then soft
         self.groups = np.zeros(6, dtype=np.uint8)  # geom groups that hold colliding geoms (for rays)
         for g in np.flatnonzero(self.colliding):
             if 0 <= int(m.geom_group[g]) < 6:
                 self.groups[int(m.geom_group[g])] = 1
-        self._owner = [self._owner_of(m, g) for g in range(m.ngeom)]
+        owners = [self._owner_of(m, g) for g in range(m.ngeom)]
+        flex_owner = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_FLEX, f) or f"flex {f}" for f in range(m.nflex)]
+        self.owners = sorted(set(owners) | set(flex_owner))
+        index = {n: k for k, n in enumerate(self.owners)}
+        self.geom_owner = np.array([index[n] for n in owners], dtype=int)
+        self.flex_owner = np.array([index[n] for n in flex_owner], dtype=int)
+        self.index = index
+        self._m_vertadr, self._m_vertnum = m.flex_vertadr.copy(), m.flex_vertnum.copy()
+        self._m_qposadr = {n: int(m.jnt_qposadr[int(m.body_jntadr[b])]) for n, b in self.root.items()}
 
     def _owner_of(self, m, g: int) -> str:
         if self.geom_object[g]:
@@ -135,10 +164,44 @@ class Objects:
     def owner(self, g: int) -> str:
         """What geom ``g`` belongs to: a free object's name, fixed furniture's, ``robot``, the
         pusher, ``floor``, ``wall_i`` or ``background``."""
-        return self._owner[int(g)]
+        return self.owners[int(self.geom_owner[int(g)])]
+
+    def contact_owners(self, d) -> np.ndarray:
+        """(ncon, 2) index into ``owners`` of each side of each contact (a geom's or a flex's)."""
+        n = d.ncon
+        g = d.contact.geom[:n]
+        f = d.contact.flex[:n]
+        return np.where(g >= 0, self.geom_owner[np.maximum(g, 0)], self.flex_owner[np.maximum(f, 0)] if len(self.flex_owner) else -1)
 
     def geoms(self, name: str) -> np.ndarray:
         return np.flatnonzero((self.geom_object == name) & self.colliding)
+
+    def vertices(self, d, name: str) -> np.ndarray:
+        """(V, 3) world positions of soft object ``name``'s vertices."""
+        f = self.flex[name]
+        return d.flexvert_xpos[int(self._m_vertadr[f]) : int(self._m_vertadr[f]) + int(self._m_vertnum[f])]
+
+    def mass(self, m, name: str) -> float:
+        """Mass (kg) of object ``name``: its bodies', or a soft body's vertices'."""
+        if name in self.root:
+            return float(m.body_subtreemass[self.root[name]])
+        f = self.flex[name]
+        return float(m.body_mass[m.flex_vertbodyid[int(m.flex_vertadr[f]) : int(m.flex_vertadr[f]) + int(m.flex_vertnum[f])]].sum())
+
+    def position(self, d, name: str) -> np.ndarray:
+        """Where object ``name`` is: its root body's origin, or a soft body's vertex centroid."""
+        return d.xpos[self.root[name]].copy() if name in self.root else self.vertices(d, name).mean(axis=0)
+
+    def shift(self, d_to, d_from, names, offset_xy) -> None:
+        """``d_to.qpos``: ``d_from``'s with the objects ``names`` moved by ``offset_xy``."""
+        for n in names:
+            if n in self.root:
+                a = int(self._m_qposadr[n])
+                d_to.qpos[a : a + 2] = d_from.qpos[a : a + 2] + offset_xy
+            else:
+                q = self.flex_qpos[n]
+                d_to.qpos[q[:, 0]] = d_from.qpos[q[:, 0]] + offset_xy[0]
+                d_to.qpos[q[:, 1]] = d_from.qpos[q[:, 1]] + offset_xy[1]
 
 
 def settle(m, d, seconds: float, on_step=None) -> None:
@@ -204,7 +267,7 @@ def cast(m, d, objects: Objects, pnt, vec, accept, cap: float, normal: np.ndarra
         if dist < 0.0 or gone + dist > cap:
             return float("inf")
         g = int(gid[0])
-        if objects.colliding[g] and accept(g):
+        if g >= 0 and objects.colliding[g] and accept(g):  # -1: a flex, which rays pass
             return gone + dist
         step = dist + 1e-4
         gone += step

@@ -35,8 +35,9 @@ not fall: none sinks more than ``CARRIED_DROP_M`` (5 cm) or tilts past ``layout.
 (their slip relative to the pushed object is reported). A failure says why:
 no room for the pusher, the pusher stopped by something else, blocked by what it was pushed
 against (the largest force against the push), too heavy for the force limit (its weight times
-the friction of its support against the limit), moved too far, tilted, others moved. Free bodies
-only: soft bodies (flex) are neither pushed nor tracked.
+the friction of its support against the limit), moved too far, tilted, others moved. Soft
+bodies (a flex) are pushed and tracked too: their position is their vertices' centroid, they have
+no tilt, and their start is found from their vertices (rays pass through a flex).
 """
 
 from __future__ import annotations
@@ -97,15 +98,13 @@ SIDES = ("front (+x)", "left (+y)", "back (-x)", "right (-y)")  # of the object'
 def _riders(m, d, objects: Objects, name: str) -> set[str]:
     """Objects resting on ``name``, directly or on each other (from the contacts at rest)."""
     on: dict[str, set[str]] = {}
+    own = objects.contact_owners(d)
+    movable = set(objects.names)
     for i in range(d.ncon):
-        c = d.contact[i]
-        g0, g1 = int(c.geom[0]), int(c.geom[1])
-        if g0 < 0 or g1 < 0:
+        a, b = objects.owners[own[i, 0]], objects.owners[own[i, 1]]
+        if a not in movable or b not in movable or a == b:
             continue
-        a, b = objects.geom_object[g0], objects.geom_object[g1]
-        if not a or not b or a == b:
-            continue
-        nz = float(c.frame[2])  # contact normal, from geom 0 toward geom 1
+        nz = float(d.contact.frame[i, 2])  # contact normal, from side 0 toward side 1
         if nz > RIDER_NORMAL_Z:
             on.setdefault(a, set()).add(b)  # b rests on a
         elif nz < -RIDER_NORMAL_Z:
@@ -120,10 +119,15 @@ def _riders(m, d, objects: Objects, name: str) -> set[str]:
     return out
 
 
-def _face_directions(d, root: int) -> list[np.ndarray]:
-    """The four horizontal face directions of the body frame (+x, +y, -x, -y; unit, z = 0)."""
-    rot = d.xmat[root].reshape(3, 3)
-    x = rot[:, 0].copy()
+def _face_directions(d, objects: Objects, name: str) -> list[np.ndarray]:
+    """The four horizontal face directions of the body frame (+x, +y, -x, -y; unit, z = 0); of a
+    soft body, its vertices' principal horizontal axes."""
+    if name in objects.root:
+        x = d.xmat[objects.root[name]].reshape(3, 3)[:, 0].copy()
+    else:
+        xy = objects.vertices(d, name)[:, :2]
+        _, _, vt = np.linalg.svd(xy - xy.mean(axis=0), full_matrices=False)
+        x = np.array([vt[0, 0], vt[0, 1], 0.0]) * (1.0 if vt[0, 0] + 1e-9 * vt[0, 1] >= 0 else -1.0)
     x[2] = 0.0
     if np.linalg.norm(x) < 1e-6:  # lying on its side: the world axes
         x = np.array([1.0, 0.0, 0.0])
@@ -145,25 +149,22 @@ def _clearance(m, d, objects: Objects, movers: set[str], direction: np.ndarray) 
     d2.qpos[:] = d.qpos
     d2.mocap_pos[:] = d.mocap_pos
     d2.mocap_quat[:] = d.mocap_quat
-    adrs = [int(m.jnt_qposadr[int(m.body_jntadr[objects.root[n]])]) for n in sorted(movers)]
-    moving = np.isin(objects.geom_object, sorted(movers))
+    moving_ids = [objects.index[n] for n in sorted(movers)]
     s = 0.0
     while s < CLEARANCE_CAP_M - 1e-9:
         s = min(s + CLEARANCE_STEP_M, CLEARANCE_CAP_M)
-        for a in adrs:
-            d2.qpos[a : a + 2] = d.qpos[a : a + 2] + s * direction[:2]
+        objects.shift(d2, d, sorted(movers), s * direction[:2])
         mujoco.mj_kinematics(m, d2)
+        mujoco.mj_flex(m, d2)
         mujoco.mj_collision(m, d2)
         n = d2.ncon
         if not n:
             continue
-        g = d2.contact.geom[:n]
-        valid = (g[:, 0] >= 0) & (g[:, 1] >= 0)
-        g = np.where(valid[:, None], g, 0)
-        one_side = moving[g[:, 0]] ^ moving[g[:, 1]]
+        moving = np.isin(objects.contact_owners(d2), moving_ids)
+        one_side = moving[:, 0] ^ moving[:, 1]
         lateral = np.abs(d2.contact.frame[:n, 2]) < RIDER_NORMAL_Z
         deep = d2.contact.dist[:n] < -BLOCK_DEPTH_M
-        if np.any(valid & one_side & lateral & deep):
+        if np.any(one_side & lateral & deep):
             return s - CLEARANCE_STEP_M
     return CLEARANCE_CAP_M
 
@@ -175,16 +176,16 @@ def _touching(m, d, objects: Objects, name: str, riders: set[str]) -> list[tuple
     import mujoco
 
     out = []
+    own = objects.contact_owners(d)
+    movable = set(objects.names)
     for i in range(d.ncon):
-        c = d.contact[i]
-        g0, g1 = int(c.geom[0]), int(c.geom[1])
-        if g0 < 0 or g1 < 0 or float(c.dist) > BLOCK_DEPTH_M or abs(float(c.frame[2])) >= RIDER_NORMAL_Z:
+        if float(d.contact.dist[i]) > BLOCK_DEPTH_M or abs(float(d.contact.frame[i, 2])) >= RIDER_NORMAL_Z:
             continue
-        a, b = objects.geom_object[g0], objects.geom_object[g1]
+        a, b = objects.owners[own[i, 0]], objects.owners[own[i, 1]]
         if name not in (a, b) or a == b:
             continue
-        other, n = (b, np.array(c.frame[:3])) if a == name else (a, -np.array(c.frame[:3]))
-        if not other or other in riders:
+        other, n = (b, np.array(d.contact.frame[i, :3])) if a == name else (a, -np.array(d.contact.frame[i, :3]))
+        if other not in movable or other in riders:
             continue
         n[2] = 0.0
         out.append((other, n / max(float(np.linalg.norm(n)), 1e-9)))
@@ -229,18 +230,24 @@ def _supported(m, d, objects: Objects, pts: np.ndarray, com: np.ndarray, shift: 
     return bool(np.all(hull.equations[:, :2] @ c + hull.equations[:, 2] <= -SUPPORT_INSET_M))
 
 
+def _shape(m, d, objects: Objects, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 3) points of the object's collision geometry (a soft body's vertices, its radius
+    around them ignored) and its centre of mass; (0, 3) points without collision geometry."""
+    if name in objects.root:
+        return points(m, d, objects.geoms(name)), d.subtree_com[objects.root[name]].copy()
+    v = objects.vertices(d, name)
+    return v.copy(), v.mean(axis=0)
+
+
 def _plan(m, d, objects: Objects, name: str, riders: set[str], travel_m: float) -> PushPlan:
-    root = objects.root[name]
-    geoms = objects.geoms(name)
-    if len(geoms) == 0:
+    pts, com = _shape(m, d, objects, name)
+    if len(pts) == 0:
         return PushPlan(name, False, (0.0, 0.0), 0.0, "it has no collision geometry")
-    pts = points(m, d, geoms)
     skip = {name} | riders
     accept = lambda g: objects.geom_object[g] not in skip  # noqa: E731
-    com = d.subtree_com[root]
     touching = _touching(m, d, objects, name, riders)
     tried = []
-    for k, u in enumerate(_face_directions(d, root)):
+    for k, u in enumerate(_face_directions(d, objects, name)):
         clear = _clearance(m, d, objects, skip, u)
         behind = _clearance(m, d, objects, skip, -u)
         supported = _supported(m, d, objects, pts, com, (travel_m + SUPPORT_MARGIN_M) * u, accept)
@@ -274,17 +281,16 @@ def plan_push(model, travel_m: float = PUSH_TRAVEL_M) -> tuple[PushPlan, ...]:
     return tuple(_plan(m, d, objects, n, _riders(m, d, objects, n), travel_m) for n in objects.names)
 
 
-def _starts(m, d, objects: Objects, name: str, geoms: np.ndarray, u: np.ndarray):
+def _starts(m, d, objects: Objects, name: str, u: np.ndarray):
     """Where the paddle may meet the object, best first: (hit distance from ``back``, line,
     height, half width, half height, back) candidates (see the module docstring)."""
     perp = np.array([-u[1], u[0], 0.0])
-    root = objects.root[name]
-    pts = points(m, d, geoms)
-    bottom, top = float(pts[:, 2].min()), float(pts[:, 2].max())
+    pts, com = _shape(m, d, objects, name)
+    radius = float(m.flex_radius[objects.flex[name]]) if name in objects.flex else 0.0
+    bottom, top = float(pts[:, 2].min()) - radius, float(pts[:, 2].max()) + radius
     lat = pts @ perp
     half_w = float(np.clip(0.3 * (lat.max() - lat.min()), 0.01, 0.05))
     half_h = float(np.clip(0.25 * (top - bottom), 0.01, 0.04))
-    com = d.subtree_com[root].copy()
     # At most half the height at which a push would tip it over its leading bottom edge before
     # it slides (it tips when height x friction > the lever of its weight), as a robot pushes a
     # tall cabinet low. Rays over the paddle's face from behind the object find where it first
@@ -294,8 +300,8 @@ def _starts(m, d, objects: Objects, name: str, geoms: np.ndarray, u: np.ndarray)
     mu = float(np.max(m.geom_friction[objects.colliding, 0]))
     low, high = bottom + half_h + 0.005, max(bottom + half_h + 0.005, top - half_h)
     z_top = float(np.clip(min(com[2], bottom + 0.5 * lever / mu), low, high))
-    back = float((pts @ u).min()) - 0.05
-    target = set(int(g) for g in geoms)
+    back = float((pts @ u).min()) - radius - 0.05
+    target = set(int(g) for g in objects.geoms(name))
     n_out = np.zeros(3)
     heights = [(float(zc), False) for zc in (np.linspace(low, z_top, 5) if z_top > low + 1e-3 else [low])]
     heights += [(float(zc), True) for zc in np.linspace(z_top, high, 6)[1:] if high > z_top + 1e-3]  # legs missed below
@@ -310,6 +316,11 @@ def _starts(m, d, objects: Objects, name: str, geoms: np.ndarray, u: np.ndarray)
     done = 0
     for li, lv in enumerate(lines):
         for zi, (zc, above) in enumerate(heights):
+            if radius > 0.0:  # a soft body: its vertices within the paddle's face, the flex radius around them
+                window = (np.abs(pts @ perp - lv) <= half_w + radius) & (np.abs(pts[:, 2] - zc) <= half_h + radius)
+                if window.any():
+                    found.append(((False, above, li, zi), float((pts[window] @ u).min()) - radius - back, lv, zc))
+                continue
             hits = []
             for dl in np.linspace(-half_w, half_w, 5):
                 for dz in np.linspace(-half_h, half_h, 9):  # rows 1 cm apart: a thin table top falls between coarser ones
@@ -334,7 +345,7 @@ def _starts(m, d, objects: Objects, name: str, geoms: np.ndarray, u: np.ndarray)
             yield hit, line, z, w, h, back
 
 
-def _place_pusher(m, d, objects: Objects, ids: dict, target: set[int], u: np.ndarray, candidate) -> tuple[np.ndarray | None, float, list[str]]:
+def _place_pusher(m, d, objects: Objects, ids: dict, name: str, u: np.ndarray, candidate) -> tuple[np.ndarray | None, float, list[str]]:
     """Put the paddle at ``candidate``'s start, backed off until it does not touch the object;
     (its start, how far it backed off, []) when it touches nothing else there, else (None, 0,
     what it overlaps)."""
@@ -353,14 +364,16 @@ def _place_pusher(m, d, objects: Objects, ids: dict, target: set[int], u: np.nda
         m.body_pos[ids["body"]] = start
         d.qpos[ids["qpos"]] = 0.0
         mujoco.mj_kinematics(m, d)
+        mujoco.mj_flex(m, d)
         mujoco.mj_collision(m, d)
         g = d.contact.geom[: d.ncon]
+        own = objects.contact_owners(d)
         mine = (g[:, 0] == pg) | (g[:, 1] == pg)
-        others = np.where(g[:, 0] == pg, g[:, 1], g[:, 0])[mine]
-        if not np.isin(others, list(target)).any():
-            return (start, k * APPROACH_GAP_M, []) if not len(others) else (None, 0.0, sorted({objects.owner(o) for o in others}))
+        others = np.where(g[:, 0] == pg, own[:, 1], own[:, 0])[mine]
+        if not (others == objects.index[name]).any():
+            return (start, k * APPROACH_GAP_M, []) if not len(others) else (None, 0.0, sorted({objects.owners[o] for o in others}))
         start = start - APPROACH_GAP_M * u
-    return None, 0.0, [str(objects.geom_object[next(iter(target))])]
+    return None, 0.0, [name]
 
 
 def push_object(model, name: str, direction_xy=None, travel_m: float = PUSH_TRAVEL_M, speed_m_s: float = PUSH_SPEED_M_S,
@@ -391,13 +404,12 @@ def _push(m, d, objects: Objects, name: str, direction_xy, travel_m: float = PUS
           force_n: float = PUSHER_FORCE_N) -> PushResult:
     import mujoco
 
-    if name not in objects.root:
+    if name not in objects.names:
         raise InputError(f"interaction probe: no free object {name!r} in the model (free objects: {', '.join(objects.names) or 'none'})")
     riders = _riders(m, d, objects, name)
-    geoms = objects.geoms(name)
-    root = objects.root[name]
+    has_shape = len(_shape(m, d, objects, name)[0]) > 0
     movers = {name} | riders
-    mass = float(sum(m.body_subtreemass[objects.root[n]] for n in movers))
+    mass = float(sum(objects.mass(m, n) for n in movers))
     if direction_xy is None:
         plan = _plan(m, d, objects, name, riders, travel_m)
         u = np.array([plan.direction_xy[0], plan.direction_xy[1], 0.0])
@@ -407,20 +419,19 @@ def _push(m, d, objects: Objects, name: str, direction_xy, travel_m: float = PUS
         if np.linalg.norm(u) < 1e-9:
             raise InputError("interaction probe: the push direction is zero")
         u /= np.linalg.norm(u)
-        clearance = _clearance(m, d, objects, movers, u) if len(geoms) else 0.0
+        clearance = _clearance(m, d, objects, movers, u) if has_shape else 0.0
     # Its weight times the friction of what it rests on (MuJoCo's combined coefficient of its
     # resting contacts): what a push must overcome to slide it.
-    mover_geom = np.isin(objects.geom_object, sorted(movers))
+    moving = np.isin(objects.contact_owners(d), [objects.index[n] for n in movers])
     mu = [float(d.contact.friction[i, 0]) for i in range(d.ncon)
-          if min(d.contact.geom[i]) >= 0 and mover_geom[d.contact.geom[i]].sum() == 1 and abs(float(d.contact.frame[i, 2])) > RIDER_NORMAL_Z]
+          if moving[i].sum() == 1 and abs(float(d.contact.frame[i, 2])) > RIDER_NORMAL_Z]
     common = dict(name=name, direction_xy=(float(u[0]), float(u[1])), clearance_m=float(clearance), speed_m_s=float(speed_m_s),
                   force_limit_n=float(force_n), mass_kg=mass, slide_force_n=mass * 9.81 * max(mu) if mu else float("nan"))
-    if len(geoms) == 0:
+    if not has_shape:
         return PushResult(**common, height_m=float("nan"), pusher_travel_m=0.0, displacement_m=0.0, along_m=0.0, tilt_deg=0.0,
                           toppled=False, not_started="it has no collision geometry")
 
     ids = _pusher_ids(m)
-    target = set(int(g) for g in geoms)
     saved = (m.geom_size[objects.pusher_geom].copy(), m.geom_aabb[objects.pusher_geom].copy(), float(m.geom_rbound[objects.pusher_geom]),
              m.body_pos[ids["body"]].copy(), m.body_quat[ids["body"]].copy(), m.actuator_forcerange[ids["act"]].copy())
     yaw = float(np.arctan2(u[1], u[0]))
@@ -429,8 +440,8 @@ def _push(m, d, objects: Objects, name: str, direction_xy, travel_m: float = PUS
     qpos0, qvel0 = d.qpos.copy(), d.qvel.copy()
     try:
         start, overlaps, z, backed = None, [], float("nan"), 0.0
-        for candidate in _starts(m, d, objects, name, geoms, u):
-            start, backed, why = _place_pusher(m, d, objects, ids, target, u, candidate)
+        for candidate in _starts(m, d, objects, name, u):
+            start, backed, why = _place_pusher(m, d, objects, ids, name, u, candidate)
             if start is not None:
                 z = candidate[2]
                 break
@@ -452,13 +463,19 @@ def _push(m, d, objects: Objects, name: str, direction_xy, travel_m: float = PUS
     finally:
         (m.geom_size[objects.pusher_geom], m.geom_aabb[objects.pusher_geom], m.geom_rbound[objects.pusher_geom],
          m.body_pos[ids["body"]], m.body_quat[ids["body"]], m.actuator_forcerange[ids["act"]]) = saved
-    delta = d.xpos[root] - run["base"][name]
     from layout.verify import TOPPLE_DEG, _tilt_deg
 
-    tilt = _tilt_deg(run["quat"][name], d.xquat[root].copy())
+    mujoco.mj_forward(m, d)
+    now = {n: objects.position(d, n) for n in movers}
+    delta = now[name] - run["base"][name]
+
+    def tilt_of(n: str) -> float:  # a soft body has no frame to tilt: 0
+        return _tilt_deg(run["quat"][n], d.xquat[objects.root[n]].copy()) if n in objects.root else 0.0
+
+    tilt = tilt_of(name)
     others = tuple((n, run["moved"][n]) for n in objects.names if n not in movers)
-    carried = tuple((n, float(np.linalg.norm((d.xpos[objects.root[n]] - run["base"][n])[:2]))) for n in sorted(riders))
-    slip = tuple((n, float(np.linalg.norm((d.xpos[objects.root[n]] - run["base"][n] - delta)[:2]))) for n in sorted(riders))
+    carried = tuple((n, float(np.linalg.norm((now[n] - run["base"][n])[:2]))) for n in sorted(riders))
+    slip = tuple((n, float(np.linalg.norm((now[n] - run["base"][n] - delta)[:2]))) for n in sorted(riders))
     return PushResult(
         **common,
         height_m=z,
@@ -476,8 +493,8 @@ def _push(m, d, objects: Objects, name: str, direction_xy, travel_m: float = PUS
         resisted_by=tuple(sorted(run["resist"].items(), key=lambda kv: (-kv[1], kv[0]))),
         pusher_hit=tuple(sorted(((k, v) for k, v in run["hit"].items() if v >= HIT_MIN_N), key=lambda kv: (-kv[1], kv[0]))),
         carried_slip=slip,
-        carried_drop=tuple((n, float(run["base"][n][2] - d.xpos[objects.root[n]][2])) for n in sorted(riders)),
-        carried_tilt=tuple((n, _tilt_deg(run["quat"][n], d.xquat[objects.root[n]].copy())) for n in sorted(riders)),
+        carried_drop=tuple((n, float(run["base"][n][2] - now[n][2])) for n in sorted(riders)),
+        carried_tilt=tuple((n, tilt_of(n)) for n in sorted(riders)),
     )
 
 
@@ -497,9 +514,9 @@ def _run_push(m, d, objects: Objects, ids: dict, name: str, movers: set[str], u:
     import mujoco
 
     pg = objects.pusher_geom
-    target = set(int(g) for g in objects.geoms(name))
-    is_mover = np.isin(objects.geom_object, sorted(movers))
-    base = {n: d.xpos[b].copy() for n, b in objects.root.items()}
+    me = objects.index[name]
+    mover_ids = [objects.index[n] for n in movers]
+    base = {n: objects.position(d, n) for n in objects.names}
     quat = {n: d.xquat[b].copy() for n, b in objects.root.items()}
     moved = {n: 0.0 for n in objects.names}
     resist: dict[str, float] = {}
@@ -509,8 +526,8 @@ def _run_push(m, d, objects: Objects, ids: dict, name: str, movers: set[str], u:
     dt = float(m.opt.timestep)
 
     def track() -> None:
-        for n, b in objects.root.items():
-            moved[n] = max(moved[n], float(np.linalg.norm(d.xpos[b] - base[n])))
+        for n in objects.names:
+            moved[n] = max(moved[n], float(np.linalg.norm(objects.position(d, n) - base[n])))
 
     def forces() -> bool:
         """Record the paddle's contacts and what presses against the push; True when the paddle
@@ -519,25 +536,24 @@ def _run_push(m, d, objects: Objects, ids: dict, name: str, movers: set[str], u:
         if not n:
             return False
         g = d.contact.geom[:n]
-        valid = (g >= 0).all(axis=1)
-        g = np.where(valid[:, None], g, 0)
-        paddle = valid & ((g[:, 0] == pg) | (g[:, 1] == pg))
-        side = valid & ~paddle & (is_mover[g[:, 0]] != is_mover[g[:, 1]]) & (np.abs(d.contact.frame[:n, 2]) < RIDER_NORMAL_Z)
+        own = objects.contact_owners(d)
+        mover = np.isin(own, mover_ids)
+        paddle = (g[:, 0] == pg) | (g[:, 1] == pg)
+        side = ~paddle & (mover[:, 0] != mover[:, 1]) & (np.abs(d.contact.frame[:n, 2]) < RIDER_NORMAL_Z)
         touched = False
         for i in np.flatnonzero(paddle):
-            other = int(g[i, 1] if g[i, 0] == pg else g[i, 0])
-            if other in target:
+            other = int(own[i, 1] if g[i, 0] == pg else own[i, 0])
+            if other == me:
                 touched = True
                 continue
             mujoco.mj_contactForce(m, d, int(i), f6)
-            who = objects.owner(other)
+            who = objects.owners[other]
             hit[who] = max(hit.get(who, 0.0), float(f6[0]))
         for i in np.flatnonzero(side):
-            g0, g1 = int(g[i, 0]), int(g[i, 1])
             mujoco.mj_contactForce(m, d, int(i), f6)
-            on_g1 = d.contact.frame[i].reshape(3, 3).T @ f6[:3]  # what geom 0 exerts on geom 1, world frame
-            on_mover = on_g1 if is_mover[g1] else -on_g1
-            who = objects.owner(g0 if is_mover[g1] else g1)
+            on_1 = d.contact.frame[i].reshape(3, 3).T @ f6[:3]  # what side 0 exerts on side 1, world frame
+            on_mover = on_1 if mover[i, 1] else -on_1
+            who = objects.owners[int(own[i, 0] if mover[i, 1] else own[i, 1])]
             resist[who] = max(resist.get(who, 0.0), float(-on_mover @ u))
         return touched
 
