@@ -261,9 +261,9 @@ def test_real_sample_push_and_open(sample, built_real_sample):
     """Each real sample (built once per session, shared with test_end_to_end): every movable
     object pushed, every door and drawer pulled open."""
     built = built_real_sample(sample)
-    movable = {o.name for o in built.scene.objects if not o.asset.is_fixed and o.asset.deformable is None}
+    movable = {o.name for o in built.scene.objects if not o.asset.is_fixed}
     if not movable:
-        pytest.skip(f"{sample.name}: the build has no movable rigid object (all became background)")
+        pytest.skip(f"{sample.name}: the build has no movable object (all became background)")
     pushes, _ = _check_built(built.out_dir, movable)
     assert pushes == len(movable)
 
@@ -287,7 +287,7 @@ def test_built_cabinet_photo_doors_and_drawers_open(index, tmp_path):
     if not any(o.asset.kind is AssetKind.ARTICULATED for o in result.scene.objects):
         why = "; ".join(f"{p.name}: {p.reason}" for p in result.layout.placements if p.became_background)
         pytest.skip(f"{d.name}: the build has no articulated object ({why or 'none was generated'})")
-    movable = {o.name for o in result.scene.objects if not o.asset.is_fixed and o.asset.deformable is None}
+    movable = {o.name for o in result.scene.objects if not o.asset.is_fixed}
     _, joints = _check_built(result.out_dir, movable)
     assert joints >= 1, f"{d.name}: no hinge or slide joint in the MJCF"
 
