@@ -6,8 +6,7 @@ and it collides with everything: the pushed object, its neighbours, walls, the f
 background. It starts ``APPROACH_GAP_M`` behind the object's side and its commanded position
 advances at ``PUSH_SPEED_M_S`` (never more than 1.25 x force limit / stiffness, 6 mm at 100 N,
 ahead of the paddle: held back, it pushes with its full force and does not lunge when the object
-breaks free)
-until the paddle has advanced ``PUSH_TRAVEL_M`` past first contact, or for ``STALL_S`` longer
+breaks free) until the paddle has advanced ``PUSH_TRAVEL_M`` past first contact, or for ``STALL_S`` longer
 than that would take, or once it has pressed at its force limit for ``HELD_S`` without advancing
 ``HELD_M``: an object too heavy for the force limit, or pushed against a neighbour or a wall,
 stops it there. The paddle is then pulled back and parked, and the scene settles for
@@ -32,12 +31,12 @@ than ``OTHERS_MAX_M`` (1 cm) at any time, whether the object or the paddle touch
 resting on the pushed one (directly or on each other, from the contacts at rest) may ride along
 or stay where they are (a pillow pulled from under a sofa's overhang leaves the sofa), but must
 not fall: none sinks more than ``CARRIED_DROP_M`` (5 cm) or tilts past ``layout.verify.TOPPLE_DEG``
-(their slip relative to the pushed object is reported). A failure says why:
-no room for the pusher, the pusher stopped by something else, blocked by what it was pushed
-against (the largest force against the push), too heavy for the force limit (its weight times
-the friction of its support against the limit), moved too far, tilted, others moved. Soft
-bodies (a flex) are pushed and tracked too: their position is their vertices' centroid, they have
-no tilt, and their start is found from their vertices (rays pass through a flex).
+(their slip relative to the pushed object is reported). A failure says why: no room for the
+pusher, the pusher stopped by something else, blocked by what it was pushed against (the
+largest force against the push), too heavy for the force limit (its weight times the friction
+of its support against the limit), moved too far, tilted, others moved. Soft bodies (a flex) are
+pushed and tracked too: their position is their vertices' centroid, they have no tilt, and their
+start is found from their vertices (rays pass through a flex).
 """
 
 from __future__ import annotations
