@@ -39,10 +39,10 @@ report.json); anything else is refused unless --overwrite. The current folder an
 the input are always refused. Without -o the output is ./<image stem>_scene, which is replaced only
 by a build of the same image.
 
-Exit status: 0 ok, 1 other failure (check: a problem found; with --interact also a failed push
-or opening), 2 usage error (bad command line), 3 input error (bad or missing file, implausible
-depth or intrinsics, output folder refused), 4 model weights missing, 5 export failed, 130
-interrupted. Errors are one line 'error: ...'; doubtful input the build goes
+Exit status: 0 ok, 1 other failure, 2 usage error (bad command line), 3 input error (bad or
+missing file, implausible depth or intrinsics, output folder refused), 4 model weights missing,
+5 export failed, 130 interrupted; `check` exits 1 when it finds a problem (with --interact also a
+push or an opening that failed). Errors are one line 'error: ...'; doubtful input the build goes
 on with is one line 'warning: ...'.
 """
 
