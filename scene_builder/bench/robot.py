@@ -38,6 +38,7 @@ import numpy as np
 __all__ = ["main", "robot_rows"]
 
 REACH_S = 4.0
+MAX_CONTACTS = 20  # layout.reach.simulate_reach keeps the first 20 robot-scene contacts
 
 
 def robot_rows(data: Path, robot: str) -> list[dict]:
@@ -113,7 +114,8 @@ def render(rows: list[dict], robot: str) -> str:
                       f"{np.median([r['build_s'] for r in ok]):.1f} s; median final error "
                       f"{np.median([r['final_error_m'] for r in ok]) * 100:.2f} cm; the placement's own target (the control: the "
                       f"placement keeps only spots that reach it) reached within 2 cm without contact on "
-                      f"{sum(r['contacts'] == 0 and r['final_error_m'] <= 0.02 for r in ok)} of {len(rows)} samples."]
+                      f"{sum(r['contacts'] == 0 and r['final_error_m'] <= 0.02 for r in ok)} of {len(ok)} built samples"
+                      + (f" ({len(rows) - len(ok)} not built)" if len(rows) > len(ok) else "") + "."]
         lines += ["", "Reach rate over the fixed target set (18 cm above every flat top, 16 cm grid; decided before the placement):", "",
                   "| sample | targets in the scene | in the workspace | reached | rate | with the tool's axis free | tops in the workspace | scoring (s) |",
                   "|---|---:|---:|---:|---:|---:|---|---:|"]
@@ -128,9 +130,11 @@ def render(rows: list[dict], robot: str) -> str:
                       + (f"; per-sample rate median {np.median(per):.0%}, range {min(per):.0%}-{max(per):.0%}" if per else "") + "."]
         missed = [(r["sample"], t) for r in ok for t in r["missed"]]
         if missed:
-            lines += ["", "Targets missed (above which top, where; the tool's final distance, robot-scene contacts):", ""]
+            lines += ["", "Targets missed (above which top, where; the tool's final distance, robot-scene contacts: "
+                          f"the reach keeps the first {MAX_CONTACTS}):", ""]
             lines += [f"- {s}: above {t['owner']} at ({t['target_m'][0]:.2f}, {t['target_m'][1]:.2f}, {t['target_m'][2]:.2f}): "
-                      f"{t['error_m'] * 100:.1f} cm off, {t['contacts']} contacts" for s, t in missed]
+                      f"{t['error_m'] * 100:.1f} cm off, {t['contacts']}{'+' if t['contacts'] >= MAX_CONTACTS else ''} contacts"
+                      for s, t in missed]
     return "\n".join(lines)
 
 
@@ -138,8 +142,16 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--data", type=Path, default=Path(__file__).resolve().parents[2].parent / "shared" / "data")
     p.add_argument("--robot", default="panda", help="panda or mobile_panda (default panda)")
+    p.add_argument("--json", type=Path, help="also write the rows here (to render them again: --render-json)")
+    p.add_argument("--render-json", type=Path, help="render rows written by --json instead of building")
     args = p.parse_args(argv)
-    print(render(robot_rows(args.data, args.robot), args.robot))
+    if args.render_json is not None:
+        rows = json.loads(args.render_json.read_text())
+    else:
+        rows = robot_rows(args.data, args.robot)
+        if args.json is not None:
+            args.json.write_text(json.dumps(rows, indent=1, default=float) + "\n")
+    print(render(rows, args.robot))
     return 0
 
 
