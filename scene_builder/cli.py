@@ -8,6 +8,7 @@ at start-up, so ``--help`` is instant.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from pathlib import Path
@@ -41,7 +42,8 @@ current folder and a folder holding the input are always refused. Without -o the
 
 Exit status: 0 ok, 1 other failure, 2 usage error (bad command line), 3 input error (bad or
 missing file, implausible depth or intrinsics, output folder refused), 4 model weights missing,
-5 export failed, 130 interrupted. Errors are one line 'error: ...'; doubtful input the build goes
+5 export failed, 130 interrupted; `check` exits 1 when it finds a problem (with --interact also a
+push or an opening that failed). Errors are one line 'error: ...'; doubtful input the build goes
 on with is one line 'warning: ...'.
 """
 
@@ -204,9 +206,11 @@ def make_parser() -> argparse.ArgumentParser:
     c = sub.add_parser("check", help="re-validate an output folder (MJCF compiles and is stable, USD validates, files resolve)")
     c.add_argument("out", type=Path, help="an output folder written by `scene-builder build`")
     c.add_argument("--interact", action="store_true",
-                   help="also run the interaction probes in MuJoCo: push every pushable object 6 cm (it must move 2-10 cm "
-                        "without toppling, every other object less than 1 cm) and pull every door and drawer open (at least "
-                        "half its range, within its limits, the carcass still); writes OUT/interaction.json")
+                   help="also run the interaction probes in MuJoCo: push every movable object 6 cm with a pusher of at most "
+                        "100 N that collides with everything (it must move 2-10 cm without toppling, every other object less "
+                        "than 1 cm; a push blocked, too heavy or without room for the pusher fails with its reason) and pull "
+                        "every door and drawer open (at least half its range, within its limits, the carcass still); writes "
+                        "OUT/interaction.json; exit status 1 when any probe fails")
 
     v = sub.add_parser("view", help="open the rerun viewer on OUT/scene.rrd (or write its view to a PNG without a display)")
     v.add_argument("out", type=Path, help="an output folder (or a .rrd file)")
@@ -457,23 +461,37 @@ def _interact(out: Path) -> tuple[str, ...]:
     import dataclasses
     import json
 
-    from layout.interaction import interaction_problems, probe_lines, probe_scene
+    from layout.interaction import interaction_problems, probe_lines, probe_scene, push_failures
     from scene_builder.outdir import add_to_marker, replace_file
 
     plans, pushes, joints = probe_scene(out / "scene.xml")
     for line in probe_lines(plans, pushes, joints):
         print(line)
     problems = interaction_problems(pushes, joints)
+    failures = {r.name: list(push_failures(r)) for r in pushes}
     doc = {
+        "push_summary": {"movable": len(pushes), "succeeded": sum(not f for f in failures.values()),
+                         "failed": sum(bool(f) for f in failures.values())},
         "push_plans": [dataclasses.asdict(p) for p in plans],
-        "pushes": [dataclasses.asdict(r) for r in pushes],
+        "pushes": [{**dataclasses.asdict(r), "ok": not failures[r.name], "failures": failures[r.name]} for r in pushes],
         "joints": [{f.name: getattr(j, f.name) for f in dataclasses.fields(j) if f.name not in ("times_s", "positions")} for j in joints],
         "problems": list(problems),
     }
     _check_interaction_writable(out)  # again: the probes took a while
-    replace_file(out, "interaction.json", json.dumps(doc, indent=2) + "\n")
+    replace_file(out, "interaction.json", json.dumps(_finite(doc), indent=2, allow_nan=False) + "\n")
     add_to_marker(out, "interaction.json")
     return problems
+
+
+def _finite(v):
+    """``v`` with every NaN or infinite float replaced by None (JSON has no NaN)."""
+    if isinstance(v, float):
+        return v if math.isfinite(v) else None
+    if isinstance(v, dict):
+        return {k: _finite(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_finite(x) for x in v]
+    return v
 
 
 def _cmd_view(args: argparse.Namespace) -> int:
