@@ -659,7 +659,7 @@ class DetectionSegmenter:
                 cache.append(point_normals(points))
             return cache[0]
 
-        for c in np.flatnonzero(cluster_sizes >= 2 * self.min_points):
+        for c in np.flatnonzero(cluster_sizes >= self.min_points):
             if c == 0:
                 continue
             m = clusters == c
