@@ -148,6 +148,11 @@ def register_detection_backends(detection: Registry, semantic: Registry, box_pro
 
         return CenterNetCocoDetector(weights("centernet-mbv3-coco"))
 
+    def make_nanodet():
+        from perception.learned.detectors import NanoDetCocoDetector
+
+        return NanoDetCocoDetector(weights("nanodet-coco"))
+
     def make_ssd():
         from perception.learned.detectors import SsdOidDetector
 
@@ -160,6 +165,7 @@ def register_detection_backends(detection: Registry, semantic: Registry, box_pro
 
     for name, factory, priority, what in (
         ("centernet-mbv3-coco", make_centernet, 100, "CenterNet MobileNetV3, 80 COCO classes (onnxruntime)"),
+        ("nanodet-coco", make_nanodet, 75, "NanoDet-m, 80 COCO classes (onnxruntime)"),
         ("ssd-mobilenet-oid", make_ssd, 50, "SSD MobileNetV2, Open Images indoor classes incl. desk and table (TFLite)"),
     ):
         detection.register(name, factory, priority=priority, available=lambda n=name: models.unavailable_reason(n, models_dir), description=what)
