@@ -11,7 +11,15 @@ from pathlib import Path
 from scene_builder.config import PerceptionConfig
 from scene_builder.registry import Registry
 
-__all__ = ["register_backends", "register_box_prompt_backends", "register_detection_backends"]
+__all__ = ["OFF_BY_DEFAULT", "register_backends", "register_box_prompt_backends", "register_detection_backends"]
+
+#: Detectors registered but not run by the ``"detections"`` segmenter (their entry says why).
+#: NanoDet: on the 15 inventory photos the pipeline with it found 1-2 more of the 82 objects a
+#: person counts and 3-9 more wrong ones (instance precision 0.879 -> 0.843 / 0.779 at its
+#: accept_score 0.5 / 0.4): its COCO names the cabinet close-ups microwave and refrigerator and its
+#: errors agree with CenterNet's (pictures as tv), which the noisy-or merge amplifies.
+#: BENCHMARKS.md, "Offline detectors". Benchmarks build it through ``models.resolve_weights``.
+OFF_BY_DEFAULT: frozenset[str] = frozenset({"nanodet-coco"})
 
 
 def _weights(name: str, models_dir: Path | None) -> Path:
@@ -126,13 +134,23 @@ def register_box_prompt_backends(registry: Registry, config: PerceptionConfig) -
     )
 
 
+def _detector_reason(name: str, models_dir: Path | None) -> str | None:
+    """Why detector ``name`` is not run: its file is missing, or it is off by default."""
+    from perception import models
+
+    if name in OFF_BY_DEFAULT:
+        return f"{name} is off by default (more false objects than found ones on the inventory photos; BENCHMARKS.md, Offline detectors)"
+    return models.unavailable_reason(name, models_dir)
+
+
 def register_detection_backends(detection: Registry, semantic: Registry, box_prompt: Registry, config: PerceptionConfig) -> None:
     """Register the offline detectors, the semantic segmenter and SAM 2 box prompts (lazy
     factories; availability says why not, in one line).
 
     detection: ``"centernet-mbv3-coco"`` (priority 100) and ``"ssd-mobilenet-oid"`` (priority 50),
     each when its file resolves through the model registry (the ``"detections"`` segmenter runs
-    every available one). semantic: ``"deeplabv3-mnv2-pascal"`` (priority 50).
+    every available one); ``"nanodet-coco"`` (priority 75) is unavailable while it is in
+    :data:`OFF_BY_DEFAULT`. semantic: ``"deeplabv3-mnv2-pascal"`` (priority 50).
     box_prompt: ``"sam2"`` (priority 100, when its weights resolve locally; GrabCut is the
     always-available fallback registered by ``perception.backends``).
     """
@@ -168,7 +186,7 @@ def register_detection_backends(detection: Registry, semantic: Registry, box_pro
         ("nanodet-coco", make_nanodet, 75, "NanoDet-m, 80 COCO classes (onnxruntime)"),
         ("ssd-mobilenet-oid", make_ssd, 50, "SSD MobileNetV2, Open Images indoor classes incl. desk and table (TFLite)"),
     ):
-        detection.register(name, factory, priority=priority, available=lambda n=name: models.unavailable_reason(n, models_dir), description=what)
+        detection.register(name, factory, priority=priority, available=lambda n=name: _detector_reason(n, models_dir), description=what)
     semantic.register(
         "deeplabv3-mnv2-pascal",
         make_deeplab,

@@ -101,12 +101,15 @@ def room_photos(data: Path) -> list[tuple[str, np.ndarray]]:
 
 
 def load_detectors(models_dir: Path | None) -> dict[str, object]:
-    """The detectors of :data:`DETECTORS` available in ``models_dir``, built through the registry."""
+    """The detectors of :data:`DETECTORS` whose files are in ``models_dir``, built through the
+    registry (also those off by default, ``perception.learned.OFF_BY_DEFAULT``)."""
+    from perception import models
     from perception.backends import build_registries
     from scene_builder.config import PerceptionConfig
 
     reg = build_registries(PerceptionConfig(models_dir=models_dir))
-    return {e.name: e.factory() for e in reg.detection.entries() if e.name in DETECTORS and e.available() is None}
+    entries = {e.name: e for e in reg.detection.entries()}
+    return {n: entries[n].factory() for n in DETECTORS if n in entries and models.resolve_weights(n, models_dir) is not None}
 
 
 def score_boxes(boxes: np.ndarray, scores: np.ndarray, labels, truth: list[tuple[list[float], str]], threshold: float, keep=None) -> BoxScore:
@@ -216,6 +219,113 @@ def false_table(detectors, gt, gt_dets, inv_photos, inv_dets, seen, groups) -> l
     return lines
 
 
+#: accept_score values tried per detector (the others keep theirs).
+ACCEPT_SWEEP: dict[str, tuple[float, ...]] = {
+    "centernet-mbv3-coco": (0.2, 0.25, 0.3, 0.35, 0.4),
+    "nanodet-coco": (0.3, 0.35, 0.4, 0.45, 0.5),
+    "ssd-mobilenet-oid": (0.3, 0.35, 0.4, 0.45, 0.5, 0.6),
+}
+
+
+def accept_table(detectors, gt, gt_dets, inv_photos, inv_dets, seen, groups) -> list[str]:
+    """Each detector's accept_score varied, the others at theirs: the detections that stand alone
+    (merged score >= CONFIDENT) of the detectors run by default merged, with the varied one added
+    when it is off by default."""
+    from perception.detection import CONFIDENT
+    from perception.learned import OFF_BY_DEFAULT
+
+    lines = [
+        "| varied | accept_score | merged detectors | furniture R / P (photos_gt) | all-vocabulary R / P (photos_gt) | inventory instance R / P | inventory category R / P |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for name, values in ACCEPT_SWEEP.items():
+        if name not in detectors:
+            continue
+        det = detectors[name]
+        own = det.accept_score
+        combo = tuple(n for n in DETECTORS if n in detectors and (n not in OFF_BY_DEFAULT or n == name))
+        try:
+            for a in values:
+                det.accept_score = a
+                merged_gt = [_merged(combo, detectors, gt_dets, k) for k in range(len(gt))]
+                merged_inv = [_merged(combo, detectors, inv_dets, k) for k in range(len(inv_photos))]
+                furn = sum((score_boxes(m.boxes_xyxy_px, m.scores, m.labels, _vocab_truth(g[2]), CONFIDENT, FURNITURE) for m, g in zip(merged_gt, gt)), BoxScore(0, 0, 0))
+                allv = sum((score_boxes(m.boxes_xyxy_px, m.scores, m.labels, _vocab_truth(g[2]), CONFIDENT) for m, g in zip(merged_gt, gt)), BoxScore(0, 0, 0))
+                inv = pooled([score_inventory([lab for lab, s in zip(m.labels, m.scores) if lab and s >= CONFIDENT], seen[pn], groups) for m, (pn, _) in zip(merged_inv, inv_photos)])
+                mark = " (its own)" if a == own else ""
+                lines.append(
+                    f"| {SHORT[name]} | {a:g}{mark} | {' + '.join(SHORT[n] for n in combo)} | {furn.matched / max(furn.truth, 1):.2f} / {furn.matched / max(furn.found, 1):.2f} | "
+                    f"{allv.matched / max(allv.truth, 1):.2f} / {allv.matched / max(allv.found, 1):.2f} | "
+                    f"{inv['instance_recall']:.2f} / {inv['instance_precision']:.2f} | {inv['category_recall']:.2f} / {inv['category_precision']:.2f} |"
+                )
+        finally:
+            det.accept_score = own
+    return lines
+
+
+#: Pipeline settings (``--pipeline``): name, then (module, attribute, value) set for the run and
+#: restored after it. The modules are named; the values are what the run tries.
+PIPELINE_SETTINGS: tuple[tuple[str, tuple[tuple[str, str, object], ...]], ...] = (
+    ("default: CenterNet + SSD", ()),
+    ("+ NanoDet (accept_score 0.4)", (("perception.learned", "OFF_BY_DEFAULT", frozenset()),)),
+    ("+ NanoDet (accept_score 0.5)", (("perception.learned", "OFF_BY_DEFAULT", frozenset()), ("perception.learned.detectors:NanoDetCocoDetector", "accept_score", 0.5))),
+    ("FLOOR_SCORE 0.12", (("perception.segment_detect", "FLOOR_SCORE", 0.12),)),
+    ("FLOOR_SCORE 0.3", (("perception.segment_detect", "FLOOR_SCORE", 0.3),)),
+    ("CenterNet accept_score 0.25", (("perception.learned.detectors:CenterNetCocoDetector", "accept_score", 0.25),)),
+    ("CenterNet accept_score 0.35", (("perception.learned.detectors:CenterNetCocoDetector", "accept_score", 0.35),)),
+    ("SSD accept_score 0.4", (("perception.learned.detectors:SsdOidDetector", "accept_score", 0.4),)),
+    ("SSD accept_score 0.6", (("perception.learned.detectors:SsdOidDetector", "accept_score", 0.6),)),
+)
+
+
+def _target(where: str):
+    import importlib
+
+    module, _, cls = where.partition(":")
+    obj = importlib.import_module(module)
+    return getattr(obj, cls) if cls else obj
+
+
+def pipeline_table(data: Path, inventory: Path, models_dir: Path | None, settings=PIPELINE_SETTINGS) -> list[str]:
+    """``perceive`` (the "detections" segmenter: confirmation by depth and the semantic map, the
+    classifier, masks) on the inventory photos under each setting: the inventory scores of
+    :mod:`scene_builder.bench.detect`, objects found, and what changed against the first setting."""
+    from collections import Counter
+
+    from scene_builder.bench.detect import run
+
+    lines = [
+        "| setting | instance recall | instance precision | category recall | category precision | objects | median s per photo | labels gained (+) and lost (-) against the default, per photo |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    base = None
+    for name, patches in settings:
+        saved = []
+        try:
+            for where, attr, value in patches:
+                obj = _target(where)
+                saved.append((obj, attr, getattr(obj, attr)))
+                setattr(obj, attr, value)
+            result = run(data, inventory, models_dir, "detections", roots=("photos",), quiet=True)
+        finally:
+            for obj, attr, value in reversed(saved):
+                setattr(obj, attr, value)
+        rows = [r for r in result["rows"] if "inventory" in r]
+        labels = {r["photo"]: Counter(r["labels"]) for r in rows}
+        base = base or labels
+        changes = []
+        for photo, c in labels.items():
+            diff = [f"+{n} {lab}" for lab, n in sorted((c - base[photo]).items())] + [f"-{n} {lab}" for lab, n in sorted((base[photo] - c).items())]
+            if diff:
+                changes.append(f"{photo.split('/')[-1]}: {' '.join(diff)}")
+        s, secs = result["inventory_scores"], sorted(r["seconds"] for r in rows)
+        lines.append(
+            f"| {name} | {s['instance_recall']:.3f} | {s['instance_precision']:.3f} | {s['category_recall']:.3f} | {s['category_precision']:.3f} | "
+            f"{sum(r['objects'] for r in rows)} | {secs[len(secs) // 2]:.1f} | {'; '.join(changes) or '-'} |"
+        )
+    return lines
+
+
 def time_table(secs: dict) -> list[str]:
     lines = ["| detector | photos | median CPU s | slowest CPU s |", "|---|---|---|---|"]
     for name, s in secs.items():
@@ -229,7 +339,11 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--models-dir", type=Path, default=DEFAULT_MODELS if DEFAULT_MODELS.is_dir() else None, help="model files (default ../shared/models)")
     ap.add_argument("--inventory", type=Path, default=DEFAULT_INVENTORY)
     ap.add_argument("--skip-decoding", action="store_true", help="leave out NanoDet's decoding variants")
+    ap.add_argument("--pipeline", action="store_true", help="only the pipeline table: perceive on the inventory photos per setting (about 30 minutes)")
     args = ap.parse_args(argv)
+    if args.pipeline:
+        print("\n".join(pipeline_table(args.data, args.inventory, args.models_dir)))
+        return
     detectors = load_detectors(args.models_dir)
     if not detectors:
         from scene_builder.errors import ModelUnavailableError
@@ -248,6 +362,8 @@ def main(argv: list[str] | None = None) -> None:
     print("\n".join(box_tables(detectors, gt, gt_dets, inv_photos, inv_dets, seen, groups)))
     print("\n### Scores of true and of certainly false detections\n")
     print("\n".join(false_table(detectors, gt, gt_dets, inv_photos, inv_dets, seen, groups)))
+    print("\n### Each detector's accept_score varied (merged, at CONFIDENT)\n")
+    print("\n".join(accept_table(detectors, gt, gt_dets, inv_photos, inv_dets, seen, groups)))
     print("\n### CPU seconds per photo\n")
     print("\n".join(time_table(secs)))
     if not args.skip_decoding and "nanodet-coco" in detectors:
