@@ -150,16 +150,16 @@ class NanoDetCocoDetector:
     statistics, NCHW. Heads decoded by :func:`nanodet_decode`; per-class NMS (IoU 0.6, NanoDet's),
     then :func:`perception.detection.suppress` as for the other detectors.
 
-    min_score: the lowest score returned (0.1: 0.125 on the merged scale, just over the
-    segmenter's proposal floor). accept_score: the score at which a detection is trusted alone
-    (0.4: its scores run higher than CenterNet's; on the 15 inventory photos 5 of its detections of
-    a category the photo lacks reach 0.4, as 5 of CenterNet's reach its 0.3, the highest 0.49
-    (pictures called tv, cabinets called refrigerator); its true detections on photos_gt have a
-    median of 0.39, its beds and chairs on room photos 0.5-0.75. BENCHMARKS.md, "Offline detectors").
+    min_score: the lowest score returned (0.1: just under the segmenter's proposal floor, 0.12 on
+    the merged scale, where an accept_score of 0.5 leaves NanoDet's scores unchanged). accept_score: the score at which a detection is
+    trusted alone: 0.5, over every detection of a category absent from an inventory photo (the
+    highest 0.49: pictures called tv, cabinets called refrigerator; 4 reach 0.4); its beds, sofas
+    and chairs on room photos score 0.5-0.75, its true detections on photos_gt a median of 0.39.
+    In the pipeline 0.5 beat 0.4 (BENCHMARKS.md, "Offline detectors").
     """
 
     input_px = 416
-    accept_score = 0.4
+    accept_score = 0.5
 
     def __init__(self, weights: Path | str, min_score: float = 0.1) -> None:
         import onnxruntime as ort
