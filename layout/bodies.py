@@ -47,6 +47,9 @@ class Body:
     legs_m: float = 0.0
     hidden_support: bool = False  # legs stand on a support found below a hidden underside
     pad_bottom_m: float | None = None  # its background pad is a column from here (hidden support)
+    # Its pad's rectangle (lo_x, lo_y, hi_x, hi_y) in its own yawed axes relative to position_m,
+    # when cut back clear of its neighbours (layout.background.clip_pad); None: its plan extent.
+    pad_rect_m: np.ndarray | None = None
     # Static only: movable bodies its collision caged, cut back out of their outlines (layout.cage).
     cut_for: list[str] = field(default_factory=list)
 
@@ -107,6 +110,7 @@ def rebuilt(b: Body, asset: ObjectAsset) -> Body:
     new.initial_position_m = b.initial_position_m
     new.parent, new.support_surface, new.children, new.fixed = b.parent, b.support_surface, b.children, b.fixed
     new.unsupported_reason, new.legs_m, new.hidden_support, new.pad_bottom_m = b.unsupported_reason, b.legs_m, b.hidden_support, b.pad_bottom_m
+    new.pad_rect_m = b.pad_rect_m
     return new
 
 

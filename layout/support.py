@@ -30,6 +30,11 @@ SUPPORT_TOL_M = 0.05
 MIN_FOOTPRINT_OVERLAP = 0.25
 # Faces lower than this are the floor's business.
 MIN_SURFACE_HEIGHT_M = 0.02
+# Background seen around an object lower than this (a rug, a carpet's pile, depth noise on the
+# floor) is the floor: an object within reach of the floor rests on it (on legs when it was seen
+# higher), not on a pad over the hidden floor under it, which its neighbours' completions reach
+# into (beds of four SUN RGB-D samples became background for that).
+FLOOR_LIKE_M = 0.06
 # A candidate face is rejected when the object set on it would sink deeper than this into the
 # rest of the support (smaller overlaps are left to the horizontal solver).
 SUPPORT_CLASH_TOL_M = 0.01
@@ -79,7 +84,7 @@ def pad_box(b: Body, height_m: float) -> tuple[np.ndarray, np.ndarray, float]:
     from layout.background import support_pad
 
     plan = np.concatenate([p.verts_rel_m[:, :2] for p in b.pieces])
-    return support_pad(plan, b.rotation, b.position_m, height_m, b.pad_bottom_m)
+    return support_pad(plan, b.rotation, b.position_m, height_m, b.pad_bottom_m, b.pad_rect_m)
 
 
 def pad_bounds(centre: np.ndarray, half: np.ndarray, yaw: float) -> tuple[np.ndarray, np.ndarray]:
@@ -181,6 +186,8 @@ def build_support(
                     break
             if background is not None:
                 h_bg = background(foot, max(MIN_SURFACE_HEIGHT_M, bottom - drop_m), bottom + tol)
+                if h_bg is not None and h_bg < FLOOR_LIKE_M and bottom <= drop_m:
+                    h_bg = None  # the floor (seen with a rug or noise on it) is within reach
                 if h_bg is not None and _pad_is_clear(b, h_bg, [bodies[k] for k in placed]):
                     options.append((abs(h_bg - bottom), 1, h_bg, BACKGROUND, -1))
             if bottom <= drop_m:

@@ -111,7 +111,7 @@ def _penetration(m, d, index: _SceneIndex) -> tuple[float, dict[str, float], lis
     overlapping pairs (deepest first)."""
     import mujoco
 
-    from layout.solver import candidate_pairs
+    from layout.pushes import candidate_pairs
 
     geoms = _collision_geoms(m)
     lo, hi = _world_aabbs(m, d, geoms)

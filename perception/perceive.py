@@ -250,6 +250,12 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     if labels.shape != depth_m.shape:
         raise InputError(f"segmentation backend '{seg_use.backend}' returned masks of shape {labels.shape} for a {depth_m.shape} image; choose another --segmentation-backend")
     backends.extend(getattr(segmenter, "uses", ()))
+    removed = getattr(masks, "removed", None)
+    if removed is not None and not np.any(removed):
+        removed = None
+    if removed is not None:
+        share = 100.0 * float(np.mean(removed))
+        backends.append(BackendUse("people", seg_use.backend, f"removed {getattr(masks, 'removed_count', 0)} people or animals ({share:.0f} % of the photo): not part of the room; the background fills what they hid"))
     given_names = getattr(masks, "names", None)
     lifted: tuple[int, ...] = ()
     if given_names is not None and depth_source != "sensor" and frame.floor_found:
@@ -347,6 +353,6 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     if config.background:
         from perception.background import observed_background
 
-        room = Room(walls=room.walls, background=observed_background(observation, camera, room.walls, tuple(objects), config.max_depth_m))
-    return Perception(observation, camera, room, tuple(objects), tuple(backends))
+        room = Room(walls=room.walls, background=observed_background(observation, camera, room.walls, tuple(objects), config.max_depth_m, removed=removed))
+    return Perception(observation, camera, room, tuple(objects), tuple(backends), removed_mask=removed)
 

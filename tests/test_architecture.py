@@ -5,8 +5,11 @@
   stage, never the application or the bench layer.
 * The data-model modules of scene_builder import only each other (no stage, no application).
 * Only scene_builder.pipeline, scene_builder.cli and scene_builder.bench.* import the stages.
-* No module under scene_builder/ is over 800 lines; no stage module is named like a benchmark or
-  synthetic data (those live in scene_builder/bench/).
+* No import circle between the project's modules, in any package: imports anywhere in a file
+  count (top level or inside functions), and so do a package's ``__init__`` and its modules.
+* No module in any package (scene_builder with its bench layer, perception, generation, layout,
+  exporters) is over 800 lines; no stage module is named like a benchmark or synthetic data (those
+  live in scene_builder/bench/).
 """
 
 from __future__ import annotations
@@ -45,7 +48,8 @@ def project_modules() -> dict[str, Path]:
     return {module_name(p): p for pkg in PROJECT for p in sorted((ROOT / pkg).rglob("*.py"))}
 
 
-def imported_modules(source: str, name: str, is_package: bool = False) -> set[str]:
+@functools.cache  # each file is parsed once for all the checks below
+def imported_modules(source: str, name: str, is_package: bool = False) -> frozenset[str]:
     """Every project module that the module ``name`` with text ``source`` imports, anywhere in the
     file (top level or inside functions): ``import a.b`` gives a.b; ``from a import b`` gives a.b
     when a.b is a module, else a; relative imports are resolved against the module's package."""
@@ -63,7 +67,82 @@ def imported_modules(source: str, name: str, is_package: bool = False) -> set[st
             for a in node.names:
                 sub = f"{base}.{a.name}" if base else a.name
                 found.add(sub if sub in modules else base)
-    return {m for m in found if m.split(".")[0] in PROJECT}
+    return frozenset(m for m in found if m.split(".")[0] in PROJECT)
+
+
+def import_graph(extra: dict[str, str] | None = None) -> dict[str, set[str]]:
+    """Each project module -> the other project modules it imports (anywhere in the file).
+    ``extra``: text appended to some files (relative path -> source), as in :func:`violations`."""
+    extra = extra or {}
+    graph = {}
+    for name, path in project_modules().items():
+        source = path.read_text() + extra.get(path.relative_to(ROOT).as_posix(), "")
+        graph[name] = imported_modules(source, name, path.name == "__init__.py") - {name}
+    return graph
+
+
+def import_cycles(extra: dict[str, str] | None = None) -> list[list[str]]:
+    """The import circles: each set of modules that import one another, directly or through
+    others (a strongly connected component of more than one module, Tarjan's algorithm written
+    out here, iteratively, because the project has no graph library), as one circle through
+    them in import order, starting at its first module by name."""
+    graph = import_graph(extra)
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    components = []
+    for root in sorted(graph):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root] & graph.keys())))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, targets = work[-1]
+            for t in targets:
+                if t not in index:
+                    index[t] = low[t] = len(index)
+                    stack.append(t)
+                    on_stack.add(t)
+                    work.append((t, iter(sorted(graph[t] & graph.keys()))))
+                    break
+                if t in on_stack:
+                    low[node] = min(low[node], index[t])
+            else:
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[node])
+                if low[node] == index[node]:
+                    component = set()
+                    while True:
+                        m = stack.pop()
+                        on_stack.discard(m)
+                        component.add(m)
+                        if m == node:
+                            break
+                    if len(component) > 1:
+                        components.append(component)
+    return sorted(_circle_through(graph, c) for c in components)
+
+
+def _circle_through(graph: dict[str, set[str]], component: set[str]) -> list[str]:
+    """A shortest import path from the component's first module back to itself, inside it."""
+    start = min(component)
+    paths = {start: [start]}
+    frontier = [start]
+    while frontier:
+        nxt = []
+        for m in frontier:
+            for t in sorted(graph[m] & component):
+                if t == start:
+                    return paths[m] + [start]
+                if t not in paths:
+                    paths[t] = paths[m] + [t]
+                    nxt.append(t)
+        frontier = nxt
+    raise AssertionError(f"no circle through {sorted(component)}")
 
 
 def violations(extra: dict[str, str] | None = None) -> list[str]:
@@ -129,9 +208,27 @@ def test_relative_imports_are_resolved():
     assert imported_modules("from .solver import solve_layout\nimport numpy\n", "layout", is_package=True) == {"layout.solver"}
 
 
-def test_no_scene_builder_module_over_800_lines():
-    sizes = {p.relative_to(ROOT).as_posix(): len(p.read_text().splitlines()) for p in (ROOT / "scene_builder").rglob("*.py")}
-    assert len(sizes) > 10
+def test_no_import_circles():
+    circles = import_cycles()
+    assert circles == [], "break these import circles (a module both use, or one direction only): " + "; ".join(" -> ".join(c) for c in circles)
+
+
+def test_import_circles_are_found():
+    """The check sees a circle of two modules made by a function-level import, one of three
+    modules across a package's ``__init__``, and reports nothing for a one-way import added."""
+    assert import_cycles({"exporters/sdf_xml.py": "\ndef _f():\n    from exporters.sdf import write_sdf\n"}) == [
+        ["exporters.sdf", "exporters.sdf_xml", "exporters.sdf"]
+    ]
+    # layout.pushes -> layout (the package, whose __init__ imports layout.solver) -> layout.solver -> layout.pushes
+    assert import_cycles({"layout/pushes.py": "\nfrom layout import solve_layout\n"}) == [
+        ["layout", "layout.solver", "layout.pushes", "layout"]
+    ]
+    assert import_cycles({"perception/single_view.py": "\nfrom perception import vanishing_points\n"}) == []
+
+
+def test_no_module_over_800_lines_in_any_package():
+    sizes = {p.relative_to(ROOT).as_posix(): len(p.read_text().splitlines()) for pkg in PROJECT for p in (ROOT / pkg).rglob("*.py")}
+    assert {p.split("/")[0] for p in sizes} == set(PROJECT) and len(sizes) > 100
     assert {p: n for p, n in sizes.items() if n > MAX_LINES} == {}, f"split these modules (at most {MAX_LINES} lines each)"
 
 

@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from layout.solver import candidate_pairs, solve_layout_with_stats
+from layout.pushes import candidate_pairs
+from layout.solver import solve_layout_with_stats
 from scene_builder.bench.clutter import asset_from_pieces, clutter_layout_config, box_asset, box_mesh, clutter, empty_perception, surface_points, table_asset
 from scene_builder.config import LayoutConfig
 from scene_builder.frames import pose, rot_z, transform_points, yaw_of

@@ -1,5 +1,7 @@
 """The PhysX-Anything / PhysX-Omni representation: geometry token encodings (``tokens``), the
-overall-description text protocol (``protocol``), conversion to asset-frame parts (``convert``)
+overall-description text protocol (``description``: its grammar, dataclasses and writer;
+``protocol``: its parser; ``grid_frame``: its joints in the asset frame), conversion to
+asset-frame parts (``convert``)
 and the vision-language model backend (``vlm``). Importing this package is cheap: heavy
 libraries are imported inside the functions that use them."""
 

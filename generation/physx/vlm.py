@@ -49,7 +49,8 @@ import numpy as np
 from scene_builder.errors import InputError, ModelUnavailableError, SceneBuilderError
 
 from generation.physx.convert import PhysxObject, decode_part_tokens, physx_object
-from generation.physx.protocol import ParseReport, PhysxDescription, ProtocolError, parse_description
+from generation.physx.description import ParseReport, PhysxDescription, ProtocolError
+from generation.physx.protocol import parse_description
 
 __all__ = [
     "UPSTREAM_CROP_FILL",

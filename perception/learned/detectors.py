@@ -355,4 +355,4 @@ class DeepLabPascalSegmenter:
         cls = np.asarray(self.interpreter.get_tensor(self.output_index)).reshape(self.input_px, self.input_px).astype(np.int32)
         cls = np.where((cls >= 0) & (cls < len(self.labels)), cls, 0).astype(np.int32)
         full = cv2.resize(cls.astype(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST)
-        return SemanticMap(full.astype(np.int32), self.labels)
+        return SemanticMap(full.astype(np.int32), self.labels, self.classes)

@@ -130,7 +130,8 @@ def _token_seeds(omni: bool) -> tuple[bytes, ...]:
 
 
 def _description_seeds() -> tuple[bytes, ...]:
-    from generation.physx.protocol import description_from_basic_info, write_description
+    from generation.physx.description import write_description
+    from generation.physx.protocol import description_from_basic_info
 
     texts = _protocol_texts("*basic_info.txt")
     for raw in _protocol_texts("basic_info.json"):
