@@ -14,11 +14,12 @@ from scene_builder.registry import Registry
 __all__ = ["OFF_BY_DEFAULT", "register_backends", "register_box_prompt_backends", "register_detection_backends"]
 
 #: Detectors registered but not run by the ``"detections"`` segmenter (their entry says why).
-#: NanoDet: on the 15 inventory photos the pipeline with it found 1-2 more of the 82 objects a
-#: person counts and 3-9 more wrong ones (instance precision 0.879 -> 0.843 / 0.779 at its
-#: accept_score 0.5 / 0.4): its COCO names the cabinet close-ups microwave and refrigerator and its
-#: errors agree with CenterNet's (pictures as tv), which the noisy-or merge amplifies.
-#: BENCHMARKS.md, "Offline detectors". Benchmarks build it through ``models.resolve_weights``.
+#: NanoDet: on the 15 inventory photos (82 objects a person counts) the pipeline with it found
+#: none more and 4 more wrong objects at its accept_score 0.5 (instance precision 0.889 -> 0.836),
+#: 3 more and 8 more wrong at 0.4 (recall 0.683 -> 0.720, precision 0.797): its COCO names call
+#: cabinet close-ups refrigerator, microwave or oven, and its mistakes agree with CenterNet's
+#: (pictures as tv). BENCHMARKS.md, "Offline detectors in the pipeline". Benchmarks build it
+#: through its registry factory.
 OFF_BY_DEFAULT: frozenset[str] = frozenset({"nanodet-coco"})
 
 

@@ -317,10 +317,11 @@ def _target(where: str):
     return getattr(obj, cls) if cls else obj
 
 
-def pipeline_table(data: Path, inventory: Path, models_dir: Path | None, settings=PIPELINE_SETTINGS) -> list[str]:
+def pipeline_table(data: Path, inventory: Path, models_dir: Path | None, settings=PIPELINE_SETTINGS, echo: bool = False) -> list[str]:
     """``perceive`` (the "detections" segmenter: confirmation by depth and the semantic map, the
     classifier, masks) on the inventory photos under each setting: the inventory scores of
-    :mod:`scene_builder.bench.detect`, objects found, and what changed against the first setting."""
+    :mod:`scene_builder.bench.detect`, objects found, and what changed against the first setting.
+    echo: print each line as it is made (a long run keeps what it measured)."""
     from collections import Counter
 
     from scene_builder.bench.detect import run
@@ -329,6 +330,8 @@ def pipeline_table(data: Path, inventory: Path, models_dir: Path | None, setting
         "| setting | instance recall | instance precision | category recall | category precision | objects | median s per photo | labels gained (+) and lost (-) against the default, per photo |",
         "|---|---|---|---|---|---|---|---|",
     ]
+    if echo:
+        print("\n".join(lines), flush=True)
     base = None
     for name, patches in settings:
         saved = []
@@ -354,6 +357,8 @@ def pipeline_table(data: Path, inventory: Path, models_dir: Path | None, setting
             f"| {name} | {s['instance_recall']:.3f} | {s['instance_precision']:.3f} | {s['category_recall']:.3f} | {s['category_precision']:.3f} | "
             f"{sum(r['objects'] for r in rows)} | {secs[len(secs) // 2]:.1f} | {'; '.join(changes) or '-'} |"
         )
+        if echo:
+            print(lines[-1], flush=True)
     return lines
 
 
@@ -373,7 +378,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--pipeline", action="store_true", help="only the pipeline table: perceive on the inventory photos per setting (about 30 minutes)")
     args = ap.parse_args(argv)
     if args.pipeline:
-        print("\n".join(pipeline_table(args.data, args.inventory, args.models_dir)))
+        pipeline_table(args.data, args.inventory, args.models_dir, echo=True)
         return
     detectors = load_detectors(args.models_dir)
     if not detectors:
