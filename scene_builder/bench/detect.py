@@ -170,7 +170,7 @@ def run(data: Path, inventory: Path, models_dir: Path | None, segmentation: str,
             "movable": sum(1 for lab in labels if not category(lab).fixed),
             "labels": labels,
         }
-        if d.name in seen and d.parent.name == "photos":
+        if d.name in seen:
             s = score_inventory(labels, seen[d.name], groups)
             scores.append(s)
             row["inventory"] = s.__dict__

@@ -48,6 +48,7 @@ REPO = Path(__file__).resolve().parents[2]
 DEFAULT_DATA = REPO.parent / "shared" / "data"
 DEFAULT_MODELS = REPO.parent / "shared" / "models"
 DEFAULT_INVENTORY = REPO / "tests" / "data" / "photo_inventory.json"
+REAL_INVENTORY = REPO / "tests" / "data" / "real_inventory.json"
 
 #: Vocabulary labels of furniture-like things (the objects a twin is mostly about).
 FURNITURE: frozenset[str] = frozenset(
@@ -317,11 +318,12 @@ def _target(where: str):
     return getattr(obj, cls) if cls else obj
 
 
-def pipeline_table(data: Path, inventory: Path, models_dir: Path | None, settings=PIPELINE_SETTINGS, echo: bool = False) -> list[str]:
+def pipeline_table(data: Path, inventory: Path, models_dir: Path | None, settings=PIPELINE_SETTINGS, echo: bool = False, root: str = "photos") -> list[str]:
     """``perceive`` (the "detections" segmenter: confirmation by depth and the semantic map, the
-    classifier, masks) on the inventory photos under each setting: the inventory scores of
-    :mod:`scene_builder.bench.detect`, objects found, and what changed against the first setting.
-    echo: print each line as it is made (a long run keeps what it measured)."""
+    classifier, masks) on the photos of ``data``/``root`` (as plain photos) under each setting:
+    the scores of :mod:`scene_builder.bench.detect` against ``inventory``, objects found, and what
+    changed against the first setting. echo: print each line as it is made (a long run keeps what
+    it measured)."""
     from collections import Counter
 
     from scene_builder.bench.detect import run
@@ -340,7 +342,7 @@ def pipeline_table(data: Path, inventory: Path, models_dir: Path | None, setting
                 obj = _target(where)
                 saved.append((obj, attr, getattr(obj, attr)))
                 setattr(obj, attr, value)
-            result = run(data, inventory, models_dir, "detections", roots=("photos",), quiet=True)
+            result = run(data, inventory, models_dir, "detections", roots=(root,), quiet=True)
         finally:
             for obj, attr, value in reversed(saved):
                 setattr(obj, attr, value)
@@ -375,10 +377,21 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--models-dir", type=Path, default=DEFAULT_MODELS if DEFAULT_MODELS.is_dir() else None, help="model files (default ../shared/models)")
     ap.add_argument("--inventory", type=Path, default=DEFAULT_INVENTORY)
     ap.add_argument("--skip-decoding", action="store_true", help="leave out NanoDet's decoding variants")
-    ap.add_argument("--pipeline", action="store_true", help="only the pipeline table: perceive on the inventory photos per setting (about 30 minutes)")
+    ap.add_argument(
+        "--pipeline",
+        choices=("photos", "real", "both"),
+        default=None,
+        help="only the pipeline tables: perceive per setting on the inventory photos (photos: every setting, about 30 minutes) "
+        "and on the real RGB-D photos used as plain photos against tests/data/real_inventory.json (real: the default and NanoDet added)",
+    )
     args = ap.parse_args(argv)
     if args.pipeline:
-        pipeline_table(args.data, args.inventory, args.models_dir, echo=True)
+        if args.pipeline in ("photos", "both"):
+            print(f"On the {len(load_inventory(args.inventory)[0])} photos of {args.data / 'photos'} against {args.inventory.name}:\n", flush=True)
+            pipeline_table(args.data, args.inventory, args.models_dir, echo=True)
+        if args.pipeline in ("real", "both"):
+            print(f"\nOn the photos of {args.data / 'real'} used as plain photos, against {REAL_INVENTORY.name}:\n", flush=True)
+            pipeline_table(args.data, REAL_INVENTORY, args.models_dir, PIPELINE_SETTINGS[:3], echo=True, root="real")
         return
     detectors = load_detectors(args.models_dir)
     if not detectors:

@@ -109,8 +109,9 @@ EXTRAS: tuple[Extra, ...] = (
         "Offline detectors in the pipeline",
         "`perceive` with the `detections` segmenter on the 15 inventory photos (`scene_builder.bench.detectors --pipeline`) "
         "per detector setting: NanoDet added (off by default), `FLOOR_SCORE` and each detector's accept_score varied; "
-        "instance and category recall / precision against the inventory and the labels gained and lost per photo.",
-        ("-m", "scene_builder.bench.detectors", "--pipeline"),
+        "instance and category recall / precision against the inventory and the labels gained and lost per photo; then the "
+        "real RGB-D photos used as plain photos against `tests/data/real_inventory.json`, with and without NanoDet.",
+        ("-m", "scene_builder.bench.detectors", "--pipeline", "both"),
         markdown=True,
         timeout_s=5400.0,
     ),
