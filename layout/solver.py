@@ -40,7 +40,7 @@ from layout.bodies import Body, make_body, rebuilt, with_legs
 from layout.pushes import PENETRATION_TOL_M, Solver
 from layout.snapping import YawSnap, reference_yaw, snap_yaw
 from layout.support import UNSUPPORTED, build_support
-from layout.trim import trim_pair
+from layout.trim import trim_pair, trim_to_walls
 from scene_builder.config import LayoutConfig
 from scene_builder.errors import InputError
 from scene_builder.model import AssetKind, GeneratedAsset, LayoutResult, Perception, PlacedObject, Placement, Scene
@@ -67,17 +67,24 @@ class SolveStats:
     phase_cpu_s: tuple[tuple[str, float], ...] = ()
 
 
-def _trim_overlaps(solver: Solver) -> bool:
-    """Cut apart the collision pieces of overlapping bodies where the overlap is shallow
-    (``layout.trim``), replacing those bodies in place (pose, support and flags kept). Returns
-    whether anything was cut (the solver's narrow phase must then be rebuilt)."""
+def _trim_overlaps(solver: Solver, observed: dict[str, np.ndarray]) -> bool:
+    """Cut apart the collision pieces of overlapping bodies (``layout.trim``): shallow overlaps at
+    the mid-plane, deep ones between the visuals or, where those overlap, between what the camera
+    saw of each (``observed``: name -> (N, 3) world points where it was seen); bodies are replaced
+    in place (pose, support and flags kept). Returns whether anything was cut (the solver's
+    narrow phase must then be rebuilt)."""
     bodies = solver.bodies
     changed = False
+
+    def seen(b: Body) -> np.ndarray | None:
+        pts = observed.get(b.name)
+        return None if pts is None else pts + (b.position_m - b.initial_position_m)  # moved with the body
+
     for i, j in solver.penetrating_pairs():
         bi, bj = bodies[i], bodies[j]
         if bi.asset.kind is AssetKind.DEFORMABLE or bj.asset.kind is AssetKind.DEFORMABLE:
             continue  # a flex is simulated as its box: nothing to cut
-        a, b, cut, _ = trim_pair(bi.asset, bi.world_from_asset(), bj.asset, bj.world_from_asset())
+        a, b, cut, _ = trim_pair(bi.asset, bi.world_from_asset(), bj.asset, bj.world_from_asset(), observed_a=seen(bi), observed_b=seen(bj))
         if cut <= PENETRATION_TOL_M:
             continue
         for k, asset in ((i, a), (j, b)):
@@ -86,6 +93,8 @@ def _trim_overlaps(solver: Solver) -> bool:
                 continue
             bodies[k] = rebuilt(old, asset)
             changed = True
+        bodies[i].trimmed_with.add(bodies[j].name)
+        bodies[j].trimmed_with.add(bodies[i].name)
     if changed:
         # Cut pieces may have changed a supporter's top faces: each child rests on the face at
         # its bottom's height again (the nearest one).
@@ -94,6 +103,23 @@ def _trim_overlaps(solver: Solver) -> bool:
                 faces = bodies[b.parent].surfaces
                 heights = np.array([bodies[b.parent].position_m[2] + f.height_rel_m for f in faces])
                 b.support_surface = int(np.argmin(np.abs(heights - b.bottom_m))) if len(faces) else -1
+    return changed
+
+
+def _trim_walls(solver: Solver, observed: dict[str, np.ndarray], clearance_m: float) -> bool:
+    """Cut each movable body's collision to the room side of the walls where its completion
+    reaches into one (``layout.trim.trim_to_walls``), instead of pushing it out. Returns whether
+    anything was cut."""
+    changed = False
+    for k, b in enumerate(solver.bodies):
+        if b.fixed or b.asset.kind is AssetKind.DEFORMABLE or not solver.walls:
+            continue
+        pts = observed.get(b.name)
+        seen = None if pts is None else pts + (b.position_m - b.initial_position_m)
+        asset, cut = trim_to_walls(b.asset, b.world_from_asset(), solver.walls, clearance_m, seen)
+        if asset is not b.asset:
+            solver.bodies[k] = rebuilt(b, asset)
+            changed = True
     return changed
 
 
@@ -173,6 +199,9 @@ def solve_layout_with_stats(
             bodies[i] = with_legs(b)
     if any(b.legs_m > 0.0 for b in bodies):
         solver = Solver(bodies, walls, config, seed)
+    # Completions reaching into a wall are cut at it before anything is judged to be in one.
+    if _trim_walls(solver, {g.asset.name: g.observed_points_world_m for g in generated}, float(config.clearance_m)):
+        solver = Solver(bodies, walls, config, seed)
     unsupport_blocked_pads(bodies)
     unsupport_in_walls(solver, config.max_wall_push_m)
     absorbed = [i for i, b in enumerate(bodies) if b.parent == UNSUPPORTED]
@@ -186,7 +215,7 @@ def solve_layout_with_stats(
         solver.world.set_position(i, b.position_m)
     lap("support")
     for _ in range(TRIM_PASSES):  # a cut changes the pieces: look again
-        if not _trim_overlaps(solver):
+        if not _trim_overlaps(solver, {g.asset.name: g.observed_points_world_m for g in generated}):
             break
         solver = Solver(bodies, walls, config, seed)
     lap("trim")

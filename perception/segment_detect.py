@@ -1,10 +1,11 @@
 """Detection-driven instances: the ``"detections"`` segmentation backend (Grounded-SAM style, with
 geometry and a classifier as second witnesses).
 
-1. **Detect**: every available detector (COCO CenterNet, Open Images SSD) gives boxes down to a
-   low score; :func:`perception.detection.merge_detections` puts them on one scale (a detector's
-   own trust score becomes :data:`~perception.detection.CONFIDENT`) and fuses boxes that several
-   detectors agree on.
+1. **Detect**: every available detector (Grounding DINO prompted with the room vocabulary, COCO
+   CenterNet, Open Images SSD) gives boxes down to a low score;
+   :func:`perception.detection.merge_detections` puts them on one scale (a detector's own trust
+   score becomes :data:`~perception.detection.CONFIDENT`) and fuses boxes that several detectors
+   agree on.
 2. **Confirm** (two passes): a detection at :data:`~perception.detection.CONFIDENT` or more
    stands alone. A weaker one (down to :data:`FLOOR_SCORE`) is kept only when geometry or the
    semantic map confirms it among the pixels the confident ones left: a depth cluster
@@ -67,6 +68,7 @@ _BEHIND_M = 0.6
 #: A depth cluster that an object's cut reaches into and that lies this much inside its box is
 #: part of it (:meth:`DetectionSegmenter._whole_cluster`).
 _WHOLE_INSIDE = 0.8
+_WHOLE_CUT_SHARE = 0.2
 #: A person's box where the semantic map's people pixels fill this share is outlined by them.
 _PEOPLE_SEEN = 0.15
 #: A depth cluster that instances cover less than this share of is unexplained.
@@ -202,6 +204,7 @@ class DetectionSegmenter:
         self.max_depth_m = float(max_depth_m)
         #: What answered the last ``segment`` call, for ``Perception.backends``.
         self.uses: list[BackendUse] = []
+        self._boxes_per_detector: list[tuple[str, int]] = []
 
     # -- the stages ---------------------------------------------------------------------------
 
@@ -211,6 +214,7 @@ class DetectionSegmenter:
         for nb in self.detectors:
             det: ObjectDetector = nb.backend
             parts.append((det.detect(rgb), float(getattr(det, "accept_score", CONFIDENT))))
+        self._boxes_per_detector = [(nb.name, len(d)) for nb, (d, _) in zip(self.detectors, parts)]
         return merge_detections(parts)
 
     def segment(
@@ -473,8 +477,10 @@ class DetectionSegmenter:
                 continue
             pix = clusters == cl
             in_box = np.count_nonzero(pix[rs, cs])
-            if in_box >= _WHOLE_INSIDE * np.count_nonzero(pix):
-                out |= pix
+            # Mostly inside the box, and the cut holds a fair share of it (a cluster the cut
+            # only grazes is something the object touches: a wall's pillar behind a wardrobe).
+            if in_box >= _WHOLE_INSIDE * np.count_nonzero(pix) and n >= _WHOLE_CUT_SHARE * in_box:
+                out[rs, cs] |= pix[rs, cs]
         return out & ~claimed
 
     def _trim_3d(self, mask: np.ndarray, points: np.ndarray, off_room: np.ndarray, focal: float) -> np.ndarray:
@@ -653,7 +659,7 @@ class DetectionSegmenter:
                 cache.append(point_normals(points))
             return cache[0]
 
-        for c in np.flatnonzero(cluster_sizes >= 2 * self.min_points):
+        for c in np.flatnonzero(cluster_sizes >= self.min_points):
             if c == 0:
                 continue
             m = clusters == c
@@ -705,8 +711,9 @@ class DetectionSegmenter:
         said = ", ".join(f"{n} by {k}" for k, n in sorted(witnesses.items()))
         names = "+".join(nb.name for nb in self.detectors)
         n_named = sum(1 for lab in dets.labels if lab)
+        each = ", ".join(f"{name} {n}" for name, n in self._boxes_per_detector)
         self.uses = [
-            BackendUse("detection", names, f"{len(dets)} boxes ({n_named} of vocabulary classes); {len(kept)} objects: {said or 'none'}"),
+            BackendUse("detection", names, f"{len(dets)} boxes ({n_named} of vocabulary classes; before merging: {each}); {len(kept)} objects: {said or 'none'}"),
             BackendUse("box-segmentation", self.box_segmenter.name, f"{n_det} box prompts"),
         ]
         if self.semantic is not None:

@@ -9,7 +9,8 @@ import pytest
 
 from generation.physx.description import MovementType, write_description
 from generation.physx.grid_frame import GridFrame, group_joint
-from generation.physx.protocol import ProtocolError, description_from_basic_info, parse_description
+from generation.physx.basic_info import description_from_basic_info
+from generation.physx.protocol import ProtocolError, parse_description
 from scene_builder.model import JointType
 from tests.conftest import PHYSX_PROTOCOL, require
 

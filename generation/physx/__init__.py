@@ -16,6 +16,18 @@ __all__ = ["BACKEND_NAME", "PhysxVlmGenerator", "register_backends", "turn_to_ma
 BACKEND_NAME = "physx-anything-vlm"
 
 
+def model_load_errors() -> tuple[type[BaseException], ...]:
+    """What loading a transformers model from a folder raises when the folder is wrong: OSError
+    (files missing or unreadable: what ``from_pretrained`` documents), ValueError (a config,
+    tokenizer or JSON file it cannot use), KeyError (transformers' tokenizer loader on a
+    ``tokenizer.json`` without the keys it reads, e.g. ``'added_tokens'``: found with a malformed
+    file), RuntimeError (torch: weights of the wrong shape, CUDA, out of GPU memory), MemoryError,
+    and safetensors' ``SafetensorError`` (a corrupt weights file; not an OSError)."""
+    from safetensors import SafetensorError
+
+    return (OSError, ValueError, KeyError, RuntimeError, MemoryError, SafetensorError)
+
+
 class PhysxVlmGenerator:
     """An ``AssetGenerator``: each object from a single-object image of it, answered by the
     PhysX model found in ``model_dir`` (or by ``chat``, any :class:`~generation.physx.vlm.ChatModel`,
@@ -50,7 +62,7 @@ class PhysxVlmGenerator:
             except SceneBuilderError as err:
                 self._load_error = err
                 raise
-            except Exception as err:  # transformers / torch failing to load the folder
+            except model_load_errors() as err:  # transformers / torch failing to load the folder
                 self._load_error = VlmCallError(f"cannot load the PhysX model from {self.model_dir} ({type(err).__name__}: {err})".splitlines()[0])
                 raise self._load_error from err
         return self._chat, self._prompts

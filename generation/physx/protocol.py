@@ -1,6 +1,7 @@
 """The PhysX-Anything / PhysX-Omni overall-description parser: the text (grammar in
-:mod:`generation.physx.description`) and upstream ``basic_info.json`` files read into its
-dataclasses. :func:`parse_description` reads every known variation, repairs what it can and
+:mod:`generation.physx.description`) read into its dataclasses (upstream ``basic_info.json``
+files: :mod:`generation.physx.basic_info`, which shares the unit and repair helpers here).
+:func:`parse_description` reads every known variation, repairs what it can and
 lists each repair or drop in :class:`ParseReport`; values are stored in SI (kg/m^3, Pa), joints in
 the text's grid units (so that :func:`~generation.physx.description.write_description`
 round-trips); :mod:`generation.physx.grid_frame` converts joints to the asset frame in metres and
@@ -23,7 +24,7 @@ from generation.physx.description import (
 )
 from generation.physx.description import round_sig as _sig
 
-__all__ = ["ProtocolError", "description_from_basic_info", "parse_description"]
+__all__ = ["ProtocolError", "parse_description"]
 
 # --------------------------------------------------------------------------------------------
 # Numbers and units
@@ -104,7 +105,10 @@ def _quantity(text: str, kind: str, what: str, warnings: list[str]) -> float | N
         return None
     if len(values) > 1:
         warnings.append(f"{what}: {len(values)} values in {raw!r}, using their mean")
-    value = math.fsum(values) / len(values)
+    # fsum raises on inf + -inf (ValueError) and on an intermediate sum beyond float range
+    # (OverflowError): such values are out of range for any quantity, and dropped below.
+    finite = all(math.isfinite(v) and abs(v) < 1e300 for v in values)
+    value = math.fsum(values) / len(values) if finite else math.inf
     if not math.isfinite(value):
         warnings.append(f"{what}: {raw[:40]!r} is out of range, dropped")
         return None
@@ -404,98 +408,3 @@ def parse_description(text: str, grid: int = 32) -> tuple[PhysxDescription, Pars
     )
     return desc, ParseReport(tuple(warnings))
 
-
-# --------------------------------------------------------------------------------------------
-# basic_info.json (the upstream parsers' output / the annotation schema)
-# --------------------------------------------------------------------------------------------
-
-
-def description_from_basic_info(data: dict, grid: int) -> tuple[PhysxDescription, ParseReport]:
-    """Load an upstream ``basic_info.json`` (PhysX-Anything strings or PhysX-Omni floats, README
-    G6) into the same dataclasses. Normalised params are turned back into the text's grid units.
-
-    Raises ProtocolError (one line) when the data does not follow that schema."""
-    try:
-        return _from_basic_info(data, grid)
-    except ProtocolError:
-        raise
-    except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError, RecursionError) as err:
-        raise ProtocolError(f"basic_info does not follow the PhysX schema ({type(err).__name__}: {str(err)[:80]})") from err
-
-
-def _from_basic_info(data: dict, grid: int) -> tuple[PhysxDescription, ParseReport]:
-    warnings: list[str] = []
-    parts: list[PhysxPart] = []
-    for entry in data.get("parts", []):
-        label = int(entry["label"])
-        where = f"l_{label}"
-
-        def q(key: str, kind: str) -> float | None:
-            v = entry.get(key)
-            if v is None:
-                warnings.append(f"{where}: {key} is null")
-                return None
-            if isinstance(v, (int, float)):
-                return _sig(float(v) * _DEFAULT_SCALE[kind])
-            return _quantity(str(v), kind, f"{where} {key}", warnings)
-
-        rank = int(entry.get("priority_rank", 5))
-        parts.append(
-            PhysxPart(
-                label=label,
-                name=str(entry.get("name", "")),
-                affordance_rank=min(max(rank, 1), 10),
-                material=str(entry.get("material", "")),
-                density_kg_m3=q("density", "density"),
-                youngs_modulus_pa=q("Young's Modulus (GPa)", "modulus"),
-                poisson_ratio=q("Poisson's Ratio", "ratio"),
-                description=str(entry.get("Basic_description", "")),
-            )
-        )
-    groups: list[PhysxGroup] = []
-    for key, value in sorted(data.get("group_info", {}).items(), key=lambda kv: int(kv[0])):
-        gid = int(key)
-        if gid == 0:
-            groups.append(PhysxGroup(0, tuple(int(v) for v in value), MovementType.FIXED))
-            continue
-        members, parent_s, params, type_s = value
-        parent = int(parent_s) if str(parent_s).isdigit() else None
-        mt = MovementType(str(type_s).upper())
-        p = [float(v) for v in params]
-
-        def pos(v: list[float]) -> tuple[float, float, float]:
-            return tuple(_sig((c + 0.5) * grid) for c in v)  # type: ignore[return-value]
-
-        kw: dict = {}
-        if mt is MovementType.SLIDE:
-            kw = {"slide_direction": tuple(p[0:3]), "slide_range_vox": (_sig(p[6] * grid), _sig(p[7] * grid))}
-        elif mt is MovementType.REVOLUTE:
-            kw = {
-                "axis_direction": tuple(p[0:3]),
-                "axis_position_vox": pos(p[3:6]),
-                "revolute_range_deg": (_sig(p[6] * 180.0), _sig(p[7] * 180.0)),
-            }
-        elif mt is MovementType.BALL:
-            kw = {"axis_position_vox": pos(p[3:6])}
-        elif mt is MovementType.REVOLUTE_SLIDE:
-            kw = {
-                "axis_direction": tuple(p[0:3]),
-                "axis_position_vox": pos(p[3:6]),
-                "revolute_range_deg": (_sig(p[6] * 180.0), _sig(p[7] * 180.0)),
-                "slide_direction": tuple(p[8:11]),
-                "slide_range_vox": (_sig(p[14] * grid), _sig(p[15] * grid)),
-            }
-        groups.append(PhysxGroup(gid, tuple(int(m) for m in members), mt, parent, **kw))
-    labels = [p.label for p in parts]
-    if not parts:
-        raise ProtocolError("basic_info has no parts")
-    dimension = _parse_dimension(str(data.get("dimension", "")), warnings)
-    desc = PhysxDescription(
-        name=str(data.get("object_name", "")),
-        category=str(data.get("category", "")),
-        dimension_cm=dimension,
-        parts=tuple(sorted(parts, key=lambda p: p.label)),
-        groups=_repair_groups(groups, sorted(labels), warnings),
-        grid=grid,
-    )
-    return desc, ParseReport(tuple(warnings))

@@ -1,5 +1,6 @@
-"""Learned perception backends (Depth Anything V2, SAM 2, EfficientNet-Lite0 naming, the SSD
-detector) and the weight-free single-photo depth chain, registered into the perception registries.
+"""Learned perception backends (Depth Anything V2, SAM 2, EfficientNet-Lite0 naming, Grounding
+DINO and the offline detectors) and the weight-free single-photo depth chain, registered into the
+perception registries.
 
 Everything heavy is imported inside the factories: registering costs a few file-system checks.
 """
@@ -148,10 +149,12 @@ def register_detection_backends(detection: Registry, semantic: Registry, box_pro
     """Register the offline detectors, the semantic segmenter and SAM 2 box prompts (lazy
     factories; availability says why not, in one line).
 
-    detection: ``"centernet-mbv3-coco"`` (priority 100) and ``"ssd-mobilenet-oid"`` (priority 50),
+    detection: ``"grounding-dino-tiny"`` (priority 200, when its weights resolve locally: the
+    open-vocabulary detector prompted with the room vocabulary, downloaded on a networked
+    machine), ``"centernet-mbv3-coco"`` (priority 100) and ``"ssd-mobilenet-oid"`` (priority 50),
     each when its file resolves through the model registry (the ``"detections"`` segmenter runs
-    every available one); ``"nanodet-coco"`` (priority 75) is unavailable while it is in
-    :data:`OFF_BY_DEFAULT`. semantic: ``"deeplabv3-mnv2-pascal"`` (priority 50).
+    every available one, in this order); ``"nanodet-coco"`` (priority 75) is unavailable while
+    it is in :data:`OFF_BY_DEFAULT`. semantic: ``"deeplabv3-mnv2-pascal"`` (priority 50).
     box_prompt: ``"sam2"`` (priority 100, when its weights resolve locally; GrabCut is the
     always-available fallback registered by ``perception.backends``).
     """
@@ -161,6 +164,13 @@ def register_detection_backends(detection: Registry, semantic: Registry, box_pro
 
     def weights(name: str) -> Path:
         return _weights(name, models_dir)
+
+    gd_name = models.default_model("detection").name
+
+    def make_grounding_dino():
+        from perception.learned.grounding_dino import GroundingDinoDetector
+
+        return GroundingDinoDetector(weights(gd_name))
 
     def make_centernet():
         from perception.learned.detectors import CenterNetCocoDetector
@@ -183,6 +193,7 @@ def register_detection_backends(detection: Registry, semantic: Registry, box_pro
         return DeepLabPascalSegmenter(weights("deeplabv3-mnv2-pascal"))
 
     for name, factory, priority, what in (
+        (gd_name, make_grounding_dino, 200, "Grounding DINO prompted with the room vocabulary, open-vocabulary boxes (transformers)"),
         ("centernet-mbv3-coco", make_centernet, 100, "CenterNet MobileNetV3, 80 COCO classes (onnxruntime)"),
         ("nanodet-coco", make_nanodet, 75, "NanoDet-m, 80 COCO classes (onnxruntime)"),
         ("ssd-mobilenet-oid", make_ssd, 50, "SSD MobileNetV2, Open Images indoor classes incl. desk and table (TFLite)"),

@@ -354,6 +354,8 @@ class Item:
     masks: MaskScore | None = None
     masks_control: MaskScore | None = None
     objects: tuple[tuple[str, str, bool], ...] = ()  # (name, label, interactive)
+    inventory: object = None  # detect.InventoryScore of the interactive objects (set "real")
+    inventory_perceived: object = None  # ... of every perceived object
 
 
 def run_item(set_name: str, sample: Path, out_dir: Path, config, with_depth: bool) -> Item:
@@ -381,6 +383,16 @@ def run_item(set_name: str, sample: Path, out_dir: Path, config, with_depth: boo
     objects = tuple((o.name, o.asset.label, o.name in inter) for o in scene.objects)
     item = Item(set_name, sample.name, "built", seconds, fates=fates, objects=objects)
     if set_name == "real":
+        inv = _inventory().get(sample.name)
+        if inv is not None:
+            from scene_builder.bench.detect import score_inventory
+
+            seen, groups = inv
+            item = dataclasses.replace(
+                item,
+                inventory=score_inventory([lab for _, lab, inter in objects if inter], seen, groups),
+                inventory_perceived=score_inventory([o.label for o in result.perception.objects], seen, groups),
+            )
         return item
     if set_name.startswith("sun"):
         true, rtilt = sun_boxes(sample)
@@ -399,6 +411,17 @@ def run_item(set_name: str, sample: Path, out_dir: Path, config, with_depth: boo
             item, masks=score_masks({n: (labels[n], s) for n, s in sil.items()}, true), masks_control=score_masks({}, true)
         )
     return item
+
+
+REAL_INVENTORY = REPO / "tests" / "data" / "real_inventory.json"
+
+
+def _inventory() -> dict[str, tuple[dict[str, int], tuple[tuple[str, ...], ...]]]:
+    """photo name -> (what a person sees there, same-category groups), from REAL_INVENTORY."""
+    from scene_builder.bench.detect import load_inventory
+
+    photos, groups = load_inventory(REAL_INVENTORY)
+    return {name: (seen, groups) for name, seen in photos.items()}
 
 
 def inputs_of(data_dir: Path, sets: tuple[str, ...]) -> list[tuple[str, Path, bool]]:
@@ -436,6 +459,14 @@ def summarize(items: list[Item]) -> dict:
             "interactive_share_of_perceived": (sum(f.interactive for f in fates) / perceived) if perceived else None,
             "build_s_median": float(np.median([i.seconds for i in built])) if built else None,
         }
+        for key, pick in (("inventory", lambda i: i.inventory), ("inventory_perceived", lambda i: i.inventory_perceived)):
+            scores = [pick(i) for i in built if pick(i) is not None]
+            if scores:
+                from scene_builder.bench.detect import pooled
+
+                for k, v in pooled(scores).items():
+                    s[f"{key}_{k}"] = v
+                s[f"{key}_seen"] = sum(x.seen for x in scores)
         if any(i.boxes for i in built):
             n_true = sum(i.boxes.n_true for i in built if i.boxes)
             for key, pick in (("", lambda i: i.boxes), ("control_", lambda i: i.boxes_control)):
@@ -488,6 +519,9 @@ def main(argv: list[str] | None = None) -> int:
             extra = ""
             if item.boxes:
                 extra = f"boxes {item.boxes.matched}/{item.boxes.n_true} (label {item.boxes.matched_label}) " + " ".join(f"{lab}:{v:.2f}" for lab, v in item.boxes.best_iou)
+            if item.inventory is not None:
+                v = item.inventory
+                extra = f"inventory: {v.matched} of {v.seen} seen things are interactive objects ({v.found} interactive)"
             if item.masks:
                 m = item.masks
                 extra = f"masks {m.matched}/{m.n_true} (large {m.matched_large}/{m.n_large}, label {m.matched_label}) precision {m.matched_loose}/{m.n_pred}"
