@@ -524,6 +524,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--keep", type=Path, default=None, help="build into this folder and keep the builds")
     parser.add_argument("--only", default="", help="only samples whose name contains this")
     parser.add_argument("--json", type=Path, default=None, help="write the items and the summary here")
+    parser.add_argument("--markdown", action="store_true", help="print the summary as the README's Markdown table on stdout")
     args = parser.parse_args(argv)
     import tempfile
 
@@ -555,8 +556,13 @@ def main(argv: list[str] | None = None) -> int:
     summary = summarize(items)
     for set_name, s in summary.items():
         console.print(f"[bold]{set_name}[/bold] " + ", ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}" for k, v in s.items()))
+    doc = {"meta": _meta(argv), "summary": summary, "items": [dataclasses.asdict(i) for i in items]}
     if args.json:
-        args.json.write_text(json.dumps({"meta": _meta(argv), "summary": summary, "items": [dataclasses.asdict(i) for i in items]}, indent=1, default=str))
+        args.json.write_text(json.dumps(doc, indent=1, default=str))
+    if args.markdown:
+        from scene_builder.bench.readme import BLOCKS
+
+        print(BLOCKS["objects"][1](json.loads(json.dumps(doc, default=str))))
     return 0
 
 
