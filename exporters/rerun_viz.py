@@ -206,7 +206,7 @@ def _settled_picture(port: int, deadline: float) -> bytes | None:
         try:
             client = ViewerClient.connect(f"rerun+http://127.0.0.1:{port}/proxy")
             client.get_state()
-        except Exception:  # the server is not answering yet: retried until the deadline
+        except OSError:  # not answering yet (rerun raises ConnectionError "transport error"): retried until the deadline
             client = None
             time.sleep(0.2)
     if client is None:

@@ -63,6 +63,7 @@ from exporters.mjcf import (
     part_rgba,
     write_part_meshes,
 )
+from exporters.sdf_xml import fmt as _fmt, sub as _sub
 from exporters.textures import TEXTURE_DIR, texture_file, write_texture
 from exporters.urdf import rpy_from_matrix
 from scene_builder.errors import ExportError
@@ -86,17 +87,6 @@ _WORLD_NAMES = ("world", "room", "input_camera", "key", "robot")
 _GREY = (0.7, 0.7, 0.7, 1.0)
 _WALL_RGBA = (0.86, 0.84, 0.78, 1.0)
 _FLOOR_RGBA = (0.6, 0.56, 0.5, 1.0)
-
-
-def _fmt(values) -> str:
-    return " ".join(f"{float(v):.9g}" for v in np.atleast_1d(values))
-
-
-def _sub(parent: ET.Element, tag: str, text=None, **attrib) -> ET.Element:
-    el = ET.SubElement(parent, tag, attrib)
-    if text is not None:
-        el.text = text if isinstance(text, str) else _fmt(text)
-    return el
 
 
 def _pose(parent: ET.Element, xyz, rpy=(0.0, 0.0, 0.0)) -> None:

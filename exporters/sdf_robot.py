@@ -27,7 +27,7 @@ import numpy as np
 from exporters import names
 from exporters.mjcf import MESH_DIR
 from exporters.robot import compiled_robot, position_drives, quat_matrix
-from exporters.sdf import _fmt, _sub
+from exporters.sdf_xml import fmt as _fmt, sub as _sub
 from exporters.urdf import rpy_from_matrix
 from scene_builder.errors import ExportError
 from scene_builder.robot import RobotPlacement

@@ -103,7 +103,7 @@ def write_usdz(usda_path: Path) -> Path:
 
 def build_stage(scene: Scene, path: Path | None = None):
     """The ``Usd.Stage`` of ``scene`` (in memory when ``path`` is None)."""
-    from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics
+    from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics
 
     stage = Usd.Stage.CreateNew(str(path)) if path is not None else Usd.Stage.CreateInMemory()
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
@@ -129,9 +129,7 @@ def build_stage(scene: Scene, path: Path | None = None):
         prim_path = Sdf.Path("/World/Objects").AppendChild(prim_names(placed.name))
         try:
             _add_object(ctx, placed, prim_path)
-        except ExportError:
-            raise
-        except Exception as err:  # pxr raises Tf.ErrorException; name the object, keep the cause
+        except Tf.ErrorException as err:  # what pxr raises when it refuses an edit; name the object, keep the cause
             raise ExportError(f"USD export failed at object {placed.name}: {err}") from err
     if scene.robot is not None:
         from exporters.usd_robot import add_robot

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["convex_pieces", "voxel_convex_pieces", "is_convex_enough", "CONVEX_VOLUME_RATIO", "COACD_MAX_FACES", "VOXEL_FILL_RATIO"]
+__all__ = ["import_coacd", "convex_pieces", "voxel_convex_pieces", "is_convex_enough", "CONVEX_VOLUME_RATIO", "COACD_MAX_FACES", "VOXEL_FILL_RATIO"]
 
 # A part whose convex hull has at most 1 / 0.95 of its volume collides as its hull.
 CONVEX_VOLUME_RATIO = 0.95
@@ -24,6 +24,22 @@ VOXEL_FILL_RATIO = 0.9
 # the 8 corners of a unit cube, in voxel units
 _CUBE_CORNERS = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=np.int64)
 
+
+def import_coacd():
+    """The ``coacd`` module, imported after onnxruntime when onnxruntime is installed.
+
+    Importing onnxruntime after coacd crashes the process (SIGSEGV in onnxruntime's
+    ``_pybind_state`` initialisation, onnxruntime 1.32 with coacd 1.0.14's bundled libraries;
+    the other order works): a batch worker that loaded its stages, or any process that
+    generated an asset before it first ran a detector, died on its first detection.
+    """
+    import importlib.util
+
+    if importlib.util.find_spec("onnxruntime") is not None:
+        import onnxruntime  # noqa: F401  (must precede coacd, see above)
+    import coacd
+
+    return coacd
 
 def _hull(points: np.ndarray):
     import trimesh
@@ -132,8 +148,7 @@ def convex_pieces(
     if cache_path is not None and cache_path.exists():
         return _load_cache(cache_path)
 
-    import coacd
-
+    coacd = import_coacd()
     coacd.set_log_level("error")
     small = decimate(tm, COACD_MAX_FACES)
     if len(small.faces) > COACD_MAX_FACES:

@@ -39,6 +39,7 @@ __all__ = [
     "carve",
     "column_boxes",
     "support_pad",
+    "clip_pad",
 ]
 
 #: How far around an object's footprint the surface it rests on is looked for.
@@ -219,17 +220,27 @@ class HiddenBelow:
 
 
 def support_pad(
-    footprint_rel_m: np.ndarray, rotation: np.ndarray, position_m: np.ndarray, height_m: float, bottom_m: float | None = None
+    footprint_rel_m: np.ndarray,
+    rotation: np.ndarray,
+    position_m: np.ndarray,
+    height_m: float,
+    bottom_m: float | None = None,
+    rect_m: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """The box under an object resting on the background: its footprint's bounding rectangle in
-    the object's own (yawed) axes, from ``height_m - PAD_THICKNESS_M`` (not below the floor; or
-    from ``bottom_m``, a column standing in for a hidden support) up to ``height_m``.
+    the object's own (yawed) axes (or ``rect_m``: (lo_x, lo_y, hi_x, hi_y) in those axes, a
+    rectangle cut back clear of neighbours by :func:`clip_pad`), from ``height_m -
+    PAD_THICKNESS_M`` (not below the floor; or from ``bottom_m``, a column standing in for a
+    hidden support) up to ``height_m``.
     footprint_rel_m: (K, 2) relative to the object's position in world axes.
     Returns centre (3,), half extents (3,) and yaw (rad)."""
     yaw = float(np.arctan2(rotation[1, 0], rotation[0, 0]))
     c, s = np.cos(yaw), np.sin(yaw)
-    local = footprint_rel_m @ np.array([[c, -s], [s, c]])  # world offsets -> object axes
-    lo, hi = local.min(axis=0), local.max(axis=0)
+    if rect_m is not None:
+        lo, hi = np.asarray(rect_m[:2], dtype=np.float64), np.asarray(rect_m[2:], dtype=np.float64)
+    else:
+        local = footprint_rel_m @ np.array([[c, -s], [s, c]])  # world offsets -> object axes
+        lo, hi = local.min(axis=0), local.max(axis=0)
     mid = 0.5 * (lo + hi)
     centre_xy = position_m[:2] + np.array([[c, -s], [s, c]]) @ mid
     bottom = max(0.0, height_m - PAD_THICKNESS_M if bottom_m is None else bottom_m)
@@ -237,6 +248,70 @@ def support_pad(
     centre = np.array([centre_xy[0], centre_xy[1], height_m - thickness / 2.0])
     half = np.array([max((hi - lo)[0] / 2.0, 1e-3), max((hi - lo)[1] / 2.0, 1e-3), thickness / 2.0])
     return centre, half, yaw
+
+
+def clip_pad(
+    rect_m: np.ndarray,
+    yaw: float,
+    position_m: np.ndarray,
+    z_lo_m: float,
+    z_hi_m: float,
+    obstacles: list[np.ndarray],
+    com_rel_m: np.ndarray,
+    inset_m: float,
+    probe: bool = False,
+) -> np.ndarray | None:
+    """A pad rectangle cut back clear of its neighbours, or None when no cut keeps it under the
+    object's centre of mass.
+
+    rect_m: (lo_x, lo_y, hi_x, hi_y) in the object's yawed axes relative to ``position_m``;
+    obstacles: (N, 3) world vertex sets of the other objects' collision pieces; those reaching
+    into the pad's height band [z_lo_m, z_hi_m] are cut away, each by the one side of the pad
+    (the rectangle minus the piece's extent in the pad's axes, from one of four sides) that
+    keeps the most area with the centre of mass (com_rel_m (2,), same axes) ``inset_m`` inside.
+    A pad stands in for the support seen around an object and hidden under it: where a
+    neighbour's completion reaches under the object, the pad stops short of it rather than the
+    object being left where seen as background. ``probe``: only say whether the rectangle is
+    clear (it, or None at the first piece reaching in).
+    """
+    c, s = np.cos(yaw), np.sin(yaw)
+    to_local = np.array([[c, -s], [s, c]])  # world offsets -> object axes (as in support_pad)
+    r = np.asarray(rect_m, dtype=np.float64).copy()
+    com = np.asarray(com_rel_m, dtype=np.float64)
+    for _ in range(4 * len(obstacles) + 1):
+        cut = None
+        for v in obstacles:
+            v = np.asarray(v, dtype=np.float64)
+            if v[:, 2].max() <= z_lo_m or v[:, 2].min() >= z_hi_m:
+                continue
+            loc = (v[:, :2] - position_m[:2]) @ to_local
+            olo, ohi = loc.min(axis=0), loc.max(axis=0)
+            if np.all(olo < r[2:]) and np.all(ohi > r[:2]):
+                cut = (olo, ohi)
+                break
+        if cut is None:
+            return r
+        if probe:
+            return None
+        olo, ohi = cut
+        # The pad keeps the part beyond the piece on one side: lo raised past it, or hi lowered.
+        options = [(axis, side, ohi[axis] if side == "lo" else olo[axis]) for axis in (0, 1) for side in ("lo", "hi")]
+        best = None
+        for axis, side, value in options:
+            lo, hi = r[:2].copy(), r[2:].copy()
+            if side == "lo":
+                lo[axis] = max(lo[axis], value)
+            else:
+                hi[axis] = min(hi[axis], value)
+            if np.any(hi - lo <= 2 * inset_m) or np.any(com < lo + inset_m) or np.any(com > hi - inset_m):
+                continue
+            area = float(np.prod(hi - lo))
+            if best is None or area > best[0]:
+                best = (area, np.concatenate([lo, hi]))
+        if best is None:
+            return None
+        r = best[1]
+    return None
 
 
 def column_boxes(points_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from layout.geometry import Piece, SupportSurface, box_piece, footprint, object_pieces, top_surfaces
+from layout.geometry import Piece, SupportSurface, box_piece, footprint, merged_top_surfaces, object_pieces, top_surfaces
 from scene_builder.model import AssetKind, ObjectAsset
 
 
@@ -47,6 +47,12 @@ class Body:
     legs_m: float = 0.0
     hidden_support: bool = False  # legs stand on a support found below a hidden underside
     pad_bottom_m: float | None = None  # its background pad is a column from here (hidden support)
+    # Its pad's rectangle (lo_x, lo_y, hi_x, hi_y) in its own yawed axes relative to position_m,
+    # when cut back clear of its neighbours (layout.background.clip_pad); None: its plan extent.
+    pad_rect_m: np.ndarray | None = None
+    # Bodies its collision pieces were cut apart from (layout.trim): they touch by construction,
+    # with the cut's clearance; only a real overlap with them is a violation.
+    trimmed_with: set[str] = field(default_factory=set)
     # Static only: movable bodies its collision caged, cut back out of their outlines (layout.cage).
     cut_for: list[str] = field(default_factory=list)
 
@@ -107,6 +113,8 @@ def rebuilt(b: Body, asset: ObjectAsset) -> Body:
     new.initial_position_m = b.initial_position_m
     new.parent, new.support_surface, new.children, new.fixed = b.parent, b.support_surface, b.children, b.fixed
     new.unsupported_reason, new.legs_m, new.hidden_support, new.pad_bottom_m = b.unsupported_reason, b.legs_m, b.hidden_support, b.pad_bottom_m
+    new.pad_rect_m = b.pad_rect_m
+    new.trimmed_with = set(b.trimmed_with)
     return new
 
 
@@ -140,7 +148,7 @@ def make_body(asset: ObjectAsset, world_from_asset: np.ndarray) -> Body:
         position_m=position,
         initial_position_m=position.copy(),
         pieces=pieces,
-        surfaces=top_surfaces(pieces),
+        surfaces=(tops := top_surfaces(pieces)) + merged_top_surfaces(tops),
         footprint_rel_m=footprint(pieces, band),
         lo_rel_m=lo,
         hi_rel_m=hi,

@@ -34,7 +34,7 @@ from scene_builder.model import ObjectAsset, Plane, TriangleMesh
 __all__ = ["CAGE_TRAVEL_M", "caged", "uncage"]
 
 #: A movable object must be able to slide this far along one of its faces: as far as the push
-#: probe (``layout.interaction``: 6 cm past contact, the settle and a margin: 10 cm) needs free
+#: probe (``layout.push``: 6 cm past contact, the settle and a margin: 10 cm) needs free
 #: ahead, and a little more.
 CAGE_TRAVEL_M = 0.12
 DIRECTIONS = 8

@@ -245,6 +245,40 @@ def top_surfaces(pieces: tuple[Piece, ...]) -> tuple[SupportSurface, ...]:
     return tuple(out)
 
 
+#: Top faces of one object within this height of each other form one merged top (a dresser's
+#: top completed as many convex pieces is one surface to stand a lamp on) ...
+MERGE_BAND_M = 0.03
+#: ... when the faces cover this share of the convex hull of their union (not two armrests
+#: spanning the seat between them).
+MERGE_MIN_COVER = 0.5
+
+
+def merged_top_surfaces(faces: tuple[SupportSurface, ...]) -> tuple[SupportSurface, ...]:
+    """Merged tops of an object's per-piece top faces: each group of faces within
+    :data:`MERGE_BAND_M` of the highest one not yet grouped, as the convex hull of their
+    polygons at the group's highest height, when the faces cover :data:`MERGE_MIN_COVER` of it
+    and the group has more than one face. A completed object's top is often many convex pieces
+    whose faces step by millimetres; a thing standing on it overlaps no single one enough."""
+    import shapely
+
+    out = []
+    left = sorted(range(len(faces)), key=lambda k: -faces[k].height_rel_m)
+    while left:
+        top = faces[left[0]].height_rel_m
+        group = [k for k in left if faces[k].height_rel_m >= top - MERGE_BAND_M]
+        left = [k for k in left if k not in group]
+        if len(group) < 2:
+            continue
+        hull = convex_hull_2d(np.concatenate([faces[k].polygon_rel_m for k in group]))
+        area = polygon_area(hull)
+        if area <= 1e-4:
+            continue
+        cover = shapely.union_all([shapely.Polygon(faces[k].polygon_rel_m) for k in group if len(faces[k].polygon_rel_m) >= 3]).area
+        if cover >= MERGE_MIN_COVER * area:
+            out.append(SupportSurface(float(top), hull))
+    return tuple(out)
+
+
 def footprint(pieces: tuple[Piece, ...], band_m: float) -> np.ndarray:
     """(H, 2) convex hull of the vertices within ``band_m`` of the object's lowest point: the
     region it stands on (a box's bottom face, the tips of a chair's legs)."""

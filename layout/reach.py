@@ -270,17 +270,22 @@ def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
-def robot_contacts(m, d, mine: set[int]) -> list[tuple[str, str, float]]:
-    """(robot geom, other geom, distance) of every contact between the robot and the scene."""
+def robot_contacts(m, d, mine) -> list[tuple[str, str, float]]:
+    """(robot geom, other geom, distance) of every contact between the robot and the scene;
+    ``mine``: the robot's geom ids (a set) or a (ngeom,) bool mask of them."""
+    n = d.ncon
+    if not n:
+        return []
+    mask = mine if isinstance(mine, np.ndarray) else np.isin(np.arange(m.ngeom), sorted(mine))
+    g = d.contact.geom[:n]
+    valid = (g >= 0).all(axis=1)
+    g = np.where(valid[:, None], g, 0)
     out = []
-    for i in range(d.ncon):
-        c = d.contact[i]
-        a, b = int(c.geom[0]), int(c.geom[1])
-        if a < 0 or b < 0 or (a in mine) == (b in mine):
-            continue
-        own, other = (a, b) if a in mine else (b, a)
+    for i in np.flatnonzero(valid & (mask[g[:, 0]] != mask[g[:, 1]])):
+        a, b = int(g[i, 0]), int(g[i, 1])
+        own, other = (a, b) if mask[a] else (b, a)
         out.append((m.geom(own).name or f"geom {own} of {m.body(int(m.geom_bodyid[own])).name}",
-                    m.geom(other).name or f"geom {other}", float(c.dist)))
+                    m.geom(other).name or f"geom {other}", float(d.contact.dist[i])))
     return out
 
 
@@ -307,7 +312,7 @@ def simulate_reach(m, d, arm: ArmIds, target: np.ndarray, seconds: float, on_ste
     rot = d.site_xmat[arm.site].reshape(3, 3).copy() if hold_tool_axis else None
     path = tool_path(start, np.asarray(target, dtype=np.float64), 0.8 * seconds)
     q = d.qpos[arm.qpos].copy()
-    mine = {int(g) for g in range(m.ngeom) if m.body(int(m.geom_bodyid[g])).name.startswith(PREFIX)}
+    mine = np.array([m.body(int(m.geom_bodyid[g])).name.startswith(PREFIX) for g in range(m.ngeom)], dtype=bool)
     every = max(1, int(round(CONTROL_DT_S / m.opt.timestep)))
     contacts: list[tuple[float, str, str, float]] = []
     min_err = np.inf
@@ -323,3 +328,56 @@ def simulate_reach(m, d, arm: ArmIds, target: np.ndarray, seconds: float, on_ste
         if on_step is not None:
             on_step(k)
     return ReachResult(float(np.linalg.norm(d.site_xpos[arm.site] - target)), min_err, contacts)
+
+
+#: A target of the reach figure counts as reached when the simulated tool ends this close to it
+#: with no robot-scene contact on the way.
+SCORE_TOL_M = 0.02
+SCORE_REACH_S = 4.0
+
+
+@dataclass
+class TargetReach:
+    """One target of the fixed set (``layout.robot.reach_targets``) tried from the placed robot.
+
+    target_m: (3,) the point; owner: the top it is above; in_workspace: within the arm's reach
+    (``RobotModel.reach_m``) of its shoulder; reached: the simulated reach ended within
+    SCORE_TOL_M without a robot-scene contact (the tool's axis held down, else free);
+    final_error_m / contacts: of the last reach tried (nan / 0 outside the workspace);
+    hold_tool_axis: whether the reach that counted held the tool's axis."""
+
+    target_m: np.ndarray
+    owner: str
+    in_workspace: bool
+    reached: bool = False
+    final_error_m: float = float("nan")
+    contacts: int = 0
+    hold_tool_axis: bool = True
+
+
+def score_reach(mjcf_path: Path, placement: RobotPlacement, targets: np.ndarray, owners: tuple[str, ...],
+                seconds: float = SCORE_REACH_S) -> list[TargetReach]:
+    """Try every target of ``targets`` (T, 3) within the workspace of the robot of the scene
+    ``mjcf_path`` (written with ``placement``): from the home pose, :func:`simulate_reach` for
+    ``seconds`` with the tool's axis held, and again with it free when that misses (as the
+    placement's alternatives do). The figure is the share of in-workspace targets reached."""
+    import mujoco
+
+    m = mujoco.MjModel.from_xml_path(str(mjcf_path))
+    d = mujoco.MjData(m)
+    arm = _arm(m, placement)
+    model = placement.model
+    shoulder = placement.world_from_robot[:3, :3] @ model.arm_mount_m + placement.position_m
+    out = []
+    for target, owner in zip(np.asarray(targets, dtype=np.float64), owners):
+        if float(np.linalg.norm(target - shoulder)) > model.reach_m:
+            out.append(TargetReach(target, owner, False))
+            continue
+        for hold in (True, False):
+            reset_home(m, d, arm)
+            r = simulate_reach(m, d, arm, target, seconds, hold_tool_axis=hold)
+            ok = r.final_error_m <= SCORE_TOL_M and not r.contacts
+            if ok or not hold:
+                out.append(TargetReach(target, owner, True, ok, r.final_error_m, len(r.contacts), hold))
+                break
+    return out

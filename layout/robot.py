@@ -68,6 +68,7 @@ SEEN_FLOOR_WEIGHT = 1.0
 CANDIDATE_SPACING_M = 0.3
 TURNS_RAD = (np.pi / 4, -np.pi / 4, np.pi / 2, -np.pi / 2)
 STEP_BACK_M = (0.05, 0.1, 0.15)
+SCORE_GRID_CELLS = 4  # the fixed reach targets of ``reach_targets``: every 4th cell, 16 cm apart
 
 
 def _pieces(scene: Scene) -> list[tuple[str, np.ndarray]]:
@@ -329,6 +330,45 @@ def _clearance(scene: Scene, pieces: list[tuple[str, np.ndarray]], model: RobotM
     for wall in scene.room.walls:
         clearance = np.minimum(clearance, np.column_stack([xy, np.zeros(len(xy))]) @ wall.normal + wall.offset_m)
     return clearance - float(model.footprint_radius_m)
+
+
+def reach_targets(scene: Scene) -> tuple[np.ndarray, tuple[str, ...]]:
+    """The fixed target set of ``scene`` for the reach figure (``layout.reach.score_reach``),
+    decided from the scene alone, before and whatever the placement: a point TARGET_HEIGHT_M
+    above every flat top (an object's, fixed furniture's or the background's; the height map's
+    cells flat within TOP_BAND_M over TARGET_INSET_M, clear of what stands on them within
+    ON_TOP_CLEARANCE_M, at least MIN_TOP_M high, inside the walls) on a grid of every
+    SCORE_GRID_CELLS-th cell, and on a top the grid misses the cell nearest its middle. Returns
+    (T, 3) points and the owner of each (an object's name or ``background``)."""
+    from scipy import ndimage
+
+    pieces = _pieces(scene)
+    height_map = _height_map(pieces)
+    lo = height_map[0]
+    points, owner_index, _, owners = _targets(height_map, np.inf, set())
+    inside = np.ones(len(points), dtype=bool)
+    for wall in scene.room.walls:
+        inside &= points @ wall.normal + wall.offset_m > 0.0
+    points, owner_index = points[inside], owner_index[inside]
+    if not len(points):
+        return np.zeros((0, 3)), ()
+    ij = np.round((points[:, :2] - lo) / CELL_M).astype(int)
+    keep = (ij % SCORE_GRID_CELLS == 0).all(axis=1)
+    # Each connected flat top (one owner's cells at one height) gets a point, on the grid or not.
+    grid = np.full(ij.max(axis=0) + 1, -1)
+    grid[ij[:, 0], ij[:, 1]] = np.arange(len(points))
+    for k in np.unique(owner_index):
+        mask = np.zeros(grid.shape, dtype=bool)
+        mine = np.flatnonzero(owner_index == k)
+        mask[ij[mine, 0], ij[mine, 1]] = True
+        labels, n = ndimage.label(mask)
+        for c in range(1, n + 1):
+            cells = grid[labels == c]
+            if keep[cells].any():
+                continue
+            middle = points[cells, :2].mean(axis=0)
+            keep[cells[np.argmin(np.linalg.norm(points[cells, :2] - middle, axis=1))]] = True
+    return points[keep], tuple(owners[int(k)] for k in owner_index[keep])
 
 
 def alternatives(scene: Scene, placement: RobotPlacement) -> list[RobotPlacement]:

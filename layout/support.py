@@ -28,8 +28,22 @@ FLOOR, WALL, BACKGROUND, UNSUPPORTED = -1, -2, -3, -4
 SUPPORT_TOL_M = 0.05
 # Share of the object's footprint that must lie over the face.
 MIN_FOOTPRINT_OVERLAP = 0.25
+# An object whose bottom was seen (or completed) sunk up to this far into a top face rests on it
+# when most of its footprint lies over it (SUNK_FOOTPRINT_OVERLAP): a plant's pot or a lamp's
+# base completed a few centimetres into the dresser it stands on (sunrgbd_imvotenet_000003's
+# plant sank 5 cm and, with nothing else under it, became background, then the dresser for it).
+SINK_INTO_SUPPORT_M = 0.15
+SUNK_FOOTPRINT_OVERLAP = 0.6
+# ... and a face under that much of its footprint is its support even when it leaves it this
+# deep in the rest of the supporter (layout.trim cuts such overlaps apart; layout.trim.MAX_TRIM_M).
+SUNK_CLASH_TOL_M = 0.06
 # Faces lower than this are the floor's business.
 MIN_SURFACE_HEIGHT_M = 0.02
+# Background seen around an object lower than this (a rug, a carpet's pile, depth noise on the
+# floor) is the floor: an object within reach of the floor rests on it (on legs when it was seen
+# higher), not on a pad over the hidden floor under it, which its neighbours' completions reach
+# into (beds of four SUN RGB-D samples became background for that).
+FLOOR_LIKE_M = 0.06
 # A candidate face is rejected when the object set on it would sink deeper than this into the
 # rest of the support (smaller overlaps are left to the horizontal solver).
 SUPPORT_CLASH_TOL_M = 0.01
@@ -48,6 +62,23 @@ HIDDEN_OWN_SHARE = 0.5
 # A hidden support is looked for at most this far under an object (a monitor seen at eye level
 # with nothing under it is on the wall, not on a hidden 1.7 m column).
 HIDDEN_MAX_DROP_M = 1.0
+# Furniture that stands on legs or a stem the camera may see past (a desk's top seen over the
+# floor between its legs, a chair whose star base is cut from its mask, a floor lamp's pole): seen
+# with empty space under it, it stands where seen on collision legs down to the highest support
+# up to this far below, instead of hanging as static background.
+STANDS_ON_LEGS = frozenset(
+    {"chair", "stool", "bench", "table", "desk", "sofa", "bed", "cabinet", "drawer_unit", "shelf", "wardrobe", "lamp", "plant", "tv", "monitor"}
+)
+LEGS_MAX_DROP_M = 1.5
+# Legs longer than this many times the object's narrowest footprint width make a stilt it topples
+# from: what is not furniture on legs stands on a static column down to the floor instead.
+SLENDER_LEGS = 1.5
+# Anything else with its underside hidden stands on legs down to an object's top at most this
+# share of its own height below it (its hidden lower part).
+HIDDEN_LEGS_SHARE = 1.0
+# ... on the floor, not on low clutter seen under it (a box under a desk, the floor's own depth
+# noise): background under legs counts from this height up (a counter, a static dresser's top).
+LEGS_MIN_BACKGROUND_M = 0.25
 
 
 def _footprint_world(b: Body) -> np.ndarray:
@@ -79,7 +110,7 @@ def pad_box(b: Body, height_m: float) -> tuple[np.ndarray, np.ndarray, float]:
     from layout.background import support_pad
 
     plan = np.concatenate([p.verts_rel_m[:, :2] for p in b.pieces])
-    return support_pad(plan, b.rotation, b.position_m, height_m, b.pad_bottom_m)
+    return support_pad(plan, b.rotation, b.position_m, height_m, b.pad_bottom_m, b.pad_rect_m)
 
 
 def pad_bounds(centre: np.ndarray, half: np.ndarray, yaw: float) -> tuple[np.ndarray, np.ndarray]:
@@ -151,7 +182,7 @@ def build_support(
         min_face_area = DEFORMABLE_MIN_FACE_AREA * polygon_area(foot) if soft else 0.0
         lo_xy = foot.min(axis=0)
         hi_xy = foot.max(axis=0)
-        def search(drop_m: float, objects: bool = True) -> list[tuple[float, int, float, int, int]]:
+        def search(drop_m: float, objects: bool = True, min_background_m: float = 0.0) -> list[tuple[float, int, float, int, int]]:
             candidates: list[tuple[float, float, int, int]] = []  # (height, overlap, -body, surface)
             n_placed = len(placed)
             near = np.nonzero(
@@ -165,22 +196,29 @@ def build_support(
                     continue
                 for k, surf in enumerate(s.surfaces):
                     h = float(s.position_m[2] + surf.height_rel_m)
-                    if h < max(MIN_SURFACE_HEIGHT_M, bottom - drop_m) or h > bottom + tol or polygon_area(surf.polygon_rel_m) < min_face_area:
+                    if h < max(MIN_SURFACE_HEIGHT_M, bottom - drop_m) or h > bottom + SINK_INTO_SUPPORT_M or polygon_area(surf.polygon_rel_m) < min_face_area:
                         continue
                     frac = _overlap_fraction(foot, surf.polygon_rel_m + s.position_m[:2])
-                    if frac < MIN_FOOTPRINT_OVERLAP:
+                    if frac < (MIN_FOOTPRINT_OVERLAP if h <= bottom + tol else SUNK_FOOTPRINT_OVERLAP):
                         continue
                     candidates.append((h, frac, -j, k))
             # The support nearest to the observed bottom wins (ties: an object's face, then the
             # background, then the floor): the object moves as little as it can.
             options: list[tuple[float, int, float, int, int]] = []  # (|gap|, rank, h, parent, surface)
-            for h, _, neg_j, k in sorted(candidates, reverse=True):
+            for h, frac, neg_j, k in sorted(candidates, reverse=True):
                 z = float(b.position_m[2] + h - bottom)
-                if clash is None or clash(i, -neg_j, z) <= SUPPORT_CLASH_TOL_M:
+                # A face mostly under it may leave a shallow overlap with the rest of the
+                # support (a completed dresser top stepping a few centimetres, the side of a
+                # mirror behind a plant): the layout trims that; a deeper one means the face is
+                # buried inside the object.
+                tol_clash = SUNK_CLASH_TOL_M if frac >= SUNK_FOOTPRINT_OVERLAP else SUPPORT_CLASH_TOL_M
+                if clash is None or clash(i, -neg_j, z) <= tol_clash:
                     options.append((abs(h - bottom), 0, h, -neg_j, k))
                     break
             if background is not None:
                 h_bg = background(foot, max(MIN_SURFACE_HEIGHT_M, bottom - drop_m), bottom + tol)
+                if h_bg is not None and h_bg < max(FLOOR_LIKE_M, min_background_m) and bottom <= drop_m:
+                    h_bg = None  # the floor (seen with a rug or noise on it) is within reach
                 if h_bg is not None and _pad_is_clear(b, h_bg, [bodies[k] for k in placed]):
                     options.append((abs(h_bg - bottom), 1, h_bg, BACKGROUND, -1))
             if bottom <= drop_m:
@@ -199,9 +237,20 @@ def build_support(
             # (Not onto another object: a hidden support under it would be seen beside it.)
             options = search(HIDDEN_MAX_DROP_M, objects=False)
             hidden_under = bool(options)
+            if not options:
+                # Nor the floor or background within reach: another object's top under it, hidden
+                # (a box on a shelf unit whose front hides the box's lower half). It stands on
+                # legs down to it when the gap is no more than its own hidden lower part could be.
+                options = [o for o in search(HIDDEN_MAX_DROP_M) if o[3] >= 0 and bottom - o[2] <= max(MAX_DROP_M, HIDDEN_LEGS_SHARE * b.height_m)]
+        if not options and not soft and not b.fixed and hidden is not None and b.asset.label in STANDS_ON_LEGS:
+            # Its legs (or stem, or base) were not seen, or were hidden: legs down to what it
+            # stands on.
+            options = search(LEGS_MAX_DROP_M, min_background_m=LEGS_MIN_BACKGROUND_M)
         if options:
             _, _, h, j, k = min(options)
-            if hidden_under and j in (FLOOR, BACKGROUND) and bottom - h > max(MAX_DROP_M, HIDDEN_OWN_SHARE * b.height_m):
+            narrow = float(np.min(np.ptp(foot, axis=0))) if len(foot) else 0.0
+            slender = b.asset.label not in STANDS_ON_LEGS and bottom - h > max(MAX_DROP_M, SLENDER_LEGS * narrow)
+            if j in (FLOOR, BACKGROUND) and (slender or (hidden_under and bottom - h > max(MAX_DROP_M, HIDDEN_OWN_SHARE * b.height_m))):
                 # Far above the floor or the background below, for its size: a static column
                 # from there up to its bottom stands in for the hidden support (it stays put when
                 # the object is picked up). Nearer (a bed's frame hidden by its own cover), or on

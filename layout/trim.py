@@ -25,7 +25,7 @@ import numpy as np
 from scene_builder.arrays import MIN_PIECE_THICKNESS_M, thickness_m
 from scene_builder.model import ObjectAsset, TriangleMesh
 
-__all__ = ["MAX_TRIM_M", "clip_convex", "separating_plane", "trim_pair"]
+__all__ = ["MAX_TRIM_M", "MAX_WALL_TRIM_M", "clip_convex", "separating_plane", "trim_pair", "trim_to_walls"]
 
 #: Deepest overlap (m) between two pieces that is cut away rather than pushed apart.
 MAX_TRIM_M = 0.06
@@ -33,6 +33,9 @@ MAX_TRIM_M = 0.06
 TRIM_CLEARANCE_M = 0.002
 #: A cut piece smaller than this (m^3) is dropped (when its part keeps another piece).
 MIN_PIECE_VOLUME_M3 = 1e-7
+#: A deep overlap is cut between what the camera saw of the two objects only where it saw at
+#: least this many points of each near the overlap.
+MIN_OBSERVED_POINTS = 30
 #: A piece holding at least this share of its part's collision volume is never cut away whole.
 MAIN_PIECE_SHARE = 0.25
 
@@ -175,12 +178,85 @@ def _cut_offset(n: np.ndarray, c: float, depth: float, va_vis: np.ndarray, vb_vi
     return float(np.clip(c, lo, hi))
 
 
+def _observed_offset(n: np.ndarray, c: float, va: np.ndarray, vb: np.ndarray, obs_a: np.ndarray | None, obs_b: np.ndarray | None) -> float | None:
+    """For two pieces whose visuals overlap deeply: a cut along ``n`` (A on the negative side)
+    that keeps what the camera saw of each object on its own side, near the overlap (the points
+    of ``obs_a`` / ``obs_b`` (N, 3) within the pieces' common box grown by 2 cm; 2 % of them may
+    be stray depth); None when they interleave there, or when fewer than
+    :data:`MIN_OBSERVED_POINTS` of either were seen there."""
+    if obs_a is None or obs_b is None or not len(obs_a) or not len(obs_b):
+        return None
+    lo_box = np.maximum(va.min(axis=0), vb.min(axis=0)) - 0.02
+    hi_box = np.minimum(va.max(axis=0), vb.max(axis=0)) + 0.02
+    pa = obs_a[np.all((obs_a >= lo_box) & (obs_a <= hi_box), axis=1)] @ n
+    pb = obs_b[np.all((obs_b >= lo_box) & (obs_b <= hi_box), axis=1)] @ n
+    if len(pa) < MIN_OBSERVED_POINTS or len(pb) < MIN_OBSERVED_POINTS:
+        return None  # too little seen there of one of them to say where either ends
+    lo = float(np.quantile(pa, 0.98)) + TRIM_CLEARANCE_M
+    hi = float(np.quantile(pb, 0.02)) - TRIM_CLEARANCE_M
+    if lo > hi:
+        return None
+    return float(np.clip(c, lo, hi))
+
+
+#: Deepest reach (m) of an object's collision into a wall that is cut at the wall, not pushed.
+MAX_WALL_TRIM_M = 0.15
+
+
+def trim_to_walls(asset: ObjectAsset, t: np.ndarray, walls, clearance_m: float, observed: np.ndarray | None = None) -> tuple[ObjectAsset, float]:
+    """``asset`` (at the (4, 4) pose ``t``) with its collision pieces cut to the room side of
+    every wall (a ``clearance_m`` gap), where they reach at most :data:`MAX_WALL_TRIM_M` into it
+    and what the camera saw of the object (``observed``: (N, 3) world points, 2 % stray allowed)
+    stays on the room side: a completion that reaches behind the wall is completion, not
+    object. A part never loses its last piece. Returns the asset (the same object when nothing
+    was cut) and the deepest reach cut."""
+    cut_depth = 0.0
+    parts = []
+    changed = False
+    for part in asset.parts:
+        pieces = list(part.collision)
+        for w in walls:
+            n = np.asarray(w.normal, dtype=np.float64)
+            reach = 0.0
+            for m in pieces:
+                if m is not None:
+                    reach = max(reach, clearance_m - float(np.min(_world(m, t) @ n + w.offset_m)))
+            if reach <= 1e-5 or reach > MAX_WALL_TRIM_M + clearance_m:
+                continue
+            if observed is not None and len(observed) and float(np.quantile(observed @ n + w.offset_m, 0.02)) < -0.01:
+                continue  # the camera saw it behind the wall plane: the plane is off, not the object
+            # Room side: n . (R v + tr) + off >= clearance  <=>  (-R^T n) . v <= off - clearance + n . tr
+            na = -(t[:3, :3].T @ n)
+            offset = float(w.offset_m - clearance_m + n @ t[:3, 3])
+            new = [None if m is None else clip_convex(m.vertices_m, na, offset) for m in pieces]
+            if not any(m is not None for m in new):
+                continue  # the whole part lies behind the wall: not a completion error to cut
+            pieces = new
+            cut_depth = max(cut_depth, reach - clearance_m)
+        kept = tuple(m for m in pieces if m is not None)
+        if len(kept) != len(part.collision) or any(x is not y for x, y in zip(kept, part.collision)):
+            changed = True
+            part = dataclasses.replace(part, collision=kept)
+        parts.append(part)
+    return (dataclasses.replace(asset, parts=tuple(parts)) if changed else asset), cut_depth
+
+
 def trim_pair(
-    a: ObjectAsset, ta: np.ndarray, b: ObjectAsset, tb: np.ndarray, max_depth_m: float = MAX_TRIM_M
+    a: ObjectAsset,
+    ta: np.ndarray,
+    b: ObjectAsset,
+    tb: np.ndarray,
+    max_depth_m: float = MAX_TRIM_M,
+    observed_a: np.ndarray | None = None,
+    observed_b: np.ndarray | None = None,
 ) -> tuple[ObjectAsset, ObjectAsset, float, float]:
     """Cut apart every pair of overlapping collision pieces of assets ``a`` and ``b`` (placed at
     the (4, 4) poses ``ta``, ``tb``): at the mid-plane when the overlap is at most
-    ``max_depth_m`` deep, between the two visuals when deeper (see the module docstring).
+    ``max_depth_m`` deep, between the two visuals when deeper (see the module docstring); where
+    the visuals themselves overlap deeply (one object's completion of what the camera did not see
+    reaches into the other), between what the camera saw of each (``observed_a``,
+    ``observed_b``: (N, 3) world points at these poses), when that separates them: the objects
+    stay where they were seen instead of being pushed apart.
     Returns the two assets (unchanged objects when nothing was cut), the deepest overlap cut, and
     the deepest overlap left (the visuals overlap, or a part would lose its last piece)."""
     pieces_a = {p.name: list(p.collision) for p in a.parts}
@@ -211,7 +287,10 @@ def trim_pair(
                     n, c, depth = separating_plane(va, vb)
                     if depth <= 0.0:
                         continue
-                    c = _cut_offset(n, c, depth, vis_a, vis_b, va, vb, max_depth_m)
+                    mid = c
+                    c = _cut_offset(n, mid, depth, vis_a, vis_b, va, vb, max_depth_m)
+                    if c is None:
+                        c = _observed_offset(n, mid, va, vb, observed_a, observed_b)
                     if c is None:
                         left_depth = max(left_depth, depth)
                         continue

@@ -111,7 +111,7 @@ def _penetration(m, d, index: _SceneIndex) -> tuple[float, dict[str, float], lis
     overlapping pairs (deepest first)."""
     import mujoco
 
-    from layout.solver import candidate_pairs
+    from layout.pushes import candidate_pairs
 
     geoms = _collision_geoms(m)
     lo, hi = _world_aabbs(m, d, geoms)
@@ -406,6 +406,9 @@ adopt_settled = settled_scene
 
 #: A movable object overlapping anything by more than this at t = 0 cannot stand where it was put.
 START_PENETRATION_LIMIT_M = 1e-3
+#: ... a soft body (a flex pillow on a bed: its contacts start inside their margin and it sags)
+#: by more than this.
+DEFORMABLE_START_PENETRATION_M = 0.01
 
 
 def unstable_objects(verdict: PhysicsVerdict, scene: Scene, config: LayoutConfig) -> dict[str, str]:
@@ -417,7 +420,8 @@ def unstable_objects(verdict: PhysicsVerdict, scene: Scene, config: LayoutConfig
         if v.fixed:
             continue
         o = scene.object(v.name)
-        if v.start_penetration_m > START_PENETRATION_LIMIT_M:
+        soft = o.asset.kind is AssetKind.DEFORMABLE
+        if v.start_penetration_m > (DEFORMABLE_START_PENETRATION_M if soft else START_PENETRATION_LIMIT_M):
             # Overlapping at t = 0 (with static geometry the solver could not move it clear of,
             # e.g. collision legs over an object left where seen): not physically standing there.
             out[v.name] = f"reached {v.start_penetration_m * 1000:.0f} mm into its neighbours at the start of the settle simulation"
@@ -428,6 +432,52 @@ def unstable_objects(verdict: PhysicsVerdict, scene: Scene, config: LayoutConfig
             how = "toppled" if v.toppled else ("turned" if v.drift_m <= config.stable_drift_m else "moved")
             out[v.name] = f"{how} ({v.drift_m * 100:.1f} cm, {v.rotation_deg:.0f} deg) in the {config.settle_s:g} s settle simulation"
     return out
+
+
+#: An object that settled at most this far (and turned at most RESEAT_MAX_DEG) and came to rest
+#: (its last 0.2 s within RESEAT_REST_M) is re-seated where it came to rest, not made background.
+RESEAT_MAX_DRIFT_M = 0.05
+RESEAT_MAX_DEG = 20.0
+RESEAT_REST_M = 0.002
+
+
+def reseatable(verdict: PhysicsVerdict, unstable: dict[str, str]) -> dict[str, str]:
+    """The objects of ``unstable`` that settled a little and came to rest (a pot completed with a
+    rounded bottom tipping 5 degrees onto its rim, a chair on legs settling a centimetre, an
+    overlap of a few millimetres pushed apart): re-seated where they came to rest instead of
+    being made background. Returns name -> reason ("re-seated where it came to rest ...")."""
+    tracks = {t.name: t for t in verdict.trajectories}
+    out = {}
+    for v in verdict.objects:
+        t = tracks.get(v.name)
+        if v.name not in unstable or v.fixed or v.toppled or t is None or len(t.times_s) < 3:
+            continue
+        if v.drift_m > RESEAT_MAX_DRIFT_M or v.rotation_deg > RESEAT_MAX_DEG:
+            continue
+        tail = t.positions_m[t.times_s >= t.times_s[-1] - 0.2]
+        if len(tail) >= 2 and float(np.linalg.norm(tail[-1] - tail[0])) > RESEAT_REST_M:
+            continue  # still moving at the end: not at rest anywhere
+        out[v.name] = f"re-seated where it came to rest in the settle simulation ({v.drift_m * 100:.1f} cm, {v.rotation_deg:.0f} deg; {unstable[v.name]})"
+    return out
+
+
+def reseat_objects(layout: LayoutResult, verdict: PhysicsVerdict, reasons: dict[str, str]) -> LayoutResult:
+    """``layout`` with the objects named in ``reasons`` moved to where they came to rest in the
+    settle simulation (``settled_scene``, for those objects only); their placements add the
+    reason and count the settle in their displacement."""
+    import dataclasses
+
+    settled = {o.name: o for o in settled_scene(layout.scene, verdict).objects}
+    objects = tuple(settled[o.name] if o.name in reasons else o for o in layout.scene.objects)
+    scene = dataclasses.replace(layout.scene, objects=objects)
+    before = {o.name: o.world_from_asset for o in layout.scene.objects}
+    placements = []
+    for p in layout.placements:
+        if p.name in reasons:
+            moved = float(np.linalg.norm(settled[p.name].world_from_asset[:3, 3] - before[p.name][:3, 3]))
+            p = dataclasses.replace(p, displacement_m=p.displacement_m + moved, reason="; ".join(x for x in (p.reason, reasons[p.name]) if x))
+        placements.append(p)
+    return dataclasses.replace(layout, scene=scene, placements=tuple(placements))
 
 
 def make_background(layout: LayoutResult, reasons: dict[str, str]) -> LayoutResult:

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 
 from perception.protocols import BoxPromptSegmenter, DepthEstimator, InstanceSegmenter, ObjectDetector, ObjectNamer, SemanticSegmenter
 from scene_builder.config import PerceptionConfig
+from scene_builder.errors import ModelUnavailableError
 from scene_builder.registry import Registry
 
 __all__ = ["PerceptionRegistries", "build_registries"]
@@ -86,8 +87,9 @@ def build_registries(config: PerceptionConfig) -> PerceptionRegistries:
         lambda: _detection_segmenter(registries, config),
         priority=150,
         available=detectors_missing,
-        description="detector boxes (COCO CenterNet, Open Images SSD) confirmed by depth clusters and the semantic map, "
-        "outlined by SAM 2 or GrabCut; clear unexplained depth clusters as extra objects",
+        description="detector boxes (Grounding DINO prompted with the room vocabulary, COCO CenterNet, Open Images SSD) "
+        "confirmed by depth clusters and the semantic map, outlined by SAM 2 or GrabCut; clear unexplained depth clusters "
+        "as extra objects",
     )
     return registries
 
@@ -120,18 +122,22 @@ def prepare_learned_weights(
     progress: bool = True,
 ) -> tuple[str, ...]:
     """Make the default learned perception models usable for a build, the first time downloading
-    them (Depth Anything V2 when ``need_depth``, SAM 2) with progress bars, unless ``offline``,
-    ``HF_HUB_OFFLINE`` or no network (``perception.models.offline_reason``, decided in about
-    ``timeout_s``). Only the models of tasks whose backend is "auto" or that model's backend are
-    considered. Returns one-line notes for the user: what was downloaded, or which fallback each
-    task will use and why (empty when every weight was already here)."""
+    them (Depth Anything V2 when ``need_depth``, SAM 2, Grounding DINO) with progress bars, unless
+    ``offline``, ``HF_HUB_OFFLINE`` or no network (``perception.models.offline_reason``, decided in
+    about ``timeout_s``). Only the models of tasks whose backend is "auto" or that model's backend
+    are considered (SAM 2 and Grounding DINO also for the ``"detections"`` segmenter, whose
+    detector and box prompts they are). Returns one-line notes for the user: what was downloaded,
+    or which fallback each task will use and why (empty when every weight was already here)."""
     from perception import models
 
     wanted: list[tuple[str, str, str]] = []  # (task, backend, model)
     if need_depth and config.depth_backend in ("auto", "depth-anything-v2"):
         wanted.append(("depth", "depth-anything-v2", models.default_model("depth").name))
-    if config.segmentation_backend in ("auto", "sam2"):
+    if config.segmentation_backend in ("auto", "sam2", "detections"):
         wanted.append(("segmentation", "sam2", models.default_model("segmentation").name))
+    if config.segmentation_backend in ("auto", "detections"):
+        detector = models.default_model("detection").name
+        wanted.append(("detection", detector, detector))
     missing = [w for w in wanted if models.resolve_weights(w[2], config.models_dir) is None]
     if not missing:
         return ()
@@ -139,10 +145,18 @@ def prepare_learned_weights(
     size_mb = sum(models.model_spec(m).download_mb for m in names)
     why = models.offline_reason(offline, timeout_s)
     if why is None:
+        from huggingface_hub import errors as hf_errors
+
+        # What a failed download raises: fetch_models' ModelUnavailableError (the hub went away
+        # since the check above); what snapshot_download documents (OSError, which its HTTP errors
+        # RepositoryNotFoundError, RevisionNotFoundError... are, and ValueError); and its HTTP
+        # client's transport errors (a connection dropped mid-file), whose base HTTPError is not an
+        # OSError (huggingface_hub.errors subclasses it). The build goes on with its fallbacks; the
+        # note says why.
+        download_errors = (ModelUnavailableError, OSError, ValueError, hf_errors.HTTPError)
         try:
             paths = models.fetch_models(names, config.models_dir, endpoint_timeout_s=max(timeout_s, 5.0), progress=progress)
-        except Exception as err:  # noqa: BLE001 - any failed optional download (HTTP, disk, the hub client's
-            # own transport errors, which are not OSErrors) leaves the build on its fallbacks; the note says why
+        except download_errors as err:
             why = f"download failed: {type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}".rstrip(": ")
         else:
             where = ", ".join(str(p) for p in paths)
@@ -150,7 +164,11 @@ def prepare_learned_weights(
     registries = build_registries(config)
     uses = []
     for task, backend, _ in missing:
-        fallback = next((e.name for e in getattr(registries, task).entries() if e.name != backend and e.available() is None), "none")
+        others = [e.name for e in getattr(registries, task).entries() if e.name != backend and e.available() is None]
+        if task == "detection":  # the "detections" segmenter runs every available detector
+            fallback = "+".join(others) if others else "no detector"
+        else:
+            fallback = others[0] if others else "none"
         uses.append(f"{task}: {fallback} instead of {backend}")
     return (
         f"no {' or '.join(names)} weights here and no download ({why}): {'; '.join(uses)}. "

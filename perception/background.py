@@ -168,8 +168,12 @@ def observed_background(
     max_depth_m: float = 10.0,
     keep_stretched: bool = False,
     max_nodes: int = MAX_NODES,
+    removed: np.ndarray | None = None,
 ) -> Background:
     """The static background of an observation (see the module docstring).
+
+    removed: None, or (H, W) bool pixels of people and animals: like an object's, they are filled
+    with what lies behind them and their colour is inpainted (:mod:`perception.people`).
 
     Returns a :class:`Background` with the textured surface mesh in the world frame and no
     collision geometry yet (the layout adds it once the objects are placed).
@@ -187,7 +191,7 @@ def observed_background(
     vi = np.clip(np.round(v).astype(int), 0, h - 1)
 
     depth = np.asarray(observation.depth_m, dtype=np.float64)
-    obj_px = np.zeros((h, w), dtype=bool)
+    obj_px = np.zeros((h, w), dtype=bool) if removed is None else np.asarray(removed, dtype=bool).copy()
     for o in objects:
         obj_px |= o.mask
     # Object depth at each node (for the "behind" bound): the nearest object pixel of the cell.

@@ -5,7 +5,8 @@ detector backends (:mod:`perception.learned.detectors`) and the detection-driven
 Detectors name far more than furniture (people, animals, vehicles, food); only the classes that
 are things of a room map to a label of :mod:`scene_builder.vocabulary`; the rest are dropped.
 Scores of different detectors are not on one scale (the Open Images SSD gives its sigmoid scores
-of 0.4 to plain wall; CenterNet's best room detections score 0.35-0.65): each detector states the
+of 0.4 to plain wall; CenterNet's best room detections score 0.35-0.65; Grounding DINO's demo
+trusts its token similarities from 0.35): each detector states the
 score at which one of its detections is trusted alone (``accept_score``) and
 :func:`merge_detections` rescales every detector so that this score becomes
 :data:`CONFIDENT`.

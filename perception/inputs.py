@@ -31,14 +31,16 @@ from __future__ import annotations
 
 import json
 import math
+import tokenize
 import warnings
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from scene_builder.config import InputSpec, PerceptionConfig
-from scene_builder.errors import InputError, InputWarning
+from scene_builder.errors import PIL_READ_ERRORS, InputError, InputWarning
 from scene_builder.model import CameraIntrinsics
 
 __all__ = [
@@ -126,7 +128,7 @@ def _open_checked(path: Path, what: str, hint: str):
             im = Image.open(path)
     except Image.DecompressionBombError as err:
         raise InputError(f"{what} {path} is too large to read ({err}); pass an image of at most {MAX_IMAGE_PIXELS // 1_000_000} MP") from err
-    except _DECODE_ERRORS as err:
+    except PIL_ERRORS as err:
         raise InputError(f"cannot read {path} as {hint} ({_short(err)}); pass a JPEG or PNG file") from err
     w, h = im.size
     if w * h > MAX_IMAGE_PIXELS:
@@ -138,11 +140,18 @@ def _open_checked(path: Path, what: str, hint: str):
     return im
 
 
-#: What decoding a corrupt file with PIL can raise: besides OSError and SyntaxError (its documented
-#: ones), its plugins let struct.error, IndexError, KeyError, ZeroDivisionError... escape on
-#: malformed headers (found by ``python -m scene_builder.bench.fuzz``). Caught only around PIL's
-#: open / load / convert of the user's file, and turned into one InputError line with the cause.
-_DECODE_ERRORS = (Exception,)
+#: What Pillow raises for a file it cannot read (:data:`scene_builder.errors.PIL_READ_ERRORS`).
+#: Caught only around Pillow's own calls on the user's file (never around this module's code,
+#: whose bugs must surface as themselves), and turned into one InputError line with the cause.
+#: ``python -m scene_builder.bench.fuzz`` checks that nothing else escapes.
+PIL_ERRORS = PIL_READ_ERRORS
+#: What ``numpy.load`` raises for a malformed ``.npy`` file: OSError, ValueError and EOFError (its
+#: documented ones: a header that is no dictionary of ``descr``, ``fortran_order``, ``shape`` is a
+#: ValueError) and three it does not document, found by the fuzzer: ``tokenize.TokenError`` (its
+#: header filter, on an unterminated bracket), SyntaxError (``ast.literal_eval`` of the header
+#: text, 5 of 100,000 inputs) and OverflowError (``memmap`` of a shape beyond a C long, 7 of
+#: 100,000). Caught only around numpy's reading of the file.
+NPY_ERRORS: tuple[type[BaseException], ...] = (OSError, ValueError, EOFError, SyntaxError, OverflowError, tokenize.TokenError)
 
 
 def _short(err: BaseException) -> str:
@@ -151,12 +160,23 @@ def _short(err: BaseException) -> str:
     return text if len(text) <= 160 else text[:157] + "..."
 
 
+@contextmanager
+def _reading(path: Path, hint: str):
+    """Around Pillow's calls on the user's file: :data:`PIL_ERRORS` become one InputError line."""
+    try:
+        yield
+    except PIL_ERRORS as err:
+        raise InputError(f"cannot read {path} as {hint} ({_short(err)}); pass a JPEG or PNG photo") from err
+
+
 def _to_rgb(im, path: Path) -> np.ndarray:
-    """(H, W, 3) uint8 RGB of any PIL mode: 16/32-bit grey and float grey scaled to 8 bits, an
-    alpha channel dropped (with a warning when some pixels are transparent)."""
+    """(H, W, 3) uint8 RGB of any PIL mode (``im`` loaded): 16/32-bit grey and float grey scaled
+    to 8 bits, an alpha channel dropped (with a warning when some pixels are transparent)."""
     mode = im.mode
     if mode.startswith("I") or mode == "F":
-        a = np.asarray(im).astype(np.float64)
+        with _reading(path, "an image"):
+            a = np.asarray(im)
+        a = a.astype(np.float64)
         finite = a[np.isfinite(a)]
         top = float(finite.max()) if finite.size else 0.0
         scale = 1.0 if top <= 255.0 else (255.0 / 65535.0 if top <= 65535.0 else 255.0 / top)
@@ -171,7 +191,8 @@ def _to_rgb(im, path: Path) -> np.ndarray:
         return np.repeat(grey[:, :, None], 3, axis=2)
     has_alpha = mode in ("RGBA", "LA", "PA", "La", "RGBa") or (mode == "P" and "transparency" in im.info)
     if has_alpha:
-        rgba = np.asarray(im.convert("RGBA"))
+        with _reading(path, "an image"):
+            rgba = np.asarray(im.convert("RGBA"))
         if (rgba[:, :, 3] < 255).any():
             warnings.warn(
                 f"{path} has an alpha channel with transparent pixels; it is dropped (transparent pixels show their RGB values)",
@@ -179,7 +200,8 @@ def _to_rgb(im, path: Path) -> np.ndarray:
                 stacklevel=3,
             )
         return np.ascontiguousarray(rgba[:, :, :3])
-    return np.asarray(im.convert("RGB"), dtype=np.uint8)
+    with _reading(path, "an image"):
+        return np.asarray(im.convert("RGB"), dtype=np.uint8)
 
 
 def check_paths(inputs: InputSpec) -> None:
@@ -204,32 +226,34 @@ def load_rgb(path: Path) -> tuple[np.ndarray, dict[int, object], tuple[int, int]
     Returns rgb (H, W, 3) uint8, the EXIF tags (main IFD merged with the Exif IFD) and the size
     (width, height) of the image as stored before the orientation was applied.
     """
-    from PIL import ImageOps
-
     path = Path(path)
     _check_path(path, "image")
     im = _open_checked(path, "image", "an image")
-    try:
-        with im:
+    with im:
+        with _reading(path, "an image"):
             im.load()
-            stored_size = im.size
-            tags: dict[int, object] = {}
-            try:
-                exif = im.getexif()
-                tags.update(exif)
-                tags.update(exif.get_ifd(_EXIF_IFD))
-                oriented = ImageOps.exif_transpose(im)
-            except Exception as err:  # noqa: BLE001 - any broken EXIF: go on without it, and say so
-                warnings.warn(f"{path}: unreadable EXIF data ignored ({_short(err)}); orientation and focal length not read", InputWarning, stacklevel=2)
-                tags, oriented = {}, im
-            rgb = _to_rgb(oriented, path)
-    except InputError:
-        raise
-    except _DECODE_ERRORS as err:
-        raise InputError(f"cannot read {path} as an image ({_short(err)}); pass a JPEG or PNG photo") from err
+        stored_size = im.size
+        tags, oriented = _exif(im, path)
+        rgb = _to_rgb(oriented, path)
     if rgb.shape[0] < 16 or rgb.shape[1] < 16:
         raise InputError(f"image {path} is only {rgb.shape[1]}x{rgb.shape[0]} px; pass a photo of at least 16x16 px")
     return rgb, tags, stored_size
+
+
+def _exif(im, path: Path) -> tuple[dict[int, object], object]:
+    """The EXIF tags of a loaded image (main IFD merged with the Exif IFD) and the image with its
+    EXIF orientation applied; broken EXIF data is ignored with a warning (the photo is still
+    good). Pillow parses EXIF as a TIFF directory: a malformed one raises :data:`PIL_ERRORS`."""
+    from PIL import ImageOps
+
+    try:
+        exif = im.getexif()
+        tags: dict[int, object] = dict(exif)
+        tags.update(exif.get_ifd(_EXIF_IFD))
+        return tags, ImageOps.exif_transpose(im)
+    except PIL_ERRORS as err:
+        warnings.warn(f"{path}: unreadable EXIF data ignored ({_short(err)}); orientation and focal length not read", InputWarning, stacklevel=3)
+        return {}, im
 
 
 def load_depth(path: Path, depth_scale: float | None = None) -> np.ndarray:
@@ -255,7 +279,7 @@ def load_depth(path: Path, depth_scale: float | None = None) -> np.ndarray:
         try:
             # Memory-mapped first: a header declaring a huge shape must not allocate it.
             raw = np.load(path, allow_pickle=False, mmap_mode="r")
-        except _DECODE_ERRORS as err:  # numpy's header parser raises SyntaxError, tokenize.TokenError...
+        except NPY_ERRORS as err:
             raise InputError(f"cannot read {path} as a .npy depth array ({_short(err)}); save it with numpy.save") from err
         if not isinstance(raw, np.ndarray):
             raise InputError(f"{path} holds no array; save the depth with numpy.save")
@@ -268,25 +292,23 @@ def load_depth(path: Path, depth_scale: float | None = None) -> np.ndarray:
             raise InputError(f"depth array {path} is {raw.shape[1]}x{raw.shape[0]}; at most {MAX_IMAGE_PIXELS // 1_000_000} MP is read")
         try:
             raw = np.array(raw)
-        except (OSError, ValueError) as err:
+        except NPY_ERRORS as err:
             raise InputError(f"cannot read {path} as a .npy depth array ({_short(err)})") from err
         is_float = kind == "f"
         eight_bit = raw.dtype.itemsize == 1
     else:
         im = _open_checked(path, "depth map", "a depth image")
-        try:
-            with im:
-                mode = im.mode
-                if mode not in ("L", "I", "I;16", "I;16B", "I;16L", "I;16N", "F"):
-                    raise InputError(
-                        f"depth image {path} has mode {mode}; expected one channel (uint16 PNG in millimetres, 32-bit grey, or a float32 TIFF)"
-                    )
+        with im:
+            mode = im.mode
+            if mode not in ("L", "I", "I;16", "I;16B", "I;16L", "I;16N", "F"):
+                raise InputError(
+                    f"depth image {path} has mode {mode}; expected one channel (uint16 PNG in millimetres, 32-bit grey, or a float32 TIFF)"
+                )
+            try:
                 im.load()
                 raw = np.asarray(im)
-        except InputError:
-            raise
-        except _DECODE_ERRORS as err:
-            raise InputError(f"cannot read {path} as a depth image ({_short(err)}); pass a uint16 PNG or a .npy of metres") from err
+            except PIL_ERRORS as err:
+                raise InputError(f"cannot read {path} as a depth image ({_short(err)}); pass a uint16 PNG or a .npy of metres") from err
         is_float = mode == "F"
         eight_bit = mode == "L"
     if eight_bit and not explicit:

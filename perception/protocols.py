@@ -45,12 +45,16 @@ class InstanceMasks:
     backend names those).
     boxes_xyxy_px: None, or (K, 4) float64 the detector's box of each instance (NaN rows for
     instances without one); a detector's box reaches the floor contact that a mask may miss
-    (thin legs, an occluded foot)."""
+    (thin legs, an occluded foot).
+    removed: None, or (H, W) bool pixels of people and animals (in no instance): not part of the
+    room; removed_count: how many of them (:mod:`perception.people`)."""
 
     labels: np.ndarray
     scores: np.ndarray
     names: tuple[str, ...] | None = None
     boxes_xyxy_px: np.ndarray | None = None
+    removed: np.ndarray | None = None
+    removed_count: int = 0
 
 
 class InstanceSegmenter(Protocol):
@@ -101,10 +105,12 @@ class ObjectDetector(Protocol):
 class SemanticMap:
     """A per-pixel class map. classes: (H, W) int32 index into ``labels``, at the input size.
     labels: vocabulary label of each class index, ``""`` for background and for classes that
-    are not objects of the vocabulary (person, animals, vehicles)."""
+    are not objects of the vocabulary (person, animals, vehicles). names: the model's own name of
+    each class index (empty when unknown)."""
 
     classes: np.ndarray
     labels: tuple[str, ...]
+    names: tuple[str, ...] = ()
 
 
 class SemanticSegmenter(Protocol):

@@ -1,10 +1,11 @@
 """Detection-driven instances: the ``"detections"`` segmentation backend (Grounded-SAM style, with
 geometry and a classifier as second witnesses).
 
-1. **Detect**: every available detector (COCO CenterNet, Open Images SSD) gives boxes down to a
-   low score; :func:`perception.detection.merge_detections` puts them on one scale (a detector's
-   own trust score becomes :data:`~perception.detection.CONFIDENT`) and fuses boxes that several
-   detectors agree on.
+1. **Detect**: every available detector (Grounding DINO prompted with the room vocabulary, COCO
+   CenterNet, Open Images SSD) gives boxes down to a low score;
+   :func:`perception.detection.merge_detections` puts them on one scale (a detector's own trust
+   score becomes :data:`~perception.detection.CONFIDENT`) and fuses boxes that several detectors
+   agree on.
 2. **Confirm** (two passes): a detection at :data:`~perception.detection.CONFIDENT` or more
    stands alone. A weaker one (down to :data:`FLOOR_SCORE`) is kept only when geometry or the
    semantic map confirms it among the pixels the confident ones left: a depth cluster
@@ -45,6 +46,7 @@ import numpy as np
 
 from perception.box_segment import HINT_BACKGROUND, HINT_FOREGROUND, HINT_PROBABLY_BACKGROUND, HINT_PROBABLY_FOREGROUND, keep_main_regions
 from perception.detection import CONFIDENT, box_iou, family, merge_detections
+from perception.extras import is_clear, point_normals, solidity
 from perception.protocols import BoxPromptSegmenter, Detections, InstanceMasks, ObjectDetector, SemanticMap
 from scene_builder.model import BackendUse, CameraIntrinsics
 
@@ -63,6 +65,12 @@ _SEMANTIC_COVER = 0.15
 _DEPTH_SEES = 0.25
 #: Pixels this far (metres) behind an object's median depth are probably background.
 _BEHIND_M = 0.6
+#: A depth cluster that an object's cut reaches into and that lies this much inside its box is
+#: part of it (:meth:`DetectionSegmenter._whole_cluster`).
+_WHOLE_INSIDE = 0.8
+_WHOLE_CUT_SHARE = 0.2
+#: A person's box where the semantic map's people pixels fill this share is outlined by them.
+_PEOPLE_SEEN = 0.15
 #: A depth cluster that instances cover less than this share of is unexplained.
 _UNEXPLAINED = 0.3
 #: Boxes of any class down to this (rescaled) score are object proposals for the classifier ...
@@ -84,16 +92,6 @@ _RENAME_FAMILY_MAX = 0.1
 #: this many.
 _UNCLEAR_MIN_AREA = 0.01
 _MAX_UNCLEAR = 8
-#: A cluster of this share of the image with this share of its surroundings unknown or far
-#: behind is alone in the view (a close-up): clear whatever its shape.
-_ISOLATED_AREA = 0.05
-_ISOLATED_SHARE = 0.9
-#: An extra object's points spread at least this much (standard deviation, metres) off their
-#: best-fit plane.
-_MIN_THICKNESS_M = 0.015
-#: ... and this share of them lies on surfaces facing up (normal within 37 degrees of up).
-_MIN_TOP_SHARE = 0.08
-_TOP_COS = 0.8
 
 
 @dataclass(frozen=True)
@@ -168,38 +166,10 @@ def _same_object(box: np.ndarray, others: np.ndarray) -> bool:
     return bool(np.any((iou >= 0.5) | ((inter >= 0.6 * small) & (small >= 0.5 * large))))
 
 
-def _separated_share(mask: np.ndarray, depth_m: np.ndarray, valid: np.ndarray, ring_px: int = 4) -> float:
-    """Share of the ring of pixels around ``mask`` whose depth is unknown or at least 0.2 m (and
-    5 %) behind the nearest pixel of the mask: 1 for a thing with nothing next to it."""
-    import cv2
-    from scipy.ndimage import distance_transform_edt
-
-    ring = (cv2.dilate(mask.astype(np.uint8), np.ones((2 * ring_px + 1, 2 * ring_px + 1), np.uint8)) > 0) & ~mask
-    if not ring.any():
-        return 1.0
-    _, (ri, ci) = distance_transform_edt(~mask, return_indices=True)
-    near = depth_m[ri[ring], ci[ring]]
-    d = depth_m[ring]
-    apart = ~valid[ring] | (d > near + np.maximum(0.2, 0.05 * near))
-    return float(apart.mean())
-
-
 def _inside(box: np.ndarray, other: np.ndarray, share: float = 0.7) -> bool:
     """Whether ``share`` of ``box`` (4,) lies inside ``other`` (4,)."""
     ix = max(0.0, min(box[2], other[2]) - max(box[0], other[0])) * max(0.0, min(box[3], other[3]) - max(box[1], other[1]))
     return ix >= share * max((box[2] - box[0]) * (box[3] - box[1]), 1e-9)
-
-
-def _solidity(mask: np.ndarray) -> float:
-    """Area of ``mask`` over the area of its convex hull (1 for a convex blob)."""
-    import cv2
-
-    pts = cv2.findNonZero(mask.astype(np.uint8))
-    if pts is None or len(pts) < 3:
-        return 0.0
-    hull = cv2.convexHull(pts)
-    area = cv2.contourArea(hull)
-    return float(mask.sum()) / max(area, 1.0)
 
 
 class DetectionSegmenter:
@@ -234,7 +204,7 @@ class DetectionSegmenter:
         self.max_depth_m = float(max_depth_m)
         #: What answered the last ``segment`` call, for ``Perception.backends``.
         self.uses: list[BackendUse] = []
-        self._normal_cache: tuple[np.ndarray, np.ndarray] | None = None
+        self._boxes_per_detector: list[tuple[str, int]] = []
 
     # -- the stages ---------------------------------------------------------------------------
 
@@ -244,6 +214,7 @@ class DetectionSegmenter:
         for nb in self.detectors:
             det: ObjectDetector = nb.backend
             parts.append((det.detect(rgb), float(getattr(det, "accept_score", CONFIDENT))))
+        self._boxes_per_detector = [(nb.name, len(d)) for nb, (d, _) in zip(self.detectors, parts)]
         return merge_detections(parts)
 
     def segment(
@@ -274,7 +245,9 @@ class DetectionSegmenter:
         # over its legs), and cut with the confident masks as background.
         # Pass 3: boxes of any class (or of none the vocabulary has) that nothing explains yet,
         # when the classifier sees a vocabulary object in them (a night stand boxed as "oven").
-        claimed = np.zeros((h, w), dtype=bool)
+        # People and animals are cut first: their pixels are no object's and no witness.
+        removed, n_removed = self._people(rgb, dets, depth_m, valid, background, clusters, sem, sem_labels, points, focal)
+        claimed = removed.copy()
         cands: list[_Candidate] = []
         for stage in ("strong", "weak", "classifier"):
             if stage == "classifier":
@@ -282,17 +255,20 @@ class DetectionSegmenter:
             else:
                 batch = self._confirm(dets, stage == "strong", clusters, sem_labels, claimed, h, w)
             self._outline(rgb, batch, depth_m, valid, background, clusters, sem_labels, points, focal, claimed)
+            for c in batch:
+                if c.mask is not None:
+                    c.mask = c.mask & ~removed
             batch = [c for c in batch if c.mask is not None and c.mask.sum() >= max(30, self.min_points // 3)]
             cands = self._drop_duplicates(self._merge_parts(cands + batch, points, valid & ~background, focal))
-            claimed = np.zeros((h, w), dtype=bool)
+            claimed = removed.copy()
             for c in cands:
                 claimed |= c.mask
         labels, kept = self._paint(cands, depth_m, valid, h, w)
         self._check_names(rgb, kept, labels)
         n_det = len(kept)
-        extras = self._extras(rgb, clusters, cluster_sizes, labels, kept, sem_labels, points, depth_m, valid, background, up_cam, h, w)
+        extras = self._extras(rgb, clusters, cluster_sizes, labels, kept, sem_labels, points, depth_m, valid, background, up_cam, h, w, removed)
         for c in extras:
-            free = c.mask & (labels == 0)
+            free = c.mask & (labels == 0) & ~removed
             if free.sum() >= self.min_points:
                 kept.append(c)
                 labels[free] = len(kept)
@@ -300,7 +276,31 @@ class DetectionSegmenter:
         scores = np.asarray([c.score for c in kept], dtype=np.float32)
         boxes = np.asarray([np.full(4, np.nan) if c.witness.startswith("extra") else c.box for c in kept], dtype=np.float64).reshape(-1, 4)
         self._record(dets, kept, n_det)
-        return InstanceMasks(labels.astype(np.int32), scores, names, boxes)
+        return InstanceMasks(labels.astype(np.int32), scores, names, boxes, removed=removed, removed_count=n_removed)
+
+    def _people(self, rgb, dets: Detections, depth_m, valid, background, clusters, sem, sem_labels, points, focal) -> tuple[np.ndarray, int]:
+        """(H, W) bool pixels of the detected people and animals (:mod:`perception.people`), and
+        how many there are: in each box, the semantic map's people pixels when it sees one
+        there, else the box segmenter's cut."""
+        from perception.people import people_boxes, people_pixels, removal_mask
+
+        h, w = depth_m.shape
+        seen = people_pixels(sem)
+        boxes = people_boxes(dets, seen)
+        if not len(boxes):
+            return np.zeros((h, w), dtype=bool), 0
+        found = [_Candidate(b, 1.0, "person", "people") for b in boxes]
+        cut = [c for c in found if seen is None or seen[_box_slices(c.box, h, w)].mean() < _PEOPLE_SEEN]
+        self._outline(rgb, cut, depth_m, valid, background, clusters, sem_labels, points, focal, np.zeros((h, w), dtype=bool))
+        masks = []
+        for c in found:
+            if c.mask is None:  # the semantic map sees this one: its people pixels in the box
+                c.mask = np.zeros((h, w), dtype=bool)
+                rs, cs = _box_slices(c.box, h, w)
+                c.mask[rs, cs] = seen[rs, cs]
+            if c.mask.any():
+                masks.append(c.mask)
+        return removal_mask(masks, (h, w)), len(masks)
 
     def _confirm(self, dets: Detections, strong: bool, clusters, sem_labels, claimed, h: int, w: int) -> list[_Candidate]:
         """The detections of one pass (``strong``: at CONFIDENT or more; else the weak ones with
@@ -412,6 +412,7 @@ class DetectionSegmenter:
             m = np.asarray(m, dtype=bool)
             if c.depth_sees and m.any() and valid[m].mean() >= 0.5:  # sparse depth: no 3D trim
                 m = self._trim_3d(m, points, off_room, focal)
+                m = m | self._whole_cluster(c, m, clusters, claimed)
             c.mask = m
 
     def _hint(self, c: _Candidate, depth_m, valid, background, clusters, sem_labels) -> np.ndarray:
@@ -459,6 +460,28 @@ class DetectionSegmenter:
                 # Pixels the semantic map gives to another object class belong to that object.
                 sub[(sl != "") & ~same & (sub == 0)] = HINT_PROBABLY_BACKGROUND
         return hint
+
+    @staticmethod
+    def _whole_cluster(c: _Candidate, mask: np.ndarray, clusters: np.ndarray, claimed: np.ndarray) -> np.ndarray:
+        """The pixels of the depth clusters that make the box's object whole: each cluster that
+        the cut ``mask`` reaches into and that lies mostly (:data:`_WHOLE_INSIDE`) inside the
+        box, less what other instances ``claimed``. A box segmenter cuts by colour: a bed's dark
+        wooden footboard from its white mattress, a sofa's legs from its cushions; depth joins
+        them (a cluster reaching far out of the box is another thing, or things, touching it)."""
+        h, w = mask.shape
+        rs, cs = _box_slices(c.box, h, w)
+        ids, inside = np.unique(clusters[rs, cs][mask[rs, cs]], return_counts=True)
+        out = np.zeros_like(mask)
+        for cl, n in zip(ids, inside):
+            if cl == 0 or n < 0.05 * np.count_nonzero(mask):
+                continue
+            pix = clusters == cl
+            in_box = np.count_nonzero(pix[rs, cs])
+            # Mostly inside the box, and the cut holds a fair share of it (a cluster the cut
+            # only grazes is something the object touches: a wall's pillar behind a wardrobe).
+            if in_box >= _WHOLE_INSIDE * np.count_nonzero(pix) and n >= _WHOLE_CUT_SHARE * in_box:
+                out[rs, cs] |= pix[rs, cs]
+        return out & ~claimed
 
     def _trim_3d(self, mask: np.ndarray, points: np.ndarray, off_room: np.ndarray, focal: float) -> np.ndarray:
         """``mask`` less the pixels of its small 3D clusters (bleed onto what is behind or beside
@@ -620,22 +643,30 @@ class DetectionSegmenter:
             out.append((best, p) if best and p >= _CLASSIFIER_SURE else ("", 0.0))
         return out
 
-    def _extras(self, rgb, clusters, cluster_sizes, labels, kept, sem_labels, points, depth_m, valid, background, up_cam, h: int, w: int) -> list[_Candidate]:
-        """Depth clusters and semantic regions no detection explains, when they are clear objects."""
+    def _extras(self, rgb, clusters, cluster_sizes, labels, kept, sem_labels, points, depth_m, valid, background, up_cam, h: int, w: int, removed) -> list[_Candidate]:
+        """Depth clusters and semantic regions no detection explains, when they are clear objects
+        (people and animals, ``removed``, explain what they cover)."""
         import cv2
 
         out = []
         unclear: list[tuple[int, np.ndarray]] = []
-        claimed = labels > 0
+        claimed = (labels > 0) | removed
         up = None if up_cam is None else np.asarray(up_cam, dtype=np.float64)
-        for c in np.flatnonzero(cluster_sizes >= 2 * self.min_points):
+        cache: list[np.ndarray] = []
+
+        def normals() -> np.ndarray:
+            if not cache:
+                cache.append(point_normals(points))
+            return cache[0]
+
+        for c in np.flatnonzero(cluster_sizes >= self.min_points):
             if c == 0:
                 continue
             m = clusters == c
             if (m & claimed).sum() >= _UNEXPLAINED * cluster_sizes[c]:
                 continue
             m = m & ~claimed
-            if not self._clear(m, points, valid & ~background, up, depth_m, valid):
+            if not is_clear(m, points, valid & ~background, up, depth_m, valid, self.min_points, normals):
                 unclear.append((int(c), m))
                 continue
             name = ""
@@ -668,69 +699,10 @@ class DetectionSegmenter:
                     # Inside a detected object's box it is a part of that object or lies on it.
                     if any(m[_box_slices(e.box, h, w)].sum() >= 0.7 * m.sum() for e in kept):
                         continue
-                    if any((m & e.mask).sum() >= _UNEXPLAINED * m.sum() for e in out) or _solidity(m) < 0.5:
+                    if any((m & e.mask).sum() >= _UNEXPLAINED * m.sum() for e in out) or solidity(m) < 0.5:
                         continue
                     out.append(_Candidate(np.zeros(4), 0.3, label, "extra-semantic", mask=keep_main_regions(m)))
         return out
-
-    def _clear(self, mask: np.ndarray, points, off_room, up, depth_m, valid) -> bool:
-        """A clear object: solid in the image, filling its box, plausible height and footprint,
-        and either alone in the view or of 3D shape with a visible top."""
-        rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
-        if len(rows) == 0:
-            return False
-        fill = float(mask.sum()) / ((rows[-1] - rows[0] + 1) * (cols[-1] - cols[0] + 1))
-        if fill < 0.35 or _solidity(mask) < 0.5:
-            return False
-        p = points[mask & off_room]
-        if len(p) < self.min_points:
-            return False
-        if up is not None:
-            z = p @ up
-            lo, hi = np.percentile(z, [2, 98])
-            if not 0.1 <= hi - lo <= 2.2:
-                return False
-            a = np.cross(up, [0.0, 0.0, 1.0]) if abs(up[2]) < 0.9 else np.cross(up, [1.0, 0.0, 0.0])
-            a /= np.linalg.norm(a)
-            xy = p @ np.stack([a, np.cross(up, a)]).T
-            ext = np.percentile(xy, 98, axis=0) - np.percentile(xy, 2, axis=0)
-            if float(ext.max()) > 2.5:
-                return False
-        # Alone in the view (nothing but unknown or far depth around it: a close-up's face) it
-        # is clear whatever its shape.
-        if mask.sum() >= _ISOLATED_AREA * mask.size and _separated_share(mask, depth_m, valid) >= _ISOLATED_SHARE:
-            return True
-        # Else a thing has 3D shape: a flat patch (a picture, a door, a patch of wall that a
-        # coarse depth estimate stood up as a billboard) is no object to build.
-        sub = p[:: max(1, len(p) // 4000)]
-        thickness = float(np.linalg.svd(sub - sub.mean(axis=0), compute_uv=False)[-1]) / np.sqrt(len(sub))
-        if thickness < _MIN_THICKNESS_M:
-            return False
-        # ... and a camera at standing height sees some of its top (a seat, a table top, a bed, a
-        # cabinet top): a cluster of only vertical faces is a wall piece or a coarse estimate's
-        # billboard.
-        if up is not None:
-            if self._normal_cache is None or self._normal_cache[0] is not points:
-                self._normal_cache = (points, self._normals(points))
-            n = self._normal_cache[1][mask & off_room]
-            if float(np.mean(np.abs(n @ up) > _TOP_COS)) < _MIN_TOP_SHARE:
-                return False
-        return True
-
-    @staticmethod
-    def _normals(points: np.ndarray) -> np.ndarray:
-        """(H, W, 3) unit normals of the (H, W, 3) point image (cross product of its image
-        gradients; zero where undefined)."""
-        du = np.gradient(points, axis=1)
-        dv = np.gradient(points, axis=0)
-        n = np.cross(du, dv)
-        norm = np.linalg.norm(n, axis=2, keepdims=True)
-        n = np.where(norm > 1e-12, n / np.maximum(norm, 1e-12), 0.0)
-        # Across a depth jump the gradients join two surfaces: no normal there.
-        z = np.maximum(points[..., 2], 1e-6)
-        jump = (np.abs(du[..., 2]) > 0.03 * z) | (np.abs(dv[..., 2]) > 0.03 * z)
-        n[jump] = 0.0
-        return n
 
     def _record(self, dets: Detections, kept: list[_Candidate], n_det: int) -> None:
         witnesses: dict[str, int] = {}
@@ -739,8 +711,9 @@ class DetectionSegmenter:
         said = ", ".join(f"{n} by {k}" for k, n in sorted(witnesses.items()))
         names = "+".join(nb.name for nb in self.detectors)
         n_named = sum(1 for lab in dets.labels if lab)
+        each = ", ".join(f"{name} {n}" for name, n in self._boxes_per_detector)
         self.uses = [
-            BackendUse("detection", names, f"{len(dets)} boxes ({n_named} of vocabulary classes); {len(kept)} objects: {said or 'none'}"),
+            BackendUse("detection", names, f"{len(dets)} boxes ({n_named} of vocabulary classes; before merging: {each}); {len(kept)} objects: {said or 'none'}"),
             BackendUse("box-segmentation", self.box_segmenter.name, f"{n_det} box prompts"),
         ]
         if self.semantic is not None:

@@ -279,7 +279,7 @@ class Manifest:
 def _output_version(out_dir: Path, item: BatchItem) -> str | None:
     """The scene-builder version of the complete build of ``item`` in ``out_dir``, or None when
     the folder is absent, incomplete or holds another photo's build."""
-    from scene_builder.pipeline import read_marker
+    from scene_builder.outdir import read_marker
 
     marker = read_marker(out_dir)
     if marker is None or marker.get("image") != str(Path(item.image_path).resolve()):
@@ -292,13 +292,20 @@ def _output_version(out_dir: Path, item: BatchItem) -> str | None:
 
 
 def _remove_stale_staging(out_root: Path, names: set[str]) -> int:
-    """Remove staging / set-aside folders a killed build left beside its item's output."""
+    """Remove staging / set-aside folders a killed build left beside its item's output: a staging
+    folder ``.<name>.tmp-*``, and a set-aside previous output ``.<name>.old-*`` only when it is
+    scene-builder's (its marker) or empty, as the build only ever sets such a folder aside."""
+    from scene_builder.outdir import read_marker
+
     removed = 0
-    for p in out_root.iterdir():
+    for p in sorted(out_root.iterdir()):
         m = re.fullmatch(r"\.(.+)\.(tmp|old)-[^/]+", p.name)
-        if m and m.group(1) in names and p.is_dir():
-            shutil.rmtree(p, ignore_errors=True)
-            removed += 1
+        if not (m and m.group(1) in names and p.is_dir() and not p.is_symlink()):
+            continue
+        if m.group(2) == "old" and read_marker(p) is None and any(p.iterdir()):
+            continue
+        shutil.rmtree(p)
+        removed += 1
     return removed
 
 

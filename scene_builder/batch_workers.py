@@ -25,7 +25,7 @@ from multiprocessing.connection import Connection, wait
 from pathlib import Path
 
 from scene_builder.config import BuildConfig, InputSpec
-from scene_builder.errors import SceneBuilderError
+from scene_builder.errors import InputError, SceneBuilderError
 
 
 @dataclass(frozen=True)
@@ -122,9 +122,11 @@ def _return_freed_memory() -> None:
 
 def run_item(task: ItemTask, job: WorkerJob) -> ItemOutcome:
     """Build one photo into ``task.out_dir`` exactly as ``scene-builder build`` does (staging
-    folder renamed into place at the end) and say how it went. Any exception of the build becomes
-    the item's one-line error: in a batch one bad photo must fail alone, and its error is kept in
-    the manifest, not lost."""
+    folder renamed into place at the end) and say how it went. What a build raises for a photo
+    it cannot build (a ``SceneBuilderError``, or an OSError of the machine: disk full) becomes the
+    item's one-line error: in a batch one bad photo must fail alone, and its error is kept in the
+    manifest. Anything else is a bug and is raised (a local worker reports it before it dies: see
+    :func:`_worker_main`; Ray reports it as the task's error)."""
     from scene_builder.errors import InputWarning
     from scene_builder.pipeline import build
 
@@ -135,7 +137,7 @@ def run_item(task: ItemTask, job: WorkerJob) -> ItemOutcome:
         warnings.simplefilter("always", InputWarning)
         try:
             result = build(inputs, task.out_dir, job.config, progress=False, overwrite=job.overwrite)
-        except Exception as err:  # recorded as this item's failure (see the docstring)
+        except (SceneBuilderError, OSError) as err:  # recorded as this item's failure (see the docstring)
             _return_freed_memory()
             rss, peak = _rss_mb()
             return ItemOutcome(task, "failed", f"{type(err).__name__}: {one_line(err)}", worker=worker, rss_mb=rss, peak_rss_mb=peak, warm_s=warm_s)
@@ -176,8 +178,23 @@ def _worker_main(conn: Connection, job: WorkerJob, parent_pid: int) -> None:
             return
         if task is None:
             return
-        outcome = run_item(task, job)
+        try:
+            outcome = run_item(task, job)
+        except Exception as err:  # a bug: tell the coordinator what it was and where, then die of it
+            conn.send(("crash", internal_error(err)))
+            raise
         conn.send(("result", outcome))
+
+
+def internal_error(err: BaseException) -> str:
+    """One line for an item's error when the build hit a bug: the exception, its message and the
+    line of scene-builder (or of the library) it came from."""
+    import traceback
+
+    frames = traceback.extract_tb(err.__traceback__)
+    ours = [f for f in frames if "/site-packages/" not in f.filename] or frames
+    where = f" at {Path(ours[-1].filename).name}:{ours[-1].lineno}" if ours else ""
+    return f"internal error (a bug of scene-builder; please report it): {type(err).__name__}: {one_line(err)}{where}"[:500]
 
 
 @dataclass
@@ -254,6 +271,13 @@ class LocalPool:
             if message is not None and message[0] == "ready":
                 slot.warm_s = message[1]
                 self.stats.warm_s.append(message[1])
+                continue
+            if message is not None and message[0] == "crash":
+                # The worker hit a bug and is dying of it; the same photo would hit it again.
+                self.stats.crashed += 1
+                out.append(ItemOutcome(slot.task, "failed", message[1], retryable=False, worker=str(slot.process.pid)))
+                slot.task = None
+                self._replace(i)
                 continue
             if message is not None:
                 outcome: ItemOutcome = message[1]
@@ -352,7 +376,10 @@ class RayPool:
     input and output paths (a shared filesystem)."""
 
     def __init__(self, address: str, workers: int | None, job: WorkerJob, retries: int, max_items_per_worker: int | None = None) -> None:
-        import ray
+        try:
+            import ray
+        except ImportError as err:  # the optional extra is not installed
+            raise InputError(f"--ray needs Ray, which is not installed ({err}); pip install 'scene-builder[ray]'") from err
 
         self.stats = PoolStats()
         if not ray.is_initialized():
@@ -360,7 +387,14 @@ class RayPool:
             if address == "local":
                 ray.init(num_cpus=workers or os.cpu_count(), include_dashboard=False, log_to_driver=False)
             else:
-                ray.init(address=address, log_to_driver=False)
+                try:
+                    ray.init(address=address, log_to_driver=False)
+                except ConnectionError as err:  # what ray.init documents for no cluster at the address
+                    where = "running on this machine (`ray start --head` starts one)" if address == "auto" else f"at {address}"
+                    raise InputError(
+                        f"--ray {address}: no Ray cluster {where} ({one_line(err)}); "
+                        "pass --ray local to start one here for this batch, or leave --ray out for local workers"
+                    ) from err
         self._ray = ray
         cpus = int(ray.cluster_resources().get("CPU", 1))
         self.slots = max(1, min(workers, cpus) if workers else cpus)

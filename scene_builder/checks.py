@@ -108,21 +108,34 @@ class Fidelity:
 
 @dataclass(frozen=True)
 class PushResult:
-    """A scripted push of one movable object (``layout.interaction.push_object``): a kinematic
-    pusher (a mocap paddle that touches only the pushed object) driven horizontally into its side
-    at its centre-of-mass height, then withdrawn, then a settle.
+    """A scripted push of one movable object (``layout.push.push_object``): a force-limited
+    pusher (a paddle on slide joints driven by position servos, colliding with everything) driven
+    horizontally into its side, then pulled back, then a settle.
 
     name: the pushed object; direction_xy: (2,) unit horizontal push direction in the world;
     clearance_m: free space ahead of it along that direction (its collision geometry slid there, up to
-      ``CLEARANCE_CAP_M``); height_m: world z of the pusher's centre; speed_m_s: pusher speed;
+      ``CLEARANCE_CAP_M``); height_m: world z of the pusher's centre (nan when it never started);
+      speed_m_s: pusher speed; force_limit_n: the pusher's force limit;
     pusher_travel_m: how far the pusher advanced past first contact (0 when it never touched);
+      touched: whether it touched the object at all;
     displacement_m: horizontal displacement of the pushed object's root body after the settle;
       along_m: its component along the push direction; tilt_deg: change of its up axis;
       toppled: tilt above ``layout.verify.TOPPLE_DEG``.
     carried: (name, displacement_m) of the objects resting on it (directly or on each other):
-      they ride along and are not counted as others.
+      they may ride along and are not counted as others; carried_slip: (name, m) how far each
+      moved horizontally relative to the pushed object; carried_drop: (name, m) how far each
+      sank; carried_tilt: (name, deg) how far each tilted.
     others: (name, max displacement_m over the push and settle) of every other free object;
       max_other_m: their largest (0 with none).
+    mass_kg: the pushed object's mass with what rides on it; slide_force_n: that weight times the
+      friction coefficient of its resting contacts (nan with none): what sliding it takes.
+    max_force_n: the largest force the pusher exerted along the push; stalled: it touched the
+      object but stopped short of its travel (held back at its force limit).
+    resisted_by: (what, peak N) the pushed object and its riders pressed against the push
+      through side contacts (objects, fixed furniture, ``wall_i``, ``background``), largest first;
+      pusher_hit: (what, peak N) the pusher touched besides the pushed object, largest first.
+    not_started: why the push could not start ("" when it did): no room for the pusher behind
+      it, no collision geometry.
     """
 
     name: str
@@ -138,16 +151,30 @@ class PushResult:
     carried: tuple[tuple[str, float], ...] = ()
     others: tuple[tuple[str, float], ...] = ()
     max_other_m: float = 0.0
+    force_limit_n: float = float("nan")
+    mass_kg: float = float("nan")
+    slide_force_n: float = float("nan")
+    touched: bool = False
+    max_force_n: float = 0.0
+    stalled: bool = False
+    resisted_by: tuple[tuple[str, float], ...] = ()
+    pusher_hit: tuple[tuple[str, float], ...] = ()
+    carried_slip: tuple[tuple[str, float], ...] = ()
+    carried_drop: tuple[tuple[str, float], ...] = ()
+    carried_tilt: tuple[tuple[str, float], ...] = ()
+    not_started: str = ""
 
 
 @dataclass(frozen=True)
 class PushPlan:
-    """Whether and where a movable object can be pushed (``layout.interaction.plan_push``).
+    """Which way a movable object is pushed (``layout.push.plan_push``); every movable object
+    is pushed, this is the planner's forecast.
 
-    name: the object; pushable: a direction with at least ``min_clearance_m`` free space ahead and
-    support under its centre of mass after the push was found; direction_xy / clearance_m: the
-    best of the tried directions (most clearance; (0, 0) and 0 with no collision geometry);
-    reason: why it cannot be pushed ("" when it can).
+    name: the object; pushable: a direction with at least ``min_clearance_m`` free space ahead,
+    support under its centre of mass after the push, no neighbour beside it to drag and room for
+    the pusher behind it was found; direction_xy / clearance_m: that direction, else the best of
+    the tried ones (room for the pusher, then most clearance; (0, 0) and 0 with no collision
+    geometry); reason: why no side has all of these ("" when one has).
     """
 
     name: str

@@ -8,6 +8,7 @@ at start-up, so ``--help`` is instant.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from pathlib import Path
@@ -33,14 +34,16 @@ and glTF, with a rerun recording to inspect it.
 
 Frames: world Z up, metres, kilograms, floor at z = 0; camera frame OpenCV (x right, y down, z forward).
 
-Output folder: -o may replace only a folder scene-builder wrote (it holds .scene-builder and
-report.json); anything else is refused unless --overwrite. The current folder and a folder holding
-the input are always refused. Without -o the output is ./<image stem>_scene, which is replaced only
-by a build of the same image.
+Output folder: -o replaces only a folder scene-builder wrote (its .scene-builder marker records
+every file with its hash) and only if nothing in it was added or changed since; --overwrite
+replaces such a folder even so. A folder scene-builder did not write is never replaced. The
+current folder and a folder holding the input are always refused. Without -o the output is
+./<image stem>_scene, which is replaced only by a build of the same image.
 
 Exit status: 0 ok, 1 other failure, 2 usage error (bad command line), 3 input error (bad or
 missing file, implausible depth or intrinsics, output folder refused), 4 model weights missing,
-5 export failed, 130 interrupted. Errors are one line 'error: ...'; doubtful input the build goes
+5 export failed, 130 interrupted; `check` exits 1 when it finds a problem (with --interact also a
+push or an opening that failed). Errors are one line 'error: ...'; doubtful input the build goes
 on with is one line 'warning: ...'.
 """
 
@@ -85,7 +88,8 @@ def _add_build_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="replace the output folder even if scene-builder did not write it (its content is deleted)",
+        help="replace the output folder scene-builder wrote even if files in it were added or changed since (they are "
+        "deleted); a folder scene-builder did not write is never replaced",
     )
     _add_scene_options(p)
 
@@ -103,8 +107,8 @@ def _add_scene_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--offline",
         action="store_true",
-        help="never download weights (also HF_HUB_OFFLINE=1); by default the first run downloads Depth Anything V2 "
-        "and SAM 2 (about 255 MB) when the network allows, else says which fallback it uses",
+        help="never download weights (also HF_HUB_OFFLINE=1); by default the first run downloads Depth Anything V2, "
+        "SAM 2 and Grounding DINO (about 945 MB) when the network allows, else says which fallback it uses",
     )
     p.add_argument("--depth-backend", default="auto", help="depth backend when no depth map is given (default auto; see `models list`)")
     p.add_argument(
@@ -187,7 +191,7 @@ def make_parser() -> argparse.ArgumentParser:
 
     d = sub.add_parser("demo", help="render a procedural room with MuJoCo, rebuild it, and compare with the truth")
     d.add_argument("-o", "--out", type=Path, default=Path("demo_scene"), help="output folder (default demo_scene/)")
-    d.add_argument("--overwrite", action="store_true", help="replace the output folder even if scene-builder did not write it")
+    d.add_argument("--overwrite", action="store_true", help="replace the output folder scene-builder wrote even if it was changed since")
     d.add_argument("--seed", type=int, default=0, help="room and build seed (default 0)")
     d.add_argument("--objects", type=int, default=6, help="number of objects in the room (default 6)")
     d.add_argument("--viz", choices=("save", "spawn", "off"), default="save", help="rerun recording (default save)")
@@ -202,9 +206,11 @@ def make_parser() -> argparse.ArgumentParser:
     c = sub.add_parser("check", help="re-validate an output folder (MJCF compiles and is stable, USD validates, files resolve)")
     c.add_argument("out", type=Path, help="an output folder written by `scene-builder build`")
     c.add_argument("--interact", action="store_true",
-                   help="also run the interaction probes in MuJoCo: push every pushable object 6 cm (it must move 2-10 cm "
-                        "without toppling, every other object less than 1 cm) and pull every door and drawer open (at least "
-                        "half its range, within its limits, the carcass still); writes OUT/interaction.json")
+                   help="also run the interaction probes in MuJoCo: push every movable object 6 cm with a pusher of at most "
+                        "100 N that collides with everything (it must move 2-10 cm without toppling, every other object less "
+                        "than 1 cm; a push blocked, too heavy or without room for the pusher fails with its reason) and pull "
+                        "every door and drawer open (at least half its range, within its limits, the carcass still); writes "
+                        "OUT/interaction.json; exit status 1 when any probe fails")
 
     v = sub.add_parser("view", help="open the rerun viewer on OUT/scene.rrd (or write its view to a PNG without a display)")
     v.add_argument("out", type=Path, help="an output folder (or a .rrd file)")
@@ -216,7 +222,7 @@ def make_parser() -> argparse.ArgumentParser:
     ml = msub.add_parser("list", help="show each known model and whether its weights are available locally")
     ml.add_argument("--models-dir", type=Path, help="folder with model weights (also $SCENE_BUILDER_MODELS)")
     mf = msub.add_parser("fetch", help="download model weights (needs a network; HF_ENDPOINT selects a mirror)")
-    mf.add_argument("names", nargs="*", help="model names (default: the ones a build uses, Depth Anything V2 and SAM 2, about 255 MB)")
+    mf.add_argument("names", nargs="*", help="model names (default: the ones a build uses, Depth Anything V2, SAM 2 and Grounding DINO, about 945 MB)")
     mf.add_argument("--models-dir", type=Path, help="where to put them (default: the Hugging Face cache)")
     return parser
 
@@ -268,7 +274,7 @@ def _add_batch_parser(sub) -> None:
     ba.add_argument("--max-worker-memory-gb", type=_positive, default=8.0, metavar="GB",
                     help="resident memory limit of one worker: a worker over it is killed and replaced, its item failed and retried (default 8)")
     ba.add_argument("--max-items-per-worker", type=_positive_int, metavar="N", help="replace a worker after N photos (default never)")
-    ba.add_argument("--overwrite", action="store_true", help="replace OUT_ROOT/<name> even if scene-builder did not write it")
+    ba.add_argument("--overwrite", action="store_true", help="replace OUT_ROOT/<name> scene-builder wrote even if it was changed since")
     _add_scene_options(ba)
 
 
@@ -365,10 +371,12 @@ def _print_summary(result) -> None:
 
     from scene_builder.pipeline import stderr_console
 
+    from scene_builder.report import fates_line
+
     v = result.verdict
     console = stderr_console()
     console.print(
-        f"[bold]{len(result.scene.objects)} objects[/bold] -> {escape(str(result.out_dir))}/  "
+        f"[bold]{escape(fates_line(result.fates))}[/bold] -> {escape(str(result.out_dir))}/  "
         f"(max penetration {v.max_penetration_m * 1000:.2f} mm, settle drift {v.settle_max_drift_m * 1000:.1f} mm, "
         f"{'stable' if v.stable else 'NOT stable'})"
     )
@@ -382,7 +390,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     from scene_builder.config import BuildConfig, ExportConfig, InputSpec
     from scene_builder.bench.render import write_demo_input
     from scene_builder.bench.truth import compare_to_ground_truth
-    from scene_builder.pipeline import add_to_marker, build, stderr_console
+    from scene_builder.outdir import add_to_marker
+    from scene_builder.pipeline import build, stderr_console
 
     with tempfile.TemporaryDirectory(prefix="scene-builder-demo-") as tmp:
         sample = write_demo_input(Path(tmp) / "room", seed=args.seed, n_objects=args.objects)
@@ -416,6 +425,8 @@ def _cmd_check(args: argparse.Namespace) -> int:
 
     if not args.out.is_dir():
         raise InputError(f"{args.out} is not an output folder; pass the folder written by `scene-builder build`")
+    if args.interact:
+        _check_interaction_writable(args.out)  # before anything runs: --interact writes into the folder
     problems = check_output(args.out)
     if args.interact:
         problems = problems + _interact(args.out)
@@ -428,30 +439,61 @@ def _cmd_check(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_interaction_writable(out: Path) -> None:
+    """Raise InputError unless ``out`` is a build of scene-builder whose interaction.json is
+    absent or the one scene-builder wrote (so writing it destroys nothing of the user's)."""
+    from scene_builder.errors import InputError
+    from scene_builder.outdir import MARKER, owns_file, read_marker
+
+    if read_marker(out) is None:
+        raise InputError(
+            f"{out} is not an output folder of scene-builder (no {MARKER} beside report.json), and --interact writes "
+            "interaction.json into it; run `scene-builder check` without --interact, or pass a build's folder"
+        )
+    if not owns_file(out, "interaction.json"):
+        raise InputError(
+            f"{out / 'interaction.json'} was not written by scene-builder or was changed since; move it away, then run --interact again"
+        )
+
+
 def _interact(out: Path) -> tuple[str, ...]:
     """Run the interaction probes on OUT/scene.xml, print one line per probe, write
-    OUT/interaction.json; returns the probes that miss the bar."""
+    OUT/interaction.json (``out`` checked by :func:`_check_interaction_writable`); returns the
+    probes that miss the bar."""
     import dataclasses
     import json
 
-    from layout.interaction import interaction_problems, probe_lines, probe_scene
-    from scene_builder.pipeline import add_to_marker
+    from layout.interaction import interaction_problems, probe_lines, probe_scene, push_failures
+    from scene_builder.outdir import add_to_marker, replace_file
 
     plans, pushes, joints = probe_scene(out / "scene.xml")
     for line in probe_lines(plans, pushes, joints):
         print(line)
     problems = interaction_problems(pushes, joints)
+    failures = {r.name: list(push_failures(r)) for r in pushes}
     doc = {
+        "push_summary": {"movable": len(pushes), "succeeded": sum(not f for f in failures.values()),
+                         "failed": sum(bool(f) for f in failures.values())},
         "push_plans": [dataclasses.asdict(p) for p in plans],
-        "pushes": [dataclasses.asdict(r) for r in pushes],
+        "pushes": [{**dataclasses.asdict(r), "ok": not failures[r.name], "failures": failures[r.name]} for r in pushes],
         "joints": [{f.name: getattr(j, f.name) for f in dataclasses.fields(j) if f.name not in ("times_s", "positions")} for j in joints],
         "problems": list(problems),
     }
-    tmp = out / "interaction.json.tmp"
-    tmp.write_text(json.dumps(doc, indent=2) + "\n")
-    tmp.replace(out / "interaction.json")
+    _check_interaction_writable(out)  # again: the probes took a while
+    replace_file(out, "interaction.json", json.dumps(_finite(doc), indent=2, allow_nan=False) + "\n")
     add_to_marker(out, "interaction.json")
     return problems
+
+
+def _finite(v):
+    """``v`` with every NaN or infinite float replaced by None (JSON has no NaN)."""
+    if isinstance(v, float):
+        return v if math.isfinite(v) else None
+    if isinstance(v, dict):
+        return {k: _finite(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_finite(x) for x in v]
+    return v
 
 
 def _cmd_view(args: argparse.Namespace) -> int:

@@ -25,6 +25,15 @@ from __future__ import annotations
 #: Exit status of a usage error (argparse's own status).
 USAGE_EXIT_CODE = 2
 
+#: What Pillow raises for a file (or bytes) it cannot read as an image: ``Image.open`` documents
+#: ``UnidentifiedImageError`` (an OSError), ValueError and TypeError; its plugins turn malformed
+#: headers into SyntaxError (its plugin API's "not my format") and EOFError, and decoding into
+#: OSError ("image file is truncated", "decoder error"); ``convert`` raises ValueError for a
+#: conversion it lacks; its TIFF decoder raises TypeError for a tag of the wrong type
+#: ("'IFDRational' object cannot be interpreted as an integer", found by the fuzzer). Catch these
+#: only around Pillow's own calls, never around the project's code.
+PIL_READ_ERRORS: tuple[type[BaseException], ...] = (OSError, SyntaxError, ValueError, TypeError, EOFError)
+
 
 class SceneBuilderError(Exception):
     """Base class: a failure the user can act on. ``str(err)`` is the one-line message."""

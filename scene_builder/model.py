@@ -411,13 +411,21 @@ class PerceivedObject:
 
 @dataclass(frozen=True, eq=False)
 class Perception:
-    """Everything perception found: the observation, the gravity-aligned camera, room and objects."""
+    """Everything perception found: the observation, the gravity-aligned camera, room and objects.
+
+    removed_mask: None, or (H, W) bool pixels of people and animals seen in the photo: not part of
+    the room, in no object, filled in the background with what they hid."""
 
     observation: Observation
     camera: Camera
     room: Room
     objects: tuple[PerceivedObject, ...]
     backends: tuple[BackendUse, ...] = ()
+    removed_mask: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.removed_mask is not None:
+            _freeze(self, "removed_mask", np.bool_, self.observation.rgb.shape[:2])
 
 
 # --------------------------------------------------------------------------------------------

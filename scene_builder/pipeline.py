@@ -13,20 +13,18 @@
 Everything is written into a hidden staging folder beside OUT and renamed into place at the end,
 so a failed build leaves nothing half-written behind.
 
-Output safety (:func:`check_out_dir`): OUT may replace only a folder that scene-builder wrote (it
-holds the marker file :data:`MARKER` listing what the build wrote, and ``report.json``) unless
-``overwrite`` is set; the current folder, a folder holding the input and a folder inside the
-input's folder (unless that is the current folder) are always refused. The folder gets the
-permissions the umask allows, like any folder the user makes.
+Output safety (:mod:`scene_builder.outdir`): OUT replaces only a folder that scene-builder wrote
+(its marker :data:`MARKER` records every file with its hash), and only when nothing in it was
+added or changed since, unless ``overwrite`` is set; a folder scene-builder did not write is never
+replaced. The current folder, a folder holding the input and a folder inside the input's folder
+(unless that is the current folder) are always refused. The folder gets the permissions the
+umask allows, like any folder the user makes.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
-import os
 import shutil
-import tempfile
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -36,11 +34,26 @@ from typing import Callable, Iterator
 from scene_builder.config import BuildConfig, InputSpec
 from scene_builder.errors import InputError
 from scene_builder.model import ExportedFiles, Fidelity, LayoutResult, Perception, PhysicsVerdict, Scene
+from scene_builder.outdir import (  # noqa: F401 - MARKER, read_marker, add_to_marker: re-exported for callers of the pipeline
+    MARKER,
+    add_to_marker,
+    check_location,
+    check_out_dir,
+    check_replaceable,
+    make_staging,
+    move_into_place,
+    read_marker,
+    real_out_dir,
+    write_marker,
+)
 
 
 #: Rounds of turning objects that do not stay at rest into static background (what rested on
 #: them may in turn move).
-UNSTABLE_ROUNDS = 2
+UNSTABLE_ROUNDS = 3
+#: An object is re-seated where it came to rest at most this many times (re-seating one object
+#: can leave its neighbour a millimetre inside it for the next round).
+RESEAT_TIMES = 2
 
 
 @dataclass(frozen=True)
@@ -56,6 +69,14 @@ class BuildResult:
     timings_s: tuple[tuple[str, float], ...]
     out_dir: Path
     report_path: Path
+    first_verdict: PhysicsVerdict | None = None  # the physics check before any object became background
+
+    @property
+    def fates(self) -> dict:
+        """What became of every perceived object (``scene_builder.report.object_fates``)."""
+        from scene_builder.report import object_fates
+
+        return object_fates(self.perception, self.layout, self.scene, self.first_verdict, self.verdict)
 
 
 def stderr_console():
@@ -154,8 +175,10 @@ def build(
     """Run the whole pipeline on one photo and write every output into ``out_dir``.
 
     ``out_dir`` is checked first (:func:`check_out_dir`): an existing folder is replaced only when
-    scene-builder wrote it (or ``overwrite``); ``default_name`` says ``out_dir`` was not chosen by
-    the user (then it is replaced only when it holds a build of the same image).
+    scene-builder wrote it and nothing in it was added or changed since (with ``overwrite``: edited
+    or not; a folder scene-builder did not write never); ``default_name`` says ``out_dir`` was not
+    chosen by the user (then it is replaced only when it holds a build of the same image). A
+    symbolic link is followed: the folder it points to is replaced, the link kept.
 
     Raises scene_builder.errors.SceneBuilderError subclasses with a one-line message on bad input
     or a failed export; in that case ``out_dir`` is left as it was.
@@ -163,7 +186,7 @@ def build(
     # Stages are imported here, not at module level, so `scene-builder --help` stays instant.
     from exporters import export_scene, record_scene, write_mjcf
     from generation import generate_assets
-    from layout import make_background, settled_scene, solve_layout, unstable_objects, verify_scene
+    from layout import make_background, reseat_objects, reseatable, settled_scene, solve_layout, unstable_objects, verify_scene
     from perception import perceive
     from perception.inputs import check_paths
     from scene_builder.report import build_report, write_report
@@ -177,7 +200,8 @@ def build(
         check_robot_request(config.robot.name, config.robot.source, config.robot.offline)
     log = StageLog(progress)
     total_start = time.perf_counter()
-    staging = _make_staging(out_dir)
+    dest = real_out_dir(out_dir)
+    staging = make_staging(dest)
     try:
         with log.live("perception", lambda: _perception_summary(perceived)) as step:
             perceived = perceive(inputs, config.perception, config.seed, on_step=step)
@@ -191,14 +215,25 @@ def build(
         with log.live("physics check", lambda: _verdict_summary(verdict)) as step:
             step(f"{config.layout.settle_s:g} s of simulation, then render-and-compare")
             verdict, fidelity = verify_scene(mjcf_path, scene, config.layout, perceived)
-        for _ in range(UNSTABLE_ROUNDS):
-            # An object that does not stay at rest where it was seen (a thin frame toppling off
-            # a shelf) cannot stand there physically: it becomes static background, not moved.
+        first_verdict = verdict  # before any object became background in the settle rounds
+        reseated: dict[str, int] = {}  # how often each object was re-seated (at most RESEAT_TIMES)
+        for round_ in range(UNSTABLE_ROUNDS):
+            # An object that settled a little and came to rest is re-seated there (once); one
+            # that does not stay at rest where it was seen (a thin frame toppling off a shelf)
+            # cannot stand there physically: it becomes static background, not moved.
             unstable = unstable_objects(verdict, scene, config.layout)
             if not unstable:
                 break
-            with log.stage("unstable to background", lambda: f"{len(unstable)} objects; {_verdict_summary(verdict)}"):
-                layout = make_background(layout, unstable)
+            last = round_ == UNSTABLE_ROUNDS - 1  # the last round re-seats nothing: it must end at rest
+            reseat = {} if last else {n: r for n, r in reseatable(verdict, unstable).items() if reseated.get(n, 0) < RESEAT_TIMES}
+            give_up = {n: r for n, r in unstable.items() if n not in reseat}
+            with log.stage("unstable repaired", lambda: f"{len(reseat)} re-seated, {len(give_up)} to background; {_verdict_summary(verdict)}"):
+                if reseat:
+                    layout = reseat_objects(layout, verdict, reseat)
+                    for n in reseat:
+                        reseated[n] = reseated.get(n, 0) + 1
+                if give_up:
+                    layout = make_background(layout, give_up)
                 scene = layout.scene
                 shutil.rmtree(staging / "meshes", ignore_errors=True)  # the old objects' meshes
                 mjcf_path = write_mjcf(scene, staging)
@@ -228,20 +263,23 @@ def build(
                 )
             files = dataclasses.replace(files, rerun=rrd)
         log.timings.append(("total", time.perf_counter() - total_start))
-        report = build_report(inputs, config, perceived, layout, scene, verdict, fidelity, tuple(log.timings), generated)
+        report = build_report(inputs, config, perceived, layout, scene, verdict, fidelity, tuple(log.timings), generated, first_verdict)
         write_report(staging, scene, report)
         shutil.rmtree(staging / ROBOT_WORK_DIR, ignore_errors=True)
         write_marker(staging, inputs)
-        # Checked again: the build took a while, and someone may have put a file in out_dir.
-        check_out_dir(out_dir, inputs, overwrite=overwrite, default_name=default_name)
-        _move_into_place(staging, out_dir)
+        # Checked again: the build took a while, and someone may have put a file in out_dir. Its
+        # contents are checked once it is set aside, so nothing added until then is lost.
+        check_location(out_dir, inputs)
+        move_into_place(
+            staging, dest, verify=lambda old: check_replaceable(old, inputs, overwrite, default_name, shown=out_dir)
+        )
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
     finally:
         _release_mujoco_assets()
     files = ExportedFiles(*[None if p is None else out_dir / p.name for p in dataclasses.astuple(files)])
-    return BuildResult(perceived, layout, scene, verdict, fidelity, files, tuple(log.timings), out_dir, out_dir / "report.json")
+    return BuildResult(perceived, layout, scene, verdict, fidelity, files, tuple(log.timings), out_dir, out_dir / "report.json", first_verdict)
 
 
 def _release_mujoco_assets() -> None:
@@ -309,141 +347,10 @@ def _verdict_summary(v: PhysicsVerdict) -> str:
     )
 
 
-#: Marker file a build writes into its output folder: JSON naming the input image and every
-#: top-level entry the build wrote, so a later build knows the folder is its own to replace.
-MARKER = ".scene-builder"
-_MARKER_FORMAT = "scene-builder/output"
-
-
-def _is_within(path: Path, folder: Path) -> bool:
-    """``path`` is ``folder`` or lies inside it (both resolved)."""
-    return path == folder or folder in path.parents
-
-
-def read_marker(folder: Path) -> dict | None:
-    """The marker of an output folder scene-builder wrote, or None (no marker, unreadable marker,
-    or no ``report.json`` beside it)."""
-    try:
-        doc = json.loads((Path(folder) / MARKER).read_text())
-    except (OSError, ValueError):
-        return None
-    if not isinstance(doc, dict) or doc.get("format") != _MARKER_FORMAT or not isinstance(doc.get("files"), list):
-        return None
-    if not (Path(folder) / "report.json").is_file():
-        return None
-    return doc
-
-
-def write_marker(folder: Path, inputs: InputSpec, extra: tuple[str, ...] = ()) -> Path:
-    """Write (or rewrite) :data:`MARKER` in ``folder``: the input image and every top-level entry
-    of the folder (plus ``extra``) as written by scene-builder."""
-    folder = Path(folder)
-    files = sorted({p.name for p in folder.iterdir() if p.name != MARKER} | set(extra))
-    doc = {"format": _MARKER_FORMAT, "version": 1, "image": str(Path(inputs.image_path).resolve()), "files": files}
-    path = folder / MARKER
-    path.write_text(json.dumps(doc, indent=2) + "\n")
-    return path
-
-
-def add_to_marker(folder: Path, name: str) -> None:
-    """Record that scene-builder also wrote ``folder/name`` after the build (the demo's comparison)."""
-    doc = read_marker(folder)
-    if doc is None:
-        raise InputError(f"{folder} is not an output folder of scene-builder (no {MARKER}); cannot add {name} to it")
-    doc["files"] = sorted(set(doc["files"]) | {name})
-    (Path(folder) / MARKER).write_text(json.dumps(doc, indent=2) + "\n")
-
-
-def check_out_dir(out_dir: Path, inputs: InputSpec | None = None, overwrite: bool = False, default_name: bool = False) -> None:
-    """Raise InputError (one line) unless ``out_dir`` may be written and, when it exists, replaced.
-
-    Always refused: a file; the current folder or one that contains it; a folder that holds an
-    input file; a folder inside the image's folder unless that is the current folder (``-o``
-    into a dataset's sample folder; running in the photo's own folder is fine); a parent that
-    does not exist or is not writable. An existing folder is replaced only when scene-builder
-    wrote it (:data:`MARKER` and ``report.json``, and nothing else added since) or ``overwrite``;
-    under ``default_name`` only when it holds a build of the same image.
-    """
-    out_dir = Path(out_dir)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise InputError(f"output path {out_dir} is a file; pass -o with a folder name")
-    target = out_dir.resolve()
-    cwd = Path.cwd().resolve()
-    if _is_within(cwd, target):
-        raise InputError(f"output folder {out_dir} is the current folder or contains it, and would be replaced; pass -o with a new folder name")
-    if inputs is not None:
-        given = [Path(p) for p in (inputs.image_path, inputs.depth_path) if p is not None]
-        for p in given:
-            if _is_within(p.resolve(), target):
-                raise InputError(f"output folder {out_dir} holds the input {p} and would be replaced; pass -o with a folder outside it")
-        image_dir = Path(inputs.image_path).resolve().parent
-        if image_dir != cwd and _is_within(target, image_dir):
-            raise InputError(
-                f"output folder {out_dir} is inside the input's folder {image_dir}; pass -o with a folder outside it "
-                "(or run scene-builder from that folder)"
-            )
-    parent = target.parent
-    if not parent.is_dir():
-        raise InputError(f"output folder's parent {out_dir.parent} does not exist; create it or choose another -o")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise InputError(f"cannot write in {out_dir.parent} (permission denied); choose another -o")
-    if not out_dir.exists() or overwrite:
-        return
-    marker = read_marker(out_dir)
-    if marker is None:
-        if not any(out_dir.iterdir()):
-            return  # an empty folder holds nothing to lose
-        raise InputError(
-            f"output folder {out_dir} exists and was not written by scene-builder; choose another -o, or pass --overwrite to replace it"
-        )
-    added = sorted(p.name for p in out_dir.iterdir() if p.name != MARKER and p.name not in marker["files"])
-    if added:
-        raise InputError(
-            f"output folder {out_dir} holds files scene-builder did not write ({', '.join(added[:3])}{', ...' if len(added) > 3 else ''}); "
-            "move them or pass --overwrite"
-        )
-    if default_name and inputs is not None and marker.get("image") != str(Path(inputs.image_path).resolve()):
-        raise InputError(
-            f"{out_dir} holds the build of another image ({marker.get('image')}); pass -o NAME "
-            f"(e.g. -o {Path(inputs.image_path).resolve().parent.name}_{out_dir.name}) or --overwrite"
-        )
-
-
-def _make_staging(out_dir: Path) -> Path:
-    """A hidden staging folder beside ``out_dir`` with the permissions the umask allows
-    (``tempfile.mkdtemp`` makes it 0700, which would keep other users and containers out)."""
-    try:
-        staging = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-", dir=out_dir.parent))
-    except OSError as err:
-        raise InputError(f"cannot create the output folder beside {out_dir} ({err.strerror}); choose another -o") from err
-    umask = os.umask(0)
-    os.umask(umask)
-    staging.chmod(0o777 & ~umask)
-    return staging
-
-
-def _move_into_place(staging: Path, out_dir: Path) -> None:
-    """Replace ``out_dir`` with ``staging`` (renames on the same filesystem; the old output is
-    removed only after the new one is in place)."""
-    old = None
-    if out_dir.exists():
-        old = out_dir.with_name(f".{out_dir.name}.old-{staging.name.rsplit('-', 1)[-1]}")
-        out_dir.rename(old)
-    try:
-        staging.rename(out_dir)
-    except BaseException:
-        if old is not None:
-            old.rename(out_dir)  # put the previous output back
-        raise
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
-
-
 def load_stages(threads: int = 0) -> None:
     """Import every stage and the heavy libraries a build uses, once per process: what a batch
     worker loads before its first photo instead of during it. ``threads`` > 0 caps torch's
     intra-op threads (workers sharing a machine's cores)."""
-    import coacd  # noqa: F401
     import mujoco  # noqa: F401
     import pxr.Usd  # noqa: F401
     import rerun  # noqa: F401
@@ -452,9 +359,12 @@ def load_stages(threads: int = 0) -> None:
 
     import exporters  # noqa: F401
     import generation  # noqa: F401
+    from generation.collision import import_coacd
     import layout  # noqa: F401
     import perception  # noqa: F401
     from perception.backends import build_registries  # noqa: F401
+
+    import_coacd()  # onnxruntime first: the other order crashes at the first detection
 
     if threads > 0:
         torch.set_num_threads(threads)

@@ -15,6 +15,7 @@ Any dataclass of :mod:`scene_builder.model` serialises to plain JSON and back to
 from __future__ import annotations
 
 import base64
+import binascii
 import dataclasses
 import enum
 import json
@@ -26,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from scene_builder import model
-from scene_builder.errors import InputError
+from scene_builder.errors import PIL_READ_ERRORS, InputError
 
 
 class SceneFileError(InputError, ValueError):
@@ -55,9 +56,13 @@ def _image_from_png_base64(data: str) -> np.ndarray:
     from PIL import Image
 
     try:
-        with Image.open(io.BytesIO(base64.b64decode(data, validate=True))) as im:
+        png = base64.b64decode(data, validate=True)
+    except binascii.Error as err:  # a ValueError: what b64decode documents
+        raise ValueError(f"scene.json: a texture is not base64 ({err})") from err
+    try:
+        with Image.open(io.BytesIO(png)) as im:
             return np.array(im.convert("RGB"))
-    except Exception as err:  # PIL raises several types for corrupt data; report one
+    except PIL_READ_ERRORS as err:  # what Pillow raises for bytes it cannot read
         raise ValueError(f"scene.json: a texture is not a readable PNG ({type(err).__name__})") from err
 
 

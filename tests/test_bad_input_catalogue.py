@@ -141,12 +141,14 @@ def _camera_json(env: Env, doc) -> None:
 
 
 def _scene_builder_folder(path: Path, image: str) -> None:
-    """What an earlier build leaves: the marker, report.json and the scene files."""
+    """What an earlier build leaves: report.json, the scene files and the marker (with hashes)."""
+    from scene_builder.config import InputSpec
+    from scene_builder.outdir import write_marker
+
     path.mkdir()
     (path / "report.json").write_text("{}\n")
     (path / "scene.xml").write_text("<mujoco/>\n")
-    marker = {"format": "scene-builder/output", "version": 1, "image": str(Path(image).resolve()), "files": ["report.json", "scene.xml"]}
-    (path / ".scene-builder").write_text(json.dumps(marker))
+    write_marker(path, InputSpec(Path(image)))
 
 
 def _user_folder(env: Env) -> list[str]:
@@ -161,6 +163,17 @@ def _output_with_user_file(env: Env) -> list[str]:
     _scene_builder_folder(out, env.photo)
     (out / "notes.txt").write_text("mine")
     return env.rgbd("-o", str(out))
+
+
+def _output_with_file_changed(env: Env) -> list[str]:
+    out = env.work / "out"
+    _scene_builder_folder(out, env.photo)
+    (out / "scene.xml").write_text("<mujoco model='mine'/>\n")
+    return env.rgbd("-o", str(out))
+
+
+def _user_folder_overwrite(env: Env) -> list[str]:
+    return [*_user_folder(env), "--overwrite"]
 
 
 def _default_name_taken(env: Env) -> list[str]:
@@ -285,8 +298,10 @@ CASES = [
     Case("output inside the input's folder", lambda e: e.rgbd("-o", str(e.inp / "scene")), 3, r"output folder .*scene is inside the input's folder .*; pass -o with a folder outside it"),
     Case("output where no folder can be made", lambda e: e.rgbd("-o", "/proc/scene"), 3, r"cannot (write in /proc \(permission denied\)|create the output folder beside /proc/scene \(No such file or directory\)); choose another -o"),
     Case("output parent missing", lambda e: e.rgbd("-o", str(e.root / "no" / "such" / "out")), 3, r"output folder's parent .*such does not exist; create it or choose another -o"),
-    Case("output holds the user's files", _user_folder, 3, r"output folder .*precious exists and was not written by scene-builder; choose another -o, or pass --overwrite"),
-    Case("output build folder with a file added", _output_with_user_file, 3, r"output folder .*out holds files scene-builder did not write \(notes\.txt\); move them or pass --overwrite"),
+    Case("output holds the user's files", _user_folder, 3, r"output folder .*precious exists and was not written by scene-builder \(no \.scene-builder beside report\.json\); it is never replaced, even with --overwrite: choose another -o, or move it away yourself"),
+    Case("output holds the user's files, --overwrite", _user_folder_overwrite, 3, r"output folder .*precious exists and was not written by scene-builder .*never replaced, even with --overwrite"),
+    Case("output build folder with a file added", _output_with_user_file, 3, r"output folder .*out holds files added or changed since scene-builder wrote it \(added: notes\.txt\); move them, choose another -o, or pass --overwrite to replace the folder with them"),
+    Case("output build folder with a file changed", _output_with_file_changed, 3, r"output folder .*out holds files added or changed since scene-builder wrote it \(changed: scene\.xml\)"),
     Case("default output holds another image's build", _default_name_taken, 3, r"photo_scene holds the build of another image \(.*other/photo\.png\); pass -o NAME \(e\.g\. -o in_photo_scene\) or --overwrite"),
     # --- the scene -------------------------------------------------------------------------
     Case("scene with no objects", lambda e: e.rgbd(), 3, NO_OBJECTS),
@@ -342,15 +357,43 @@ def test_bad_input(case: Case, env: Env, capsys):
     assert re.search(case.error, lines[-1]), f"{case.id}: {lines[-1]!r} does not match {case.error!r}"
 
 
-def test_output_parent_read_only(env: Env, capsys):
-    """Needs a user that file permissions apply to (root writes anywhere)."""
-    import os
+def _without_root_privileges() -> None:
+    """In a child about to exec: drop the capabilities that let root ignore file permissions
+    (CAP_DAC_OVERRIDE, CAP_DAC_READ_SEARCH) from the bounding set, so the exec'd program, still
+    uid 0, is held to the folders' permission bits like any user."""
+    import ctypes
 
-    if os.geteuid() == 0:
-        pytest.skip("root writes into read-only folders")
-    case = Case("output parent read-only", _read_only_parent, 3, r"cannot write in .*readonly \(permission denied\); choose another -o")
-    code, lines = run_case(case, env, capsys)
-    assert code == 3 and len(lines) == 1 and re.search(case.error, lines[0]), lines
+    libc = ctypes.CDLL(None, use_errno=True)
+    pr_capbset_drop, cap_dac_override, cap_dac_read_search = 24, 1, 2
+    for cap in (cap_dac_override, cap_dac_read_search):
+        if libc.prctl(pr_capbset_drop, cap, 0, 0, 0) != 0:
+            raise OSError(ctypes.get_errno(), "prctl(PR_CAPBSET_DROP) failed")
+
+
+def test_output_parent_read_only(env: Env):
+    """A read-only parent folder: exit 3, one line, nothing written. The CLI runs in a child
+    process; as root (CI), that child runs without the capabilities that override permissions."""
+    import os
+    import subprocess
+    import sys
+
+    from .conftest import REPO
+
+    argv = [*_read_only_parent(env), "-q", "--viz", "off"]
+    before = _tree(env.root)
+    run = subprocess.run(
+        [sys.executable, "-m", "scene_builder.cli", *argv],
+        cwd=env.work,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        preexec_fn=_without_root_privileges if os.geteuid() == 0 else None,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    lines = run.stderr.strip().splitlines()
+    assert run.returncode == 3 and len(lines) == 1, run.stderr[-2000:]
+    assert re.search(r"error: cannot write in .*readonly \(permission denied\); choose another -o", lines[0]), lines
+    assert _tree(env.root) == before
 
 
 def test_the_users_folder_survives_intact(env: Env, capsys):

@@ -140,10 +140,26 @@ def test_cli_errors_are_one_line_with_the_input_exit_status(tmp_path, capsys):
     assert usage.value.code == 2 and "expected 1 or more" in capsys.readouterr().err
 
 
+def test_ray_auto_without_a_cluster_says_that_ray_local_starts_one(tmp_path):
+    """`--ray auto` with no cluster running: one line naming --ray local, exit 3 (Ray's own
+    ConnectionError said neither). RAY_TMPDIR keeps Ray from finding a cluster another test
+    started on this machine."""
+    pytest.importorskip("ray")
+    (tmp_path / "in" / "a").mkdir(parents=True)
+    (tmp_path / "in" / "a" / "rgb.jpg").write_bytes(b"")  # never read: the cluster is looked for first
+    env = {k: v for k, v in _env().items() if k != "RAY_ADDRESS"} | {"RAY_TMPDIR": str(tmp_path / "ray")}
+    run = subprocess.run([*_cli(str(tmp_path / "in"), "-o", str(tmp_path / "out"), "--ray", "auto")], env=env,
+                         capture_output=True, text=True, timeout=300)
+    errors = [line for line in run.stderr.splitlines() if line.startswith("error:")]
+    assert run.returncode == 3 and len(errors) == 1, run.stderr[-2000:]
+    assert errors[0].startswith("error: --ray auto: no Ray cluster running on this machine (`ray start --head` starts one)")
+    assert errors[0].endswith("pass --ray local to start one here for this batch, or leave --ray out for local workers")
+
+
 def test_resume_adopts_a_complete_output_rebuilds_an_interrupted_item_and_clears_its_staging(tmp_path):
     from scene_builder.batch import Manifest, _remove_stale_staging, plan
     from scene_builder.batch_workers import ItemTask
-    from scene_builder.pipeline import write_marker
+    from scene_builder.outdir import write_marker
 
     src, out = tmp_path / "in", tmp_path / "out"
     for name in ("a", "b", "c"):
@@ -162,7 +178,11 @@ def test_resume_adopts_a_complete_output_rebuilds_an_interrupted_item_and_clears
     write_marker(out / "a", InputSpec(src / "a" / "rgb.jpg"))
     (out / ".b.tmp-k2j4").mkdir()
     (out / ".b.tmp-k2j4" / "scene.xml").write_text("<mujoco/>")
+    # a folder named like a set-aside output that scene-builder did not write is the user's: kept
+    (out / ".c.old-x").mkdir()
+    (out / ".c.old-x" / "notes.txt").write_text("mine")
     assert _remove_stale_staging(out, {it.name for it in items}) == 1 and not (out / ".b.tmp-k2j4").exists()
+    assert (out / ".c.old-x" / "notes.txt").read_text() == "mine"
     todo, skipped = plan(manifest, items, out, BatchOptions())
     assert [it.name for it in todo] == ["b", "c"] and skipped == 1
     rows = manifest.rows()
@@ -322,3 +342,44 @@ def test_a_build_leaves_mujocos_asset_cache_empty(tmp_path):
     assert mujoco.mj_getCacheSize(cache) == 0
     mujoco.MjModel.from_xml_path(str(result.files.mjcf))
     assert mujoco.mj_getCacheSize(cache) > 0
+
+
+def test_run_item_records_a_refused_photo_and_raises_a_bug(tmp_path, monkeypatch):
+    """The errors a build documents (SceneBuilderError; OSError of the machine) are the item's
+    one-line error; anything else is a bug and is not dressed up as the photo's fault."""
+    import scene_builder.pipeline as pipeline
+    from scene_builder.batch_workers import ItemTask, WorkerJob, internal_error, run_item
+
+    monkeypatch.setattr("scene_builder.batch_workers.warm_up", lambda job: 0.0)
+    task = ItemTask("a", tmp_path / "a.png", None, tmp_path / "out", 1)
+
+    def refused(*args, **kwargs):
+        raise InputError("cannot read a.png as an image (truncated); pass a JPEG or PNG photo")
+
+    monkeypatch.setattr(pipeline, "build", refused)
+    outcome = run_item(task, WorkerJob(CONFIG))
+    assert (outcome.state, outcome.error) == ("failed", "InputError: cannot read a.png as an image (truncated); pass a JPEG or PNG photo")
+
+    def buggy(*args, **kwargs):
+        return {}["missing"]
+
+    monkeypatch.setattr(pipeline, "build", buggy)
+    with pytest.raises(KeyError) as bug:
+        run_item(task, WorkerJob(CONFIG))
+    line = internal_error(bug.value)
+    assert line.startswith("internal error (a bug of scene-builder; please report it): KeyError: 'missing' at test_batch.py:")
+
+
+@pytest.mark.slow
+def test_a_bug_in_a_local_worker_fails_its_item_with_the_cause_and_is_not_retried(tmp_path):
+    """A worker whose build raises an exception no build documents (here: it was given no
+    configuration at all) reports it before it dies; the item fails once with that cause."""
+    from PIL import Image
+
+    (tmp_path / "in" / "a").mkdir(parents=True)
+    Image.new("RGB", (32, 32)).save(tmp_path / "in" / "a" / "rgb.png")
+    summary = run_batch(tmp_path / "in", tmp_path / "out", None, BatchOptions(retries=2, progress=False))
+    assert (summary.done, summary.failed) == (0, 1)
+    error = _items(tmp_path / "out")["a"]["error"]
+    assert error.startswith("internal error (a bug of scene-builder; please report it): AttributeError: ") and "pipeline.py:" in error
+    assert len(_attempts(tmp_path / "out", "a")) == 1  # a bug is not retried

@@ -132,23 +132,8 @@ def test_summary_and_json_keys(room, tmp_path):
     assert d["scenes"][0]["name"] == "room" and d["machine"]["cores"] >= 1 and d["command"] == "cmd"
 
 
-def _pipeline_ready() -> str | None:
-    try:
-        from exporters import write_mjcf  # noqa: F401
-        from generation import generate_assets  # noqa: F401
-        from layout import solve_layout, verify_scene  # noqa: F401
-        from perception import perceive  # noqa: F401
-        from scene_builder.pipeline import build  # noqa: F401
-    except ImportError as err:
-        return f"the pipeline is not complete yet ({err})"
-    return None
-
-
 @pytest.mark.slow
 def test_small_synthetic_suite_scores_pipeline_and_baseline(tmp_path):
-    why = _pipeline_ready()
-    if why:
-        pytest.skip(why)
     out = tmp_path / "bench.json"
     result = suites.run_bench("synthetic", 2, None, out, seed=0, n_objects=3)
     d = json.loads(out.read_text())

@@ -99,8 +99,7 @@ def test_check_rejects_a_folder_that_is_not_an_output(tmp_path: Path, capsys):
 
 def test_report_keys_written_by_a_real_build(tmp_path: Path):
     """A tiny synthetic RGB-D image of a box on a floor builds end to end."""
-    pytest.importorskip("perception.inputs")
-    from scene_builder.bench.render import write_demo_input  # noqa: F401  (skips below if absent)
+    from scene_builder.bench.render import write_demo_input
 
     sample = write_demo_input(tmp_path / "room", seed=1, n_objects=3)
     cam = json.loads((sample / "camera.json").read_text())

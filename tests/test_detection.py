@@ -247,9 +247,19 @@ def test_detected_object_stands_at_its_floor_contact():
     assert np.allclose(out4[grown == 1], expect, rtol=1e-3)
 
 
-def test_registries_offer_detections_only_with_a_detector(tmp_path):
+def test_registries_offer_detections_only_with_a_detector(tmp_path, monkeypatch):
+    from perception import models
     from perception.backends import build_registries
 
+    # A fresh clone detects: with an empty models dir the bundled detector files answer.
+    reg = build_registries(PerceptionConfig(models_dir=tmp_path))
+    seg, use = reg.segmentation.resolve()
+    assert use.backend == "detections"
+    assert [d.name for d in seg.detectors] == ["centernet-mbv3-coco", "ssd-mobilenet-oid"]
+    assert all(str(models.BUNDLED_DIR) in str(models.resolve_weights(d.name, tmp_path)) for d in seg.detectors)
+
+    # Without them (an install that lost its package data) the geometric chain answers and says why.
+    monkeypatch.setattr(models, "BUNDLED_DIR", tmp_path / "none")
     reg = build_registries(PerceptionConfig(models_dir=tmp_path))
     entries = {e.name: e for e in reg.segmentation.entries()}
     assert "detections" in entries and entries["detections"].priority > entries["sam2"].priority
@@ -267,6 +277,9 @@ def test_registries_offer_detections_only_with_a_detector(tmp_path):
     seg, use = reg.segmentation.resolve()
     assert use.backend == "detections" and seg.accepts_gravity
     assert [d.name for d in seg.detectors] == ["centernet-mbv3-coco", "ssd-mobilenet-oid"]
+    # NanoDet is registered, its file is there, and it is off by default (BENCHMARKS.md).
+    nanodet = next(e for e in reg.detection.entries() if e.name == "nanodet-coco")
+    assert (MODELS / "nanodet_coco.onnx").is_file() and "off by default" in (nanodet.available() or "")
     assert seg.semantic is not None and seg.semantic.name == "deeplabv3-mnv2-pascal"
 
 

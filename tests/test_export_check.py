@@ -114,3 +114,44 @@ def test_scene_json_that_names_other_objects_is_reported(good, tmp_path):
     assert any("scene.json" in p and "differ" in p and dropped in p for p in check_output(out))
     (out / "scene.json").write_text(json.dumps({"objects": []}))
     assert any("scene.json is not a readable scene" in p for p in check_output(out))
+
+
+def test_unreadable_usd_and_glb_are_problem_lines_not_tracebacks(good, tmp_path):
+    out = _copy(good[1], tmp_path / "o")
+    (out / "scene.usda").write_text("#usda 1.0\n( this is not a layer")
+    glb = (out / "scene.glb").read_bytes()
+    (out / "scene.glb").write_bytes(glb[: len(glb) // 2])
+    problems = check_output(out)
+    assert any(p.startswith("scene.usda does not open: ") for p in problems), problems
+    assert any(p.startswith("scene.glb does not load: ") for p in problems), problems
+
+
+def test_corrupted_glb_files_are_reported_with_the_loaders_own_error_types(good, tmp_path):
+    """300 corruptions of the good scene.glb (byte changes, deletions, insertions, truncation):
+    each loads or is one problem line; nothing else escapes exporters.check.GLB_LOAD_ERRORS."""
+    import random
+
+    from exporters.check import _check_glb
+
+    glb = (good[1] / "scene.glb").read_bytes()
+    rng = random.Random(0)
+    path = tmp_path / "scene.glb"
+    reported = 0
+    for _ in range(300):
+        b = bytearray(glb)
+        for _ in range(rng.randint(1, 6)):
+            op, k = rng.random(), rng.randrange(len(b) or 1)
+            if op < 0.5 and b:
+                b[k] = rng.randrange(256)
+            elif op < 0.7:
+                del b[k : k + rng.randint(1, 64)]
+            elif op < 0.8:
+                del b[k:]
+            else:
+                b[k:k] = bytes(rng.randrange(256) for _ in range(rng.randint(1, 16)))
+        path.write_bytes(bytes(b))
+        problems: list[str] = []
+        _check_glb(path, problems)
+        assert all(p.startswith("scene.glb ") for p in problems) and len(problems) <= 1
+        reported += len(problems)
+    assert reported > 200  # most corruptions are caught, the rest load

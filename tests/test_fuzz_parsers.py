@@ -164,3 +164,31 @@ def test_regressions_found_by_the_fuzz_benchmark(tmp_path):
     cam.write_text('{"fx": 500, "fy": 500, "cx": 320, "cy": 240, "width": 640, "height": 4' + "9" * 400 + "}")
     with pytest.raises(InputError, match="width and height must be 1..1000000 px"):
         read_camera_json(cam, 640, 480)
+
+
+def test_regressions_found_with_the_narrowed_error_sets(tmp_path):
+    """Inputs the 100,000-input benchmark crashed on once the catch-alls were narrowed (issue 26):
+    errors of numpy's .npy reader it does not document, and a mean of +inf and -inf in a PhysX
+    quantity (math.fsum raised ValueError, which the old catch-all of the basic_info reader had
+    turned into 'does not follow the schema')."""
+    from generation.physx.basic_info import description_from_basic_info
+    from generation.physx.protocol import ProtocolError
+    from perception.inputs import load_depth
+    from scene_builder.errors import InputError
+
+    header = "{'descr': '<f4', 'fortran_order': False, 'shape': (24, 32), }"
+    for bad, why in (
+        (header.replace("'<f4'", "',f4'"), "numpy's dtype string parser, ast.literal_eval: SyntaxError"),
+        (header.replace("(24, 32)", "(241" + "0" * 30 + ", 32)"), "memmap: OverflowError"),
+    ):
+        text = bad.ljust(117) + "\n"
+        path = tmp_path / "depth.npy"
+        path.write_bytes(b"\x93NUMPY\x01\x00" + len(text).to_bytes(2, "little") + text.encode() + b"\x00" * 4 * 24 * 32)
+        with pytest.raises(InputError, match="cannot read .* as a .npy depth array"):
+            load_depth(path)
+    data = json.loads(bench_fuzz._basic_info_seeds()[-1])
+    data["parts"][0]["density"] = "1e999 and -1e999 g/cm^3"
+    desc, report = description_from_basic_info(data, 32)
+    assert desc.part(0).density_kg_m3 is None and any("out of range, dropped" in w for w in report.warnings)
+    with pytest.raises(ProtocolError):
+        description_from_basic_info({"parts": [{"label": 0, "priority_rank": [1]}]}, 32)

@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from layout.solver import candidate_pairs, solve_layout_with_stats
+from layout.pushes import candidate_pairs
+from layout.solver import solve_layout_with_stats
 from scene_builder.bench.clutter import asset_from_pieces, clutter_layout_config, box_asset, box_mesh, clutter, empty_perception, surface_points, table_asset
 from scene_builder.config import LayoutConfig
 from scene_builder.frames import pose, rot_z, transform_points, yaw_of
@@ -226,7 +227,8 @@ def test_fixed_furniture_does_not_move_and_walls_push_out():
     counter = box_asset("counter", (0.6, 1.5, 0.9), label="counter", fixed=True)
     box = box_asset("box", (0.4, 0.4, 0.4))
     # The box overlaps the counter and sticks 4 cm through the x = -1 wall; a second box is 3 cm
-    # through the y = 2 wall; a third 15 cm through it (more than max_wall_push_m: it is wall).
+    # through the y = 2 wall; a third 15 cm through the x = -1 wall: its completion is cut at the
+    # wall (layout.trim.trim_to_walls), it is not pushed out nor made background.
     gen = (
         _gen(counter, (0.0, 0.0, 0.0)),
         _gen(box, (-0.84, 0.5, 0.0)),
@@ -237,12 +239,20 @@ def test_fixed_furniture_does_not_move_and_walls_push_out():
     assert stats.converged
     placed = {o.name: o for o in result.scene.objects}
     np.testing.assert_array_equal(placed["counter"].world_from_asset, gen[0].world_from_asset)
-    for name in ("box", "other"):
+    for name in ("box", "other", "in_wall"):
         v = np.concatenate(_world_pieces(placed[name]))
         for w in walls:
             assert w.signed_distance_m(v).min() >= CFG.clearance_m - 1e-4
     deep = {p.name: p for p in result.placements}["in_wall"]
-    assert deep.became_background and "reaches 15 cm into a wall" in deep.reason and "in_wall" not in placed
+    assert not deep.became_background and deep.displacement_m < 1e-9
+    # Cut at the wall: 15 of its 30 cm of collision depth are left, on the room side.
+    v = np.concatenate(_world_pieces(placed["in_wall"]))
+    assert np.ptp(v[:, 0]) == pytest.approx(0.15 - CFG.clearance_m, abs=1e-6)
+    # A part wholly behind a wall is not cut to nothing: that object is wall (a picture, a door).
+    behind = box_asset("behind", (0.2, 0.2, 0.3))
+    result, _ = solve_layout_with_stats(empty_perception(walls), (_gen(behind, (-1.2, 0.0, 0.0)),), CFG)
+    p = result.placements[0]
+    assert p.became_background and "into a wall" in p.reason
     assert result.max_penetration_after_m < 1e-5
     assert _max_intersection_volume(result.scene) < 1e-9
 

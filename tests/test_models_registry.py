@@ -37,7 +37,7 @@ def test_every_model_has_a_licence_task_and_files():
         assert m.license and m.task and m.files
     # The defaults are the permissively licensed ones.
     for task in {m.task for m in models.MODELS}:
-        assert models.default_model(task).license == "Apache-2.0"
+        assert models.default_model(task).license in ("Apache-2.0", "MIT")
     assert models.model_spec("depth-anything-v2-metric-indoor-large").license == "CC-BY-NC-4.0"
 
 
@@ -110,3 +110,56 @@ def test_register_backends_names_priorities_and_availability(tmp_path):
     backend, use = depth.resolve()
     assert use.backend == "single-view-geometry" and "depth-anything-v2" in use.reason
     assert hasattr(backend, "estimate")
+
+
+# -- the offline models shipped with the project ------------------------------------------------
+
+BUNDLED = [m for m in models.MODELS if m.bundled]
+
+
+def test_bundled_models_resolve_with_no_models_dir(monkeypatch):
+    """A fresh clone detects: every bundled model resolves from the package folder, with no flag
+    and no environment variable, and each file has the SHA-256 its README states."""
+    import hashlib
+    import re
+
+    monkeypatch.delenv(models.ENV_MODELS_DIR, raising=False)
+    assert {m.name for m in BUNDLED} >= {"centernet-mbv3-coco", "ssd-mobilenet-oid", "deeplabv3-mnv2-pascal"}
+    readme = (models.BUNDLED_DIR / "README.md").read_text()
+    for m in BUNDLED:
+        path = models.resolve_weights(m.name, None)
+        assert path == models.BUNDLED_DIR / m.files[0], (m.name, path)
+        assert models.unavailable_reason(m.name, None) is None
+        for f in m.files:
+            digest = hashlib.sha256((models.BUNDLED_DIR / f).read_bytes()).hexdigest()
+            row = next(line for line in readme.splitlines() if line.startswith(f"| `{f}`"))
+            assert digest in row, f"{f}: README row does not state its SHA-256 {digest}"
+            assert re.search(r"LICENSES/[\w.-]+\.txt", row) or "Apache-2.0" in row
+    for lic in ("human-models-MIT.txt", "Apache-2.0.txt"):
+        assert (models.BUNDLED_DIR / "LICENSES" / lic).stat().st_size > 500
+
+
+def test_models_dir_overrides_a_bundled_file(tmp_path):
+    name = "centernet-mbv3-coco"
+    copy = tmp_path / "centernet_mbv3_coco.onnx"
+    copy.write_bytes((models.BUNDLED_DIR / "centernet_mbv3_coco.onnx").read_bytes())
+    assert models.resolve_weights(name, tmp_path) == copy
+
+
+def test_a_damaged_bundled_file_is_unavailable_with_the_reason(tmp_path, monkeypatch):
+    import shutil
+
+    folder = tmp_path / "offline_models"
+    shutil.copytree(models.BUNDLED_DIR, folder)
+    # What a clone without Git LFS would hold instead of the weights: a short text pointer.
+    (folder / "centernet_mbv3_coco.onnx").write_text("version https://git-lfs.github.com/spec/v1\noid sha256:0\nsize 1\n")
+    monkeypatch.setattr(models, "BUNDLED_DIR", folder)
+    models._bundled_sums.cache_clear()
+    try:
+        assert models.resolve_weights("centernet-mbv3-coco", None) is None
+        why = models.unavailable_reason("centernet-mbv3-coco", None)
+        assert why is not None and "SHA-256" in why and "centernet_mbv3_coco.onnx" in why
+        # The intact files still resolve.
+        assert models.resolve_weights("ssd-mobilenet-oid", None) == folder / "object_detection_ssd_mobilenetv2_oidv4_fp16.tflite"
+    finally:
+        models._bundled_sums.cache_clear()

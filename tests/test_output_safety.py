@@ -5,6 +5,7 @@ without a terminal are not wrapped; a photo of 500 small objects builds in bound
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import re
@@ -48,32 +49,38 @@ def work(tmp_path: Path, monkeypatch) -> Path:
 
 
 @pytest.mark.slow
-def test_rebuild_replaces_its_own_output_with_umask_permissions(room, work: Path, capsys):
+def test_rebuild_replaces_its_own_output_with_umask_permissions_and_follows_a_link(room, work: Path, capsys):
     image, flags = room
-    precious = work / "precious"
-    precious.mkdir()
-    (precious / "thesis.txt").write_text("mine")
+    out = work / "out"
     old_umask = os.umask(0o027)
     try:
-        # --overwrite: the user says the folder may go
-        assert main([str(image), *flags, "-o", str(precious), "-q", "--viz", "off", "--overwrite"]) == 0
-        assert not (precious / "thesis.txt").exists()
-        assert (precious / "report.json").is_file()
-        assert (precious.stat().st_mode & 0o777) == 0o750  # not mkdtemp's 0700
-        assert ((precious / "scene.xml").stat().st_mode & 0o777) == 0o640
-        assert ((precious / "meshes").stat().st_mode & 0o777) == 0o750
-        marker = json.loads((precious / MARKER).read_text())
-        assert marker["image"] == str(image.resolve())
-        assert set(marker["files"]) == {p.name for p in precious.iterdir()} - {MARKER}
-        first = _files(precious)
-        # a folder scene-builder wrote is replaced without --overwrite, by any input
+        assert main([str(image), *flags, "-o", str(out), "-q", "--viz", "off"]) == 0
+        assert (out.stat().st_mode & 0o777) == 0o750  # not mkdtemp's 0700
+        assert ((out / "scene.xml").stat().st_mode & 0o777) == 0o640
+        assert ((out / MARKER).stat().st_mode & 0o777) == 0o640
+        assert ((out / "meshes").stat().st_mode & 0o777) == 0o750
+        marker = json.loads((out / MARKER).read_text())
+        assert marker["image"] == str(image.resolve()) and marker["version"] == 2
+        assert set(marker["files"]) == {p.name for p in out.iterdir()} - {MARKER}
+        written = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file() and p.name != MARKER)
+        assert sorted(marker["hashes"]) == written and "meshes" in marker["folders"]
+        digest = hashlib.sha256((out / "scene.xml").read_bytes()).hexdigest()
+        assert marker["hashes"]["scene.xml"] == {"bytes": (out / "scene.xml").stat().st_size, "sha256": digest}
+        first = _files(out)
+        # a folder scene-builder wrote, unchanged, is replaced without --overwrite
         os.umask(0o022)
-        assert main([str(image), *flags, "-o", str(precious), "-q", "--viz", "off"]) == 0
-        assert (precious.stat().st_mode & 0o777) == 0o755
+        assert main([str(image), *flags, "-o", str(out), "-q", "--viz", "off"]) == 0
+        assert (out.stat().st_mode & 0o777) == 0o755
     finally:
         os.umask(old_umask)
     # Byte-identical rebuild in one process (across processes: test_two_processes_build_identical_bytes)
-    assert _files(precious) == first
+    assert _files(out) == first
+    # -o a symbolic link to that build: the folder it points to is replaced, the link kept, and
+    # nothing is left beside either (the set-aside folder was once a stray `.link.old-*` link)
+    (work / "link").symlink_to(out)
+    assert main([str(image), *flags, "-o", "link", "-q", "--viz", "off"]) == 0
+    assert (work / "link").is_symlink() and (work / "link").resolve() == out and _files(out) == first
+    assert sorted(p.name for p in work.iterdir()) == ["link", "out"]
     capsys.readouterr()
 
 
@@ -95,10 +102,13 @@ def test_default_output_name_is_rebuilt_by_the_same_image(room, work: Path, caps
 
 def _previous_output(out: Path, image: Path) -> dict[str, bytes]:
     """What an earlier build left in ``out``; returns its files' bytes."""
+    from scene_builder.config import InputSpec
+    from scene_builder.outdir import write_marker
+
     out.mkdir()
     (out / "report.json").write_text('{"objects": []}\n')
     (out / "scene.xml").write_text("<mujoco/>\n")
-    (out / MARKER).write_text(json.dumps({"format": "scene-builder/output", "version": 1, "image": str(image), "files": ["report.json", "scene.xml"]}))
+    write_marker(out, InputSpec(image))
     return {p.name: p.read_bytes() for p in out.iterdir()}
 
 
@@ -178,7 +188,7 @@ def test_two_processes_build_identical_bytes_and_logs_are_not_wrapped(room, tmp_
 def test_output_folder_rules(work: Path):
     from scene_builder.config import InputSpec
     from scene_builder.errors import InputError
-    from scene_builder.pipeline import add_to_marker, check_out_dir, read_marker, write_marker
+    from scene_builder.outdir import add_to_marker, check_out_dir, read_marker, write_marker
 
     photos = work / "photos"
     photos.mkdir()
@@ -204,12 +214,165 @@ def test_output_folder_rules(work: Path):
     write_marker(out, spec)
     assert read_marker(out)["files"] == ["report.json"]
     (out / "ground_truth_comparison.json").write_text("{}")
-    with pytest.raises(InputError, match=r"holds files scene-builder did not write \(ground_truth_comparison\.json\)"):
+    with pytest.raises(InputError, match=r"added or changed since scene-builder wrote it \(added: ground_truth_comparison\.json\)"):
         check_out_dir(out, spec)
     add_to_marker(out, "ground_truth_comparison.json")
     check_out_dir(out, spec)
     (out / "report.json").unlink()  # a marker without report.json is not a build
     assert read_marker(out) is None
+
+
+# ------------------------------------------------------------------------------------------
+# Never lose work (issue 26): every refusal leaves every file of the user's as it was
+# ------------------------------------------------------------------------------------------
+
+
+def _snapshot(root: Path) -> dict[str, bytes | None]:
+    """Every entry under ``root``: a file's bytes, None for a folder, the target for a link."""
+    out: dict[str, bytes | None] = {}
+    for p in sorted(root.rglob("*")):
+        rel = p.relative_to(root).as_posix()
+        out[rel] = os.readlink(p).encode() if p.is_symlink() else (None if p.is_dir() else p.read_bytes())
+    return out
+
+
+def _build_folder(out: Path, image: Path) -> None:
+    """What a build writes, with a real marker (hashes of every file)."""
+    from scene_builder.config import InputSpec
+    from scene_builder.outdir import write_marker
+
+    (out / "meshes").mkdir(parents=True)
+    (out / "report.json").write_text('{"objects": []}\n')
+    (out / "scene.xml").write_text('<mujoco><asset><mesh file="meshes/box.obj"/></asset></mujoco>\n')
+    (out / "meshes" / "box.obj").write_text("v 0 0 0\n")
+    write_marker(out, InputSpec(image))
+
+
+@pytest.fixture()
+def photo(work: Path) -> Path:
+    path = work / "in" / "room.png"
+    path.parent.mkdir()
+    Image.fromarray(np.zeros((32, 32, 3), np.uint8)).save(path)
+    return path
+
+
+def _refused(argv: list[str], work: Path, capsys) -> str:
+    """Run the CLI; it must exit 3 with one line and change nothing under ``work``."""
+    before = _snapshot(work)
+    capsys.readouterr()
+    assert main(argv) == 3
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: "), err
+    assert _snapshot(work) == before
+    return err[0]
+
+
+def test_rebuild_refuses_a_file_added_deep_in_the_build_naming_it(photo: Path, work: Path, capsys):
+    out = work / "out"
+    _build_folder(out, photo)
+    (out / "meshes" / "mine.obj").write_text("my own mesh")
+    (out / "notes").mkdir()
+    err = _refused([str(photo), "-o", "out", "-q"], work, capsys)
+    assert "out holds files added or changed since scene-builder wrote it (added: meshes/mine.obj, notes)" in err
+    assert "or pass --overwrite to replace the folder with them" in err
+
+
+def test_rebuild_refuses_an_edited_file_naming_it(photo: Path, work: Path, capsys):
+    out = work / "out"
+    _build_folder(out, photo)
+    text = (out / "scene.xml").read_text()
+    (out / "scene.xml").write_text(text.replace("box.obj", "bax.obj"))  # same size, other bytes
+    err = _refused([str(photo), "-o", "out", "-q"], work, capsys)
+    assert "(changed: scene.xml)" in err
+
+
+def test_overwrite_never_replaces_a_folder_scene_builder_did_not_write(photo: Path, work: Path, capsys):
+    precious = work / "precious"
+    (precious / "chapter1").mkdir(parents=True)
+    (precious / "chapter1" / "thesis.tex").write_text("four years of work")
+    (precious / "report.json").write_text("{}")  # a report.json alone does not make it a build
+    err = _refused([str(photo), "-o", "precious", "--overwrite", "-q"], work, capsys)
+    assert "precious exists and was not written by scene-builder (no .scene-builder beside report.json); " \
+           "it is never replaced, even with --overwrite" in err
+    # a marker that is not scene-builder's format does not make it one either
+    (precious / MARKER).write_text('{"format": "something else", "files": []}')
+    _refused([str(photo), "-o", "precious", "--overwrite", "-q"], work, capsys)
+
+
+def test_an_older_marker_without_hashes_is_replaced_only_with_overwrite(photo: Path, work: Path, capsys):
+    out = work / "out"
+    out.mkdir()
+    (out / "report.json").write_text("{}")
+    (out / MARKER).write_text(json.dumps({"format": "scene-builder/output", "version": 1, "image": str(photo), "files": ["report.json"]}))
+    err = _refused([str(photo), "-o", "out", "-q"], work, capsys)
+    assert "written by an older scene-builder whose marker records no file hashes" in err and "pass --overwrite" in err
+    from scene_builder.outdir import check_out_dir
+
+    check_out_dir(out, overwrite=True)  # it is scene-builder's: --overwrite may replace it
+
+
+def test_a_file_added_while_the_build_ran_is_kept(photo: Path, work: Path):
+    """The contents are checked again once the old folder is set aside: a file added after the
+    first check puts the old folder back, untouched, and the new build is not moved in."""
+    from scene_builder.config import InputSpec
+    from scene_builder.errors import InputError
+    from scene_builder.outdir import check_out_dir, check_replaceable, make_staging, move_into_place, write_marker
+
+    out = work / "out"
+    _build_folder(out, photo)
+    check_out_dir(out, InputSpec(photo))
+    staging = make_staging(out)
+    (staging / "report.json").write_text("{}")
+    write_marker(staging, InputSpec(photo))
+    (out / "meshes" / "late.obj").write_text("added during the build")
+    before = _snapshot(out)
+    with pytest.raises(InputError, match=r"added: meshes/late\.obj"):
+        move_into_place(staging, out, verify=lambda old: check_replaceable(old, shown=out))
+    assert _snapshot(out) == before
+    assert sorted(p.name for p in work.iterdir()) == sorted(["in", "out", staging.name])  # the caller removes its staging
+
+
+def test_a_link_as_output_replaces_the_folder_it_points_to_and_stays(photo: Path, work: Path):
+    """What build() does at its end with -o LINK (the build itself: the slow test above): the
+    folder behind the link is replaced, the link kept, nothing left beside them; a dangling link
+    gets its folder made."""
+    from scene_builder.config import InputSpec
+    from scene_builder.outdir import check_out_dir, check_replaceable, make_staging, move_into_place, real_out_dir, write_marker
+
+    out = work / "out"
+    _build_folder(out, photo)
+    (work / "link").symlink_to("out")
+    (work / "dangling").symlink_to("later")
+    for link in (work / "link", work / "dangling"):
+        check_out_dir(link, InputSpec(photo))
+        dest = real_out_dir(link)
+        staging = make_staging(dest)
+        (staging / "report.json").write_text('{"new": true}')
+        write_marker(staging, InputSpec(photo))
+        move_into_place(staging, dest, verify=lambda old: check_replaceable(old, shown=link))
+        assert link.is_symlink() and json.loads((link / "report.json").read_text()) == {"new": True}
+    assert sorted(p.name for p in work.iterdir()) == ["dangling", "in", "later", "link", "out"]
+    assert os.readlink(work / "link") == "out" and os.readlink(work / "dangling") == "later"
+
+
+def test_check_interact_writes_nothing_into_a_folder_that_is_not_a_build(photo: Path, work: Path, capsys):
+    mine = work / "mine"
+    mine.mkdir()
+    (mine / "scene.xml").write_text("<mujoco/>\n")  # the user's own model
+    (mine / "report.json").write_text("{}")
+    before = _snapshot(work)
+    assert main(["check", str(mine), "--interact"]) == 3
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "mine is not an output folder of scene-builder" in err[0] and "without --interact" in err[0]
+    assert _snapshot(work) == before
+    # a build whose interaction.json is the user's (not recorded in the marker): kept too
+    out = work / "out"
+    _build_folder(out, photo)
+    (out / "interaction.json").write_text("my notes")
+    before = _snapshot(work)
+    assert main(["check", str(out), "--interact"]) == 3
+    assert "interaction.json was not written by scene-builder or was changed since" in capsys.readouterr().err
+    assert _snapshot(work) == before
 
 
 def test_logs_without_a_terminal_are_not_wrapped(monkeypatch):
@@ -277,7 +440,10 @@ def test_photo_of_500_small_objects_builds_the_largest_and_says_so(work: Path, c
     depth = boxes_on_floor_depth_m()
     Image.fromarray((depth * 1000).round().astype(np.uint16)).save(work / "depth.png")
     Image.fromarray(np.full((480, 640, 3), (150, 120, 90), np.uint8)).save(work / "many.png")
-    code = main(["many.png", "--depth", "depth.png", "--intrinsics", "525,525,319.5,239.5", "-q", "--viz", "off", "--settle-s", "0.5"])
+    # The depth-cluster segmenter finds every cube (the cap is what is tested, not the detectors,
+    # which see nothing in a flat-coloured photo).
+    code = main(["many.png", "--depth", "depth.png", "--intrinsics", "525,525,319.5,239.5", "-q", "--viz", "off", "--settle-s", "0.5",
+                 "--segmentation-backend", "depth-clusters"])
     err = capsys.readouterr().err
     assert code == 0, err[-2000:]
     cap = PerceptionConfig().max_objects

@@ -343,3 +343,25 @@ def test_small_image_keeps_no_second_copy(tmp_path):
     Image.fromarray(np.zeros((480, 640, 3), dtype=np.uint8)).save(tmp_path / "vga.png")
     loaded = load_input(InputSpec(tmp_path / "vga.png"), CFG)
     assert loaded.rgb.shape == (480, 640, 3) and loaded.scale == 1.0 and loaded.rgb_full is None
+
+
+def test_a_bug_while_reading_is_not_reported_as_a_bad_file(tmp_path, monkeypatch):
+    """Only what Pillow / numpy raise for an unreadable file becomes an InputError: an error of
+    scene-builder's own code while reading a good file surfaces as itself (it used to read
+    'cannot read ... as an image', blaming the user's photo)."""
+    import perception.inputs as inputs
+
+    photo = tmp_path / "photo.png"
+    Image.fromarray(np.zeros((32, 32, 3), np.uint8)).save(photo)
+
+    def buggy(*args, **kwargs):
+        raise AttributeError("'NoneType' object has no attribute 'mode'")
+
+    monkeypatch.setattr(inputs, "_to_rgb", buggy)
+    with pytest.raises(AttributeError):
+        inputs.load_rgb(photo)
+    # and a file that really is broken is still one InputError line
+    (tmp_path / "cut.png").write_bytes(photo.read_bytes()[:60])
+    monkeypatch.undo()
+    with pytest.raises(InputError, match=r"cannot read .*cut\.png as an image"):
+        inputs.load_rgb(tmp_path / "cut.png")

@@ -7,15 +7,10 @@ import json
 import numpy as np
 import pytest
 
-from generation.physx.protocol import (
-    GridFrame,
-    MovementType,
-    ProtocolError,
-    description_from_basic_info,
-    group_joint,
-    parse_description,
-    write_description,
-)
+from generation.physx.description import MovementType, write_description
+from generation.physx.grid_frame import GridFrame, group_joint
+from generation.physx.basic_info import description_from_basic_info
+from generation.physx.protocol import ProtocolError, parse_description
 from scene_builder.model import JointType
 from tests.conftest import PHYSX_PROTOCOL, require
 

@@ -159,6 +159,29 @@ def test_model_failure_is_a_vlm_call_error():
     assert "\n" not in str(err.value)
 
 
+def test_a_model_folder_that_does_not_load_is_one_vlm_call_error_raised_again_without_reloading(tmp_path):
+    """Files present but broken (config.json not JSON; tokenizer.json without the keys
+    transformers reads, which raises KeyError): one line naming the folder and the cause, and the
+    same error for every later object."""
+    from generation.physx import PhysxVlmGenerator
+
+    for name, broken in (("config", {"config.json": "not json"}), ("tokenizer", {"tokenizer.json": '{"a": 1}'})):
+        folder = tmp_path / name
+        folder.mkdir()
+        files = {"config.json": "{}", "preprocessor_config.json": "{}", "tokenizer.json": "{}", "model.safetensors": "garbage",
+                 "overall_prompt.txt": "a", "geometry_question.txt": "b"} | broken
+        for f, text in files.items():
+            (folder / f).write_text(text)
+        gen = PhysxVlmGenerator(folder)
+        with pytest.raises(VlmCallError, match=f"cannot load the PhysX model from {folder}") as first:
+            gen._model()
+        assert "\n" not in str(first.value)
+        (folder / "config.json").unlink()  # not read again: the first failure is kept
+        with pytest.raises(VlmCallError) as again:
+            gen._model()
+        assert again.value is first.value
+
+
 def test_object_crop_is_a_centred_single_object_512_image_on_black():
     rng = np.random.default_rng(0)
     rgb = rng.integers(1, 255, (300, 400, 3), dtype=np.uint8)
@@ -280,7 +303,6 @@ def test_register_backends_reports_missing_weights(tmp_path, monkeypatch):
 
 @pytest.mark.slow
 def test_canned_answers_become_an_articulated_asset_with_computed_mass():
-    pytest.importorskip("generation.assembly", reason="the generator's assemble_asset is not in this checkout")
     from generation.physx.convert import to_object_asset
     from scene_builder.config import GenerationConfig
     from scene_builder.model import AssetKind

@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from perception.single_view import SingleViewDepth, analysis_image, closeup_box_px, detect_segments
+from perception.single_view import SingleViewDepth, closeup_box_px
+from perception.vanishing_points import analysis_image, detect_segments
 from tests.conftest import PHOTOS, REAL_DATA, require
 
 

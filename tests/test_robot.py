@@ -464,6 +464,57 @@ def test_a_target_inside_the_support_is_not_reached_without_contact(tmp_path):
     assert outcome.contacts
 
 
+def test_reach_targets_are_a_grid_over_every_flat_top_whatever_the_robot(tmp_path):
+    """The fixed target set of the reach figure comes from the scene alone: 18 cm above a flat
+    top (a ray straight down meets the top's collision geometry 18 cm below), on a 16 cm grid
+    over the counter's top (60 x 120 cm less the 6 cm inset: 4 x 7 points), at least one on each
+    smaller top (the boxes', the cabinet's), none on box_a (box_b covers it); the same with the
+    robot placed in the scene."""
+    import mujoco
+
+    from exporters.mjcf import write_mjcf
+    from layout.robot import SCORE_GRID_CELLS, TARGET_HEIGHT_M, place_robot, reach_targets
+
+    scene = mixed_scene()
+    points, owners = reach_targets(scene)
+    assert sorted(set(owners)) == ["box_b", "box_c", "box_on_cabinet", "cabinet", "counter"]
+    counter = points[np.array(owners) == "counter"]
+    assert len(counter) == 28 and len(np.unique(counter[:, 2])) == 1
+    steps = np.diff(np.unique(np.round(counter[:, 0], 6)))
+    np.testing.assert_allclose(steps, 0.04 * SCORE_GRID_CELLS, atol=1e-9)
+    m = mujoco.MjModel.from_xml_path(str(write_mjcf(scene, tmp_path / "scene")))
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    geom = np.array([-1], dtype=np.int32)
+    for p, owner in zip(points, owners):
+        dist = mujoco.mj_ray(m, d, p, np.array([0.0, 0.0, -1.0]), np.array([0, 0, 0, 1, 0, 0], dtype=np.uint8), 1, -1, geom)
+        assert dist == pytest.approx(TARGET_HEIGHT_M, abs=2e-3), (owner, p, dist)
+        assert m.body(int(m.geom_bodyid[geom[0]])).name.split("/")[0] == owner
+    with_robot = dataclasses.replace(scene, robot=place_robot(scene, _robot("panda", tmp_path))[0])
+    again, owners_again = reach_targets(with_robot)
+    np.testing.assert_array_equal(again, points)
+    assert owners_again == owners
+
+
+def test_reach_rate_counts_the_targets_in_the_workspace_and_can_fail(tmp_path):
+    """score_reach on the mixed fixture scene: the placement's target is reached (within 2 cm,
+    no contact); the same point sunk 28 cm, into box_c, is tried and missed (the arm touches
+    it); the counter's far corner lies outside the arm's workspace and is not tried."""
+    from layout.reach import SCORE_TOL_M, score_reach
+    from layout.robot import place_robot
+
+    model = _robot("panda", tmp_path)
+    placement = place_robot(mixed_scene(), model)[0]
+    path = _write_scene(dataclasses.replace(mixed_scene(), robot=placement), tmp_path / "out")
+    targets = np.array([placement.target_m, placement.target_m - [0.0, 0.0, 0.28], [1.84, -0.24, 1.08]])
+    shoulder = placement.world_from_robot[:3, :3] @ model.arm_mount_m + placement.position_m
+    assert np.linalg.norm(targets[2] - shoulder) > model.reach_m
+    reached, sunk, far = score_reach(path, placement, targets, ("box_c", "box_c", "counter"), seconds=3.0)
+    assert reached.in_workspace and reached.reached and reached.final_error_m <= SCORE_TOL_M and reached.contacts == 0
+    assert sunk.in_workspace and not sunk.reached and sunk.contacts > 0 and not sunk.hold_tool_axis  # both tries made
+    assert not far.in_workspace and not far.reached
+
+
 def test_example_writes_a_video_whose_frames_change(tmp_path):
     """examples/robot_reach.py as a user runs it: an MP4 whose frames show the arm moving."""
     import imageio.v2 as imageio

@@ -8,12 +8,8 @@ import json
 import numpy as np
 import pytest
 
-from perception.single_view import (
-    SingleViewDepth,
-    estimate_geometry,
-    focal_from_orthogonal_vps,
-    gravity_pitch_roll_deg,
-)
+from perception.single_view import SingleViewDepth
+from perception.vanishing_points import estimate_geometry, focal_from_orthogonal_vps, gravity_pitch_roll_deg
 from scene_builder.model import CameraIntrinsics
 from tests.conftest import REAL_DATA, require
 

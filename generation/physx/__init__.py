@@ -1,5 +1,7 @@
 """The PhysX-Anything / PhysX-Omni representation: geometry token encodings (``tokens``), the
-overall-description text protocol (``protocol``), conversion to asset-frame parts (``convert``)
+overall-description text protocol (``description``: its grammar, dataclasses and writer;
+``protocol``: its parser; ``grid_frame``: its joints in the asset frame), conversion to
+asset-frame parts (``convert``)
 and the vision-language model backend (``vlm``). Importing this package is cheap: heavy
 libraries are imported inside the functions that use them."""
 
@@ -12,6 +14,18 @@ import numpy as np
 __all__ = ["BACKEND_NAME", "PhysxVlmGenerator", "register_backends", "turn_to_match"]
 
 BACKEND_NAME = "physx-anything-vlm"
+
+
+def model_load_errors() -> tuple[type[BaseException], ...]:
+    """What loading a transformers model from a folder raises when the folder is wrong: OSError
+    (files missing or unreadable: what ``from_pretrained`` documents), ValueError (a config,
+    tokenizer or JSON file it cannot use), KeyError (transformers' tokenizer loader on a
+    ``tokenizer.json`` without the keys it reads, e.g. ``'added_tokens'``: found with a malformed
+    file), RuntimeError (torch: weights of the wrong shape, CUDA, out of GPU memory), MemoryError,
+    and safetensors' ``SafetensorError`` (a corrupt weights file; not an OSError)."""
+    from safetensors import SafetensorError
+
+    return (OSError, ValueError, KeyError, RuntimeError, MemoryError, SafetensorError)
 
 
 class PhysxVlmGenerator:
@@ -48,7 +62,7 @@ class PhysxVlmGenerator:
             except SceneBuilderError as err:
                 self._load_error = err
                 raise
-            except Exception as err:  # transformers / torch failing to load the folder
+            except model_load_errors() as err:  # transformers / torch failing to load the folder
                 self._load_error = VlmCallError(f"cannot load the PhysX model from {self.model_dir} ({type(err).__name__}: {err})".splitlines()[0])
                 raise self._load_error from err
         return self._chat, self._prompts

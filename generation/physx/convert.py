@@ -22,7 +22,8 @@ import numpy as np
 from scene_builder.errors import InputError
 from scene_builder.model import Joint, JointType, Material, ObjectAsset
 
-from generation.physx.protocol import GridFrame, PhysxDescription, ProtocolError, group_joint
+from generation.physx.description import PhysxDescription, ProtocolError
+from generation.physx.grid_frame import GridFrame, group_joint
 from generation.physx.tokens import decode_omni, decode_omni_lenient, decode_ranges, decode_ranges_lenient
 
 __all__ = ["PhysxObject", "PhysxPartSpec", "decode_part_tokens", "model_size_m", "physx_object", "to_object_asset"]

@@ -1,143 +1,30 @@
-"""The PhysX-Anything / PhysX-Omni overall-description text: parser, writer and frame conversion.
-
-The layout (README section G1 of ``shared/data/physx_protocol``)::
-
-    Name: <object name>
-    Category: <category>
-    Dimension: <A>*<B>*<C>                      (cm, along x, y, z of the PhysX grid)
-    Parts: 
-    l_<i>: <name>S<rank>S<material>S<density>S<young>S<poisson>S<description>
-    Group_info: 
-    group_0: ['l_<i>', ...]; Type: E; Param: N/A
-    group_<g>: ['l_<i>', ...]; Type: <T> relative to group_<p>; Param: <params>
-
-with ``S`` = ``", "`` (PhysX-Anything) or ``"| "`` (PhysX-Omni). Density is in g/cm^3, Young's
-modulus in GPa, joint positions and slide ranges in voxel units of the grid (32 or 64), revolute
-ranges in degrees. :func:`parse_description` reads every known variation, repairs what it can and
+"""The PhysX-Anything / PhysX-Omni overall-description parser: the text (grammar in
+:mod:`generation.physx.description`) read into its dataclasses (upstream ``basic_info.json``
+files: :mod:`generation.physx.basic_info`, which shares the unit and repair helpers here).
+:func:`parse_description` reads every known variation, repairs what it can and
 lists each repair or drop in :class:`ParseReport`; values are stored in SI (kg/m^3, Pa), joints in
-the text's grid units (so that :func:`write_description` round-trips); :class:`GridFrame` and
-:func:`group_joint` convert joints to the asset frame in metres and radians.
-
-Frames: the PhysX grid frame is z up with the object's front towards -y (the PartNet-Mobility
-canonical front +z of the Y-up source becomes -y after the +90 degree turn about x, README G5; in the
-real cabinet the door is the part at the lowest y). Our asset frame has the front towards +x, so
-``asset_from_physx`` is a +90 degree turn about z. Upstream scales by the largest dimension only;
-:meth:`GridFrame.from_dimension` uses all three (the origin at the bottom centre of the box they
-define, and, when the voxels are known, one scale per axis fitted to them).
+the text's grid units (so that :func:`~generation.physx.description.write_description`
+round-trips); :mod:`generation.physx.grid_frame` converts joints to the asset frame in metres and
+radians. Raises only :class:`ProtocolError` on any input (``scene_builder.bench.fuzz``).
 """
 
 from __future__ import annotations
 
-import enum
 import math
 import re
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
-import numpy as np
+from generation.physx.description import (
+    MovementType,
+    ParseReport,
+    PhysxDescription,
+    PhysxGroup,
+    PhysxPart,
+    ProtocolError,
+)
+from generation.physx.description import round_sig as _sig
 
-from scene_builder.errors import InputError
-from scene_builder.model import Joint, JointType
-
-__all__ = [
-    "ASSET_FROM_PHYSX",
-    "GridFrame",
-    "MovementType",
-    "ParseReport",
-    "PhysxDescription",
-    "PhysxGroup",
-    "PhysxPart",
-    "ProtocolError",
-    "description_from_basic_info",
-    "group_joint",
-    "parse_description",
-    "write_description",
-]
-
-#: (3, 3) rotation taking PhysX grid axes (front -y) to the asset frame (front +x): +90 deg about z.
-ASSET_FROM_PHYSX = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
-ASSET_FROM_PHYSX.setflags(write=False)
-
-
-class ProtocolError(InputError, ValueError):
-    """An overall description that cannot be read at all (one-line message says why)."""
-
-
-class MovementType(str, enum.Enum):
-    """PhysX movement types of a group relative to its parent group."""
-
-    FREE = "A"
-    SLIDE = "B"
-    REVOLUTE = "C"
-    BALL = "D"
-    REVOLUTE_SLIDE = "CB"
-    FIXED = "E"
-
-
-@dataclass(frozen=True)
-class PhysxPart:
-    """One ``l_<label>`` line. density_kg_m3 / youngs_modulus_pa / poisson_ratio (unitless) are
-    None when the text had no usable number. affordance_rank: 1..10, 1 = most likely touched."""
-
-    label: int
-    name: str
-    affordance_rank: int
-    material: str
-    density_kg_m3: float | None
-    youngs_modulus_pa: float | None
-    poisson_ratio: float | None
-    description: str = ""
-
-
-@dataclass(frozen=True)
-class PhysxGroup:
-    """One ``group_<id>`` line: member part labels moving together, relative to ``parent``.
-
-    Joint parameters are kept in the text's units: directions unitless (PhysX grid axes),
-    positions in voxel units from the grid's minimum corner, revolute ranges in degrees, slide
-    ranges in voxel units. axis_* apply to REVOLUTE and REVOLUTE_SLIDE (axis_position_vox is the
-    hinge point for BALL); slide_* to SLIDE and REVOLUTE_SLIDE; all None where they do not apply.
-    """
-
-    group_id: int
-    members: tuple[int, ...]
-    movement: MovementType
-    parent: int | None = None
-    axis_direction: tuple[float, float, float] | None = None
-    axis_position_vox: tuple[float, float, float] | None = None
-    revolute_range_deg: tuple[float, float] | None = None
-    slide_direction: tuple[float, float, float] | None = None
-    slide_range_vox: tuple[float, float] | None = None
-
-
-@dataclass(frozen=True)
-class PhysxDescription:
-    """A parsed overall description. dimension_cm: extents along the PhysX grid's x, y, z (None
-    when the text gave no three numbers). grid: voxels per side of the geometry grid (32 / 64)."""
-
-    name: str
-    category: str
-    dimension_cm: tuple[float, float, float] | None
-    parts: tuple[PhysxPart, ...]
-    groups: tuple[PhysxGroup, ...]
-    grid: int = 32
-
-    def part(self, label: int) -> PhysxPart:
-        for p in self.parts:
-            if p.label == label:
-                return p
-        raise KeyError(label)
-
-
-@dataclass(frozen=True)
-class ParseReport:
-    """What the parser repaired or dropped, one line each (empty for a clean text)."""
-
-    warnings: tuple[str, ...] = field(default_factory=tuple)
-
-    @property
-    def clean(self) -> bool:
-        return not self.warnings
-
+__all__ = ["ProtocolError", "parse_description"]
 
 # --------------------------------------------------------------------------------------------
 # Numbers and units
@@ -160,11 +47,6 @@ _UNITS: dict[str, tuple[tuple[str, float], ...]] = {
 }
 _DEFAULT_SCALE = {"density": 1000.0, "modulus": 1e9, "ratio": 1.0}  # g/cm^3, GPa, unitless
 _UNIT_NAME = {"density": "g/cm^3", "modulus": "GPa", "ratio": ""}
-
-
-def _sig(x: float) -> float:
-    """Round to 12 significant digits, so that unit conversions round-trip through text."""
-    return float(f"{x:.12g}")
 
 
 def _to_float(token: str) -> float:
@@ -223,7 +105,10 @@ def _quantity(text: str, kind: str, what: str, warnings: list[str]) -> float | N
         return None
     if len(values) > 1:
         warnings.append(f"{what}: {len(values)} values in {raw!r}, using their mean")
-    value = math.fsum(values) / len(values)
+    # fsum raises on inf + -inf (ValueError) and on an intermediate sum beyond float range
+    # (OverflowError): such values are out of range for any quantity, and dropped below.
+    finite = all(math.isfinite(v) and abs(v) < 1e300 for v in values)
+    value = math.fsum(values) / len(values) if finite else math.inf
     if not math.isfinite(value):
         warnings.append(f"{what}: {raw[:40]!r} is out of range, dropped")
         return None
@@ -242,19 +127,6 @@ def _quantity(text: str, kind: str, what: str, warnings: list[str]) -> float | N
         warnings.append(f"{what}: non-positive value {value:g} dropped")
         return None
     return _sig(value)
-
-
-def _fmt_decimal(x: float) -> str:
-    """Like the targets: '0.7', '10.0', '0.35' (always a decimal point unless exponent form)."""
-    s = f"{_sig(x):.12g}"
-    return s if ("." in s or "e" in s or "inf" in s or "nan" in s) else s + ".0"
-
-
-def _fmt_bracket(x: float) -> str:
-    """Like the targets: integers without a decimal point, others as short decimals."""
-    if abs(x - round(x)) < 1e-9:
-        return str(int(round(x)))
-    return f"{x:.12g}"
 
 
 # --------------------------------------------------------------------------------------------
@@ -536,284 +408,3 @@ def parse_description(text: str, grid: int = 32) -> tuple[PhysxDescription, Pars
     )
     return desc, ParseReport(tuple(warnings))
 
-
-# --------------------------------------------------------------------------------------------
-# Writer
-# --------------------------------------------------------------------------------------------
-
-
-def _fmt_list(values) -> str:
-    return "[" + ", ".join(_fmt_bracket(v) for v in values) + "]"
-
-
-def _fmt_quantity(value: float | None, scale: float, unit: str) -> str:
-    if value is None:
-        return "N/A"
-    return _fmt_decimal(value / scale) + (f" {unit}" if unit else "")
-
-
-def _group_params(g: PhysxGroup) -> str:
-    mt = g.movement
-    if mt is MovementType.SLIDE:
-        return f"direction: {_fmt_list(g.slide_direction)}, slide range (in voxel grid): {_fmt_list(g.slide_range_vox)}"
-    if mt is MovementType.REVOLUTE:
-        return (
-            f"direction: {_fmt_list(g.axis_direction)}, axis position (in voxel grid): {_fmt_list(g.axis_position_vox)}, "
-            f"revolute range (degree): {_fmt_list(g.revolute_range_deg)}"
-        )
-    if mt is MovementType.BALL:
-        return f"hinge position (in voxel grid): {_fmt_list(g.axis_position_vox)}"
-    if mt is MovementType.REVOLUTE_SLIDE:
-        return (
-            f"axis direction: {_fmt_list(g.axis_direction)}, axis position (in voxel grid): {_fmt_list(g.axis_position_vox)}, "
-            f"revolute range (degree): {_fmt_list(g.revolute_range_deg)}, slide direction: {_fmt_list(g.slide_direction)}, "
-            f"slide range (in voxel grid): {_fmt_list(g.slide_range_vox)}"
-        )
-    return "N/A"
-
-
-def write_description(desc: PhysxDescription, separator: str | None = None) -> str:
-    """The training-target layout (G1): ``", "`` separators for grid 32 (PhysX-Anything),
-    ``"| "`` for grid 64 (PhysX-Omni) unless ``separator`` says otherwise; no trailing newline."""
-    sep = separator if separator is not None else (", " if desc.grid == 32 else "| ")
-    lines = [f"Name: {desc.name}", f"Category: {desc.category}"]
-    if desc.dimension_cm is not None:
-        lines.append("Dimension: " + "*".join(_fmt_bracket(v) for v in desc.dimension_cm))
-    lines.append("Parts: ")
-    for p in desc.parts:
-        fields = [
-            p.name,
-            str(p.affordance_rank),
-            p.material,
-            _fmt_quantity(p.density_kg_m3, 1000.0, "g/cm^3"),
-            _fmt_quantity(p.youngs_modulus_pa, 1e9, ""),
-            _fmt_quantity(p.poisson_ratio, 1.0, ""),
-            p.description,
-        ]
-        lines.append(f"l_{p.label}: " + sep.join(fields))
-    lines.append("Group_info: ")
-    for g in desc.groups:
-        members = "[" + ", ".join(f"'l_{m}'" for m in g.members) + "]"
-        rel = "" if g.parent is None else f" relative to group_{g.parent}"
-        lines.append(f"group_{g.group_id}: {members}; Type: {g.movement.value}{rel}; Param: {_group_params(g)}")
-    return "\n".join(lines)
-
-
-# --------------------------------------------------------------------------------------------
-# basic_info.json (the upstream parsers' output / the annotation schema)
-# --------------------------------------------------------------------------------------------
-
-
-def description_from_basic_info(data: dict, grid: int) -> tuple[PhysxDescription, ParseReport]:
-    """Load an upstream ``basic_info.json`` (PhysX-Anything strings or PhysX-Omni floats, README
-    G6) into the same dataclasses. Normalised params are turned back into the text's grid units.
-
-    Raises ProtocolError (one line) when the data does not follow that schema."""
-    try:
-        return _from_basic_info(data, grid)
-    except ProtocolError:
-        raise
-    except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError, RecursionError) as err:
-        raise ProtocolError(f"basic_info does not follow the PhysX schema ({type(err).__name__}: {str(err)[:80]})") from err
-
-
-def _from_basic_info(data: dict, grid: int) -> tuple[PhysxDescription, ParseReport]:
-    warnings: list[str] = []
-    parts: list[PhysxPart] = []
-    for entry in data.get("parts", []):
-        label = int(entry["label"])
-        where = f"l_{label}"
-
-        def q(key: str, kind: str) -> float | None:
-            v = entry.get(key)
-            if v is None:
-                warnings.append(f"{where}: {key} is null")
-                return None
-            if isinstance(v, (int, float)):
-                return _sig(float(v) * _DEFAULT_SCALE[kind])
-            return _quantity(str(v), kind, f"{where} {key}", warnings)
-
-        rank = int(entry.get("priority_rank", 5))
-        parts.append(
-            PhysxPart(
-                label=label,
-                name=str(entry.get("name", "")),
-                affordance_rank=min(max(rank, 1), 10),
-                material=str(entry.get("material", "")),
-                density_kg_m3=q("density", "density"),
-                youngs_modulus_pa=q("Young's Modulus (GPa)", "modulus"),
-                poisson_ratio=q("Poisson's Ratio", "ratio"),
-                description=str(entry.get("Basic_description", "")),
-            )
-        )
-    groups: list[PhysxGroup] = []
-    for key, value in sorted(data.get("group_info", {}).items(), key=lambda kv: int(kv[0])):
-        gid = int(key)
-        if gid == 0:
-            groups.append(PhysxGroup(0, tuple(int(v) for v in value), MovementType.FIXED))
-            continue
-        members, parent_s, params, type_s = value
-        parent = int(parent_s) if str(parent_s).isdigit() else None
-        mt = MovementType(str(type_s).upper())
-        p = [float(v) for v in params]
-
-        def pos(v: list[float]) -> tuple[float, float, float]:
-            return tuple(_sig((c + 0.5) * grid) for c in v)  # type: ignore[return-value]
-
-        kw: dict = {}
-        if mt is MovementType.SLIDE:
-            kw = {"slide_direction": tuple(p[0:3]), "slide_range_vox": (_sig(p[6] * grid), _sig(p[7] * grid))}
-        elif mt is MovementType.REVOLUTE:
-            kw = {
-                "axis_direction": tuple(p[0:3]),
-                "axis_position_vox": pos(p[3:6]),
-                "revolute_range_deg": (_sig(p[6] * 180.0), _sig(p[7] * 180.0)),
-            }
-        elif mt is MovementType.BALL:
-            kw = {"axis_position_vox": pos(p[3:6])}
-        elif mt is MovementType.REVOLUTE_SLIDE:
-            kw = {
-                "axis_direction": tuple(p[0:3]),
-                "axis_position_vox": pos(p[3:6]),
-                "revolute_range_deg": (_sig(p[6] * 180.0), _sig(p[7] * 180.0)),
-                "slide_direction": tuple(p[8:11]),
-                "slide_range_vox": (_sig(p[14] * grid), _sig(p[15] * grid)),
-            }
-        groups.append(PhysxGroup(gid, tuple(int(m) for m in members), mt, parent, **kw))
-    labels = [p.label for p in parts]
-    if not parts:
-        raise ProtocolError("basic_info has no parts")
-    dimension = _parse_dimension(str(data.get("dimension", "")), warnings)
-    desc = PhysxDescription(
-        name=str(data.get("object_name", "")),
-        category=str(data.get("category", "")),
-        dimension_cm=dimension,
-        parts=tuple(sorted(parts, key=lambda p: p.label)),
-        groups=_repair_groups(groups, sorted(labels), warnings),
-        grid=grid,
-    )
-    return desc, ParseReport(tuple(warnings))
-
-
-# --------------------------------------------------------------------------------------------
-# Grid frame -> asset frame
-# --------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True, eq=False)
-class GridFrame:
-    """Maps continuous PhysX grid coordinates (voxel units; voxel i covers [i, i+1)) to the asset
-    frame in metres: ``p_asset = ASSET_FROM_PHYSX @ (metres_per_voxel * (p_vox - origin_vox))``.
-
-    metres_per_voxel: (3,) along the grid's x, y, z. origin_vox: (3,) the grid point that becomes
-    the asset origin (bottom centre of the object's box).
-    """
-
-    grid: int
-    metres_per_voxel: np.ndarray
-    origin_vox: np.ndarray
-
-    def __post_init__(self) -> None:
-        for name in ("metres_per_voxel", "origin_vox"):
-            arr = np.array(getattr(self, name), dtype=np.float64)
-            if arr.shape != (3,):
-                raise ValueError(f"GridFrame.{name} must have shape (3,)")
-            arr.setflags(write=False)
-            object.__setattr__(self, name, arr)
-
-    @classmethod
-    def from_dimension(
-        cls,
-        dimension_cm: tuple[float, float, float],
-        grid: int,
-        occupied_lo_hi_vox: tuple[np.ndarray, np.ndarray] | None = None,
-        max_anisotropy: float = 0.25,
-    ) -> tuple["GridFrame", tuple[str, ...]]:
-        """Frame from the stated size along x, y, z (all three used). Without voxels: the object
-        box is centred in the grid with extents ``G * D / max(D)`` (README G5) and the scale is
-        ``max(D) / G``. With ``occupied_lo_hi_vox`` (inclusive min / max occupied voxel indices of
-        all parts): the origin is that box's bottom centre and each axis gets its own scale
-        ``D_i / n_i``, unless it differs from ``max(D) / G`` by more than ``max_anisotropy``
-        (then the model's size and voxels disagree on that axis: the isotropic scale is kept)."""
-        d_m = np.asarray(dimension_cm, dtype=np.float64) / 100.0
-        iso = float(d_m.max()) / grid
-        warnings: list[str] = []
-        if occupied_lo_hi_vox is None:
-            half = grid * d_m / d_m.max() / 2.0
-            origin = np.array([grid / 2.0, grid / 2.0, grid / 2.0 - half[2]])
-            return cls(grid, np.full(3, iso), origin), ()
-        lo, hi = (np.asarray(a, dtype=np.float64) for a in occupied_lo_hi_vox)
-        n = hi - lo + 1.0
-        scale = d_m / n
-        for i in range(3):
-            if abs(scale[i] / iso - 1.0) > max_anisotropy:
-                warnings.append(
-                    f"axis {'xyz'[i]}: stated size {d_m[i] * 100:g} cm over {n[i]:g} voxels disagrees with "
-                    f"the largest size's scale by {abs(scale[i] / iso - 1) * 100:.0f}%; isotropic scale kept"
-                )
-                scale[i] = iso
-        origin = np.array([(lo[0] + hi[0] + 1.0) / 2.0, (lo[1] + hi[1] + 1.0) / 2.0, lo[2]])
-        return cls(grid, scale, origin), tuple(warnings)
-
-    def to_asset(self, points_vox: np.ndarray) -> np.ndarray:
-        """(N, 3) grid coordinates -> (N, 3) asset-frame metres."""
-        p = np.atleast_2d(np.asarray(points_vox, dtype=np.float64))
-        return ((p - self.origin_vox) * self.metres_per_voxel) @ ASSET_FROM_PHYSX.T
-
-    def direction_to_asset(self, direction: np.ndarray) -> tuple[np.ndarray, float]:
-        """Unit asset-frame direction of a grid direction and the metres per voxel along it
-        (a line stays a line under the per-axis scale)."""
-        d = np.asarray(direction, dtype=np.float64)
-        d = d / np.linalg.norm(d)
-        v = d * self.metres_per_voxel
-        length = float(np.linalg.norm(v))
-        return ASSET_FROM_PHYSX @ (v / length), length
-
-
-def _axis_position(g: PhysxGroup, direction, centre_vox: np.ndarray) -> np.ndarray:
-    """Hinge point in grid coordinates; for an axis-aligned direction the text writes 0 along the
-    axis (no information): we put the child's centre there instead of the grid's corner."""
-    p = np.array(g.axis_position_vox, dtype=np.float64)
-    if direction is not None:
-        d = np.asarray(direction, dtype=np.float64)
-        ones = np.flatnonzero(np.isclose(d, 1.0))
-        if len(ones) == 1 and np.allclose(np.delete(d, ones[0]), 0.0):
-            p[ones[0]] = centre_vox[ones[0]]
-    return p
-
-
-def group_joint(g: PhysxGroup, frame: GridFrame, child_centre_vox: np.ndarray) -> tuple[Joint, tuple[str, ...]]:
-    """The asset-frame joint (metres, radians) of a non-base group relative to its parent group.
-
-    child_centre_vox: (3,) centre of the group's voxels in grid coordinates (anchor for joints
-    without a position, and the value along the axis of axis-aligned hinges)."""
-    warnings: list[str] = []
-    centre = np.asarray(child_centre_vox, dtype=np.float64)
-    anchor_centre = frame.to_asset(centre)[0]
-    z_axis = np.array([0.0, 0.0, 1.0])
-    mt = g.movement
-    if mt is MovementType.FIXED:
-        return Joint(JointType.FIXED, z_axis, anchor_centre), ()
-    if mt is MovementType.FREE:
-        return Joint(JointType.FREE, z_axis, anchor_centre), ()
-    if mt is MovementType.BALL:
-        anchor = frame.to_asset(np.array(g.axis_position_vox))[0]
-        return Joint(JointType.BALL, z_axis, anchor), ()
-    if mt is MovementType.SLIDE:
-        axis, m_per_vox = frame.direction_to_asset(np.array(g.slide_direction))
-        lo, hi = (v * m_per_vox for v in g.slide_range_vox)
-        return Joint(JointType.PRISMATIC, axis, anchor_centre, lower=lo, upper=hi), ()
-    axis, _ = frame.direction_to_asset(np.array(g.axis_direction))
-    anchor = frame.to_asset(_axis_position(g, g.axis_direction, centre))[0]
-    lo, hi = (math.radians(v) for v in g.revolute_range_deg)
-    if hi - lo >= 2.0 * math.pi - 1e-9:
-        warnings.append(f"group_{g.group_id}: unlimited revolute range kept as [-pi, pi]")
-        lo, hi = -math.pi, math.pi
-    if mt is MovementType.REVOLUTE:
-        return Joint(JointType.REVOLUTE, axis, anchor, lower=lo, upper=hi), tuple(warnings)
-    slide_axis, m_per_vox = frame.direction_to_asset(np.array(g.slide_direction))
-    cos = float(axis @ slide_axis)
-    if abs(cos) < 0.99:
-        warnings.append(f"group_{g.group_id}: slide direction is not along the hinge axis; only its component along the axis kept")
-    lo2, hi2 = sorted(v * m_per_vox * cos for v in g.slide_range_vox)
-    return Joint(JointType.REVOLUTE_PRISMATIC, axis, anchor, lower=lo, upper=hi, lower2=lo2, upper2=hi2), tuple(warnings)

@@ -1,7 +1,7 @@
 """Geometry token encodings of PhysX-Anything (32^3 ranges) and PhysX-Omni (64^3 template RLE).
 
 Both encode one part's occupancy grid, a bool array ``occupancy`` of shape (G, G, G) indexed
-``[x, y, z]`` in the PhysX normalised object frame (z up, see ``protocol.GridFrame``).
+``[x, y, z]`` in the PhysX normalised object frame (z up, see ``grid_frame.GridFrame``).
 
 * **Range encoding** (PhysX-Anything, G = 32): voxel (x, y, z) has the linear index
   ``i = x*G*G + y*G + z`` (z fastest). The sorted indices are merged into maximal runs written

@@ -49,7 +49,8 @@ import numpy as np
 from scene_builder.errors import InputError, ModelUnavailableError, SceneBuilderError
 
 from generation.physx.convert import PhysxObject, decode_part_tokens, physx_object
-from generation.physx.protocol import ParseReport, PhysxDescription, ProtocolError, parse_description
+from generation.physx.description import ParseReport, PhysxDescription, ProtocolError
+from generation.physx.protocol import parse_description
 
 __all__ = [
     "UPSTREAM_CROP_FILL",
@@ -111,9 +112,17 @@ class ChatModel(Protocol):
 
     image_rgb: (H, W, 3) uint8. turns: ((role, text), ...) with role "user" or "assistant", ending
     with a user turn. Returns the assistant's answer: a :class:`ChatAnswer`, or a plain string when
-    the model cannot say whether it stopped at its budget."""
+    the model cannot say whether it stopped at its budget. A model that fails raises one of
+    :data:`MODEL_RUN_ERRORS` (or a ``SceneBuilderError``)."""
 
     def generate(self, image_rgb: np.ndarray, turns: Sequence[tuple[str, str]], max_new_tokens: int) -> "ChatAnswer | str": ...
+
+
+#: What running a torch / transformers model raises when it fails: RuntimeError (CUDA errors,
+#: ``torch.OutOfMemoryError`` is one), MemoryError (out of host memory), ValueError (the tokenizer
+#: or processor refusing an input). The object then falls back to the shape prior; anything else
+#: is a bug and surfaces as itself.
+MODEL_RUN_ERRORS: tuple[type[BaseException], ...] = (RuntimeError, MemoryError, ValueError)
 
 
 def answer_token_budget(grid: int) -> int:
@@ -303,7 +312,7 @@ def _ask(
             raw = chat.generate(image, turns, budget)
         except SceneBuilderError:
             raise
-        except Exception as err:  # the model's own failure (OOM, CUDA, tokenizer): this object falls back
+        except MODEL_RUN_ERRORS as err:  # the model's own failure (OOM, CUDA, tokenizer): this object falls back
             raise VlmCallError(f"{what}: the model failed ({type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''})") from err
         answer = raw if isinstance(raw, ChatAnswer) else ChatAnswer(str(raw))
         used = answer.budget if answer.budget is not None else budget
@@ -415,7 +424,10 @@ class TransformersQwenVL:
         template = tokenizer.chat_template
         tpl_file = model_dir / "chat_template.json"
         if template is None and tpl_file.is_file():
-            template = json.loads(tpl_file.read_text())["chat_template"]
+            doc = json.loads(tpl_file.read_text())
+            if not (isinstance(doc, dict) and isinstance(doc.get("chat_template"), str)):
+                raise ModelUnavailableError(f"{tpl_file} holds no 'chat_template' text; copy the model's own file there")
+            template = doc["chat_template"]
         return cls(model, tokenizer, image_processor, chat_template=template)
 
     def _messages(self, turns: Sequence[tuple[str, str]]) -> list[dict]:

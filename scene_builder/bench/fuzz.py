@@ -13,7 +13,7 @@ ranges-lenient      ``tokens.decode_ranges_lenient``             nothing
 omni-strict         ``tokens.decode_omni``                       ``TokenFormatError``
 omni-lenient        ``tokens.decode_omni_lenient``               nothing
 description         ``generation.physx.protocol.parse_description``  ``ProtocolError``
-basic-info          ``protocol.description_from_basic_info``     ``ProtocolError``
+basic-info          ``generation.physx.basic_info.description_from_basic_info``  ``ProtocolError``
 scene-json          ``scene_builder.serialize.scene_from_json``  ``SceneFileError``
 depth-file          ``perception.inputs.load_depth``             ``InputError``
 camera-json         ``perception.inputs.read_camera_json``       ``InputError``
@@ -130,7 +130,8 @@ def _token_seeds(omni: bool) -> tuple[bytes, ...]:
 
 
 def _description_seeds() -> tuple[bytes, ...]:
-    from generation.physx.protocol import description_from_basic_info, write_description
+    from generation.physx.basic_info import description_from_basic_info
+    from generation.physx.description import write_description
 
     texts = _protocol_texts("*basic_info.txt")
     for raw in _protocol_texts("basic_info.json"):
@@ -261,6 +262,7 @@ def _file_parser(work: Path, read: Callable[[Path], object], default_suffix: str
 
 def make_targets(work: Path) -> list[Target]:
     """Every parser, with its seeds; file parsers write their input under ``work``."""
+    from generation.physx import basic_info as basic_info_json
     from generation.physx import protocol, tokens
     from perception import inputs
     from scene_builder.serialize import SceneFileError, scene_from_json
@@ -270,7 +272,7 @@ def make_targets(work: Path) -> list[Target]:
             doc = json.loads(data)
         except (ValueError, RecursionError):
             return None  # not JSON: not this parser's input
-        return protocol.description_from_basic_info(doc, 32)
+        return basic_info_json.description_from_basic_info(doc, 32)
 
     return [
         Target("ranges-strict", lambda d: tokens.decode_ranges(_text(d)), (tokens.TokenFormatError,), _token_seeds(False)),

@@ -4,8 +4,11 @@
 No weights reach this project's machines, but compute does not depend on the weights' values:
 each model is built from the published architecture (Depth Anything V2 Small: DINOv2-S/14 + DPT,
 24.8 M parameters; SAM 2 Hiera-Tiny, transformers' ``Sam2Model``, the image part of the 38.9 M
-checkpoint) with random weights, saved, and loaded back through the project's own backend class,
-then run on a real 640 x 480 photo of ``../shared/data/real``. Each model runs in its own process
+checkpoint; Grounding DINO Swin-T, transformers' ``GroundingDinoConfig()`` defaults, with a BERT
+tokenizer of the prompt's words) with random weights, saved, and loaded back through the
+project's own backend class, then run on a real 640 x 480 photo of ``../shared/data/real``
+(Grounding DINO sees it at 800 x 1066, its published input size, prompted with the whole room
+vocabulary). ``--only NAME ...`` measures some of them. Each model runs in its own process
 so that its peak resident memory is its own. Prints a Markdown table.
 
 SAM 2's automatic generator is timed as its model work: the image embedding and the decoding of
@@ -91,12 +94,46 @@ def _sam2(folder: Path):
     ]
 
 
+def _bert_tokenizer(folder: Path, words: list[str]):
+    """A BERT WordPiece tokenizer with bert-base-uncased's ids for the special tokens, "." and "?"
+    (the ids Grounding DINO splits phrases at) and one token per word of ``words``: no hub here,
+    and the prompt's length (about a hundred tokens) is small beside the image's."""
+    from transformers import BertTokenizer
+
+    vocab = ["[PAD]"] + [f"[unused{i}]" for i in range(99)] + ["[UNK]", "[CLS]", "[SEP]", "[MASK]"]
+    vocab += [f"[unused{i}]" for i in range(99, 99 + 1012 - len(vocab))] + ["."]
+    vocab += [f"[unused{i}]" for i in range(1000, 1000 + 1029 - len(vocab))] + ["?"] + words
+    (folder / "vocab.txt").write_text("\n".join(vocab) + "\n")
+    BertTokenizer(vocab=str(folder / "vocab.txt")).save_pretrained(folder)
+
+
+def _grounding_dino(folder: Path):
+    import torch
+    from transformers import GroundingDinoConfig, GroundingDinoForObjectDetection
+
+    from perception.learned.grounding_dino import GroundingDinoDetector, prompt_phrases
+
+    torch.manual_seed(0)
+    model = GroundingDinoForObjectDetection(GroundingDinoConfig())  # the defaults are grounding-dino-tiny's architecture
+    n = sum(p.numel() for p in model.parameters())
+    model.save_pretrained(folder)
+    _bert_tokenizer(folder, sorted({w for p, _ in prompt_phrases() for w in p.split()}))
+    det = GroundingDinoDetector(folder, device="cpu")  # no preprocessor_config.json: the published one
+    rgb = _photo()
+    tokens = sum(len(p.input_ids) for p in det.prompts)
+    what = f"one photo, {len(det.phrases)} phrases in {len(det.prompts)} prompt{'s' if len(det.prompts) > 1 else ''} ({tokens} tokens)"
+    return n, [("Grounding DINO Swin-T (`grounding-dino-tiny`), `detect`", what, lambda: det.detect(rgb))]
+
+
+KINDS = {"depth": _depth_anything, "sam2": _sam2, "grounding-dino": _grounding_dino}
+
+
 def _measure(kind: str, repeats: int, queue) -> None:
     import torch
 
     torch.set_num_threads(max(1, torch.get_num_threads()))
     with tempfile.TemporaryDirectory() as tmp:
-        n, runs = (_depth_anything if kind == "depth" else _sam2)(Path(tmp))
+        n, runs = KINDS[kind](Path(tmp))
         rows = []
         for name, what, fn in runs:
             fn()  # warm-up
@@ -111,14 +148,15 @@ def _measure(kind: str, repeats: int, queue) -> None:
     queue.put(json.dumps({"params_m": n / 1e6, "rows": rows, "peak_mb": peak_mb, "threads": torch.get_num_threads()}))
 
 
-def main(repeats: int = 3) -> None:
+def main(repeats: int = 3, only: tuple[str, ...] = ()) -> None:
+    """Measure every backend of :data:`KINDS` (or those of ``only``) and print the table."""
     ctx = mp.get_context("spawn")
     print(f"Median of {repeats} runs after one warm-up, CPU; peak resident memory of the process (model, activations, "
           "Python and torch).")
     print()
     print("| backend | input | params | CPU s | wall s | peak RSS MB |")
     print("|---|---|---:|---:|---:|---:|")
-    for kind in ("depth", "sam2"):
+    for kind in only or tuple(KINDS):
         queue = ctx.Queue()
         proc = ctx.Process(target=_measure, args=(kind, repeats, queue))
         proc.start()
@@ -131,4 +169,10 @@ def main(repeats: int = 3) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    import argparse
+
+    parser = argparse.ArgumentParser(description="CPU time and memory of the learned backends with random weights of the published size")
+    parser.add_argument("--only", nargs="+", choices=sorted(KINDS), default=(), help="measure only these backends")
+    parser.add_argument("--repeats", type=int, default=3, help="runs after one warm-up (default 3)")
+    args = parser.parse_args()
+    main(args.repeats, tuple(args.only))

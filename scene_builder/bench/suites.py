@@ -47,7 +47,7 @@ from scene_builder import frames
 from scene_builder.bench import metrics
 from scene_builder.bench.baseline import naive_baseline
 from scene_builder.config import BuildConfig, ExportConfig, InputSpec
-from scene_builder.errors import InputError
+from scene_builder.errors import InputError, SceneBuilderError
 from scene_builder.model import (
     AssetKind,
     BackendUse,
@@ -565,7 +565,7 @@ def run_bench(
             t0 = time.perf_counter()
             try:
                 res = evaluate_sample(sample, tmp / "builds", config)
-            except Exception as err:  # recorded in the results and the table, never hidden
+            except SceneBuilderError as err:  # a sample the pipeline refuses: recorded in the results and the table
                 res = SceneResult(sample.name, str(sample), None, None, False, None, None, (), resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, f"{type(err).__name__}: {err}")
             scenes.append(res)
             console.print(_scene_line(i + 1, len(samples), res, time.perf_counter() - t0))

@@ -1,0 +1,145 @@
+"""Which objects the layout leaves where they were seen as static background, and the background
+they make: a body whose pad under it would reach into another body or that reaches into a wall
+is unsupported (left where seen); static bodies that cage a movable one are cut back; the
+absorbed objects join the background, with a pad under every body resting on it and the
+collision boxes of the observed structure carved clear of the rest. Called by
+:func:`layout.solver.solve_layout_with_stats`."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from layout.background import CARVE_CLEARANCE_M, absorb, carve, clip_pad, column_boxes, observed_structure
+from layout.bodies import Body
+from layout.pushes import Solver
+from layout.support import BACKGROUND, UNSUPPORTED, pad_box
+from scene_builder.model import AssetKind, Background, Plane, TriangleMesh
+
+
+def _pad_frame(b: Body) -> tuple[np.ndarray, float, float, float]:
+    """The pad under ``b``: its rectangle (lo_x, lo_y, hi_x, hi_y) in ``b``'s yawed axes relative
+    to its position, its yaw, and its height band (bottom, top less the carve clearance)."""
+    centre, half, yaw = pad_box(b, b.bottom_m)
+    c, s = np.cos(yaw), np.sin(yaw)
+    mid = (centre[:2] - b.position_m[:2]) @ np.array([[c, -s], [s, c]])
+    rect = np.concatenate([mid - half[:2], mid + half[:2]])
+    return rect, yaw, float(centre[2] - half[2]), float(centre[2] + half[2] - CARVE_CLEARANCE_M)
+
+
+def _obstacles(b: Body, bodies: list[Body]) -> list[np.ndarray]:
+    """World vertices of every collision piece of the bodies other than ``b``."""
+    return [p.verts_rel_m + o.position_m for o in bodies if o is not b for p in o.pieces]
+
+
+def _pad_blocked(b: Body, bodies: list[Body]) -> bool:
+    """Whether the pad under ``b`` (resting on the background) reaches into another body's
+    pieces (their extent in the pad's axes, within its height band)."""
+    rect, yaw, z_lo, z_hi = _pad_frame(b)
+    return clip_pad(rect, yaw, b.position_m, z_lo, z_hi, _obstacles(b, bodies), np.zeros(2), 0.0, probe=True) is None
+
+
+def unsupport_blocked_pads(bodies: list[Body]) -> None:
+    """A body resting on the background whose pad would reach into another body (one placed
+    after it in the support graph, e.g. overlapping it from the side) gets its pad cut back clear
+    of it (``layout.background.clip_pad``, keeping its centre of mass over the pad); only when no
+    cut does is it left where it was seen (``UNSUPPORTED``), like any object with nothing under
+    it; what rests on it then rests on the background."""
+    from layout.pushes import support_inset_m
+
+    for b in bodies:
+        if b.parent != BACKGROUND or not _pad_blocked(b, bodies):
+            continue
+        rect, yaw, z_lo, z_hi = _pad_frame(b)
+        c, s = np.cos(yaw), np.sin(yaw)
+        com = b.com_rel_m[:2] @ np.array([[c, -s], [s, c]])
+        clipped = clip_pad(rect, yaw, b.position_m, z_lo, z_hi, _obstacles(b, bodies), com, support_inset_m(b))
+        if clipped is not None:
+            b.pad_rect_m = clipped
+            continue
+        b.parent = UNSUPPORTED
+        b.unsupported_reason = "what is under it is another object's, with no face to rest on"
+
+
+def unsupport_in_walls(solver: Solver, max_push_m: float) -> None:
+    """A movable body reaching more than ``max_push_m`` into a wall would have to move that far
+    to stand in the room: it is wall (a door, a radiator, a picture seen as an object, or a wall
+    plane fitted a little off), left where it was seen as static background."""
+    for k, b in enumerate(solver.bodies):
+        if not len(solver.wall_n) or b.fixed or b.parent == UNSUPPORTED:
+            continue
+        depth = -float(np.min(solver.wall_gaps(k)))
+        if depth > max_push_m:
+            b.parent = UNSUPPORTED
+            b.unsupported_reason = f"reaches {depth * 100:.0f} cm into a wall"
+
+
+def uncage_bodies(bodies: list[Body], absorbed: list[int], walls: tuple[Plane, ...], seen: dict[str, np.ndarray]) -> None:
+    """Static bodies (``absorbed``, at their seen poses, as the background will hold them) whose
+    collision cages a movable body get the pieces that hold it cut back (``layout.cage``); each
+    records whom for (``Body.cut_for``)."""
+    from layout.cage import CAGE_TRAVEL_M, uncage
+
+    statics = set(absorbed)
+    reach = CAGE_TRAVEL_M + 0.05
+    for i, b in enumerate(bodies):
+        if i in statics or b.asset.kind is AssetKind.DEFORMABLE:
+            continue
+        lo, hi = b.lo_rel_m + b.position_m - reach, b.hi_rel_m + b.position_m + reach
+        near = []
+        for k in sorted(statics):
+            t = seen[bodies[k].name]
+            pieces = [piece.vertices_m @ t[:3, :3].T + t[:3, 3] for part in bodies[k].asset.parts for piece in part.collision]
+            if any(np.all(v.max(axis=0) > lo) and np.all(v.min(axis=0) < hi) for v in pieces):
+                near.append(k)
+        if not near:
+            continue
+        cut = uncage([p.verts_rel_m + b.position_m for p in b.pieces], [(bodies[k].asset, seen[bodies[k].name]) for k in near], walls,
+                     float(np.arctan2(b.rotation[1, 0], b.rotation[0, 0])))
+        for k, asset in zip(near, cut or ()):
+            if asset is not bodies[k].asset:
+                bodies[k].asset = asset
+                bodies[k].cut_for.append(b.name)
+
+
+def static_background(
+    background: Background | None, bodies: list[Body], absorbed: list[int], walls: tuple[Plane, ...], seen: dict[str, np.ndarray]
+) -> Background | None:
+    """The background with the objects in ``absorbed`` (body indices) made part of it, a pad under
+    every body resting on it, and the collision boxes of its observed structure carved clear of
+    the remaining bodies."""
+    if background is None:
+        if not absorbed:
+            return None
+        # No observed surface (perception built none): the background holds just these objects.
+        background = Background(TriangleMesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)), np.zeros(0, dtype=bool))
+    for k in absorbed:
+        b = bodies[k]
+        background = absorb(background, b.name, b.asset, seen[b.name])  # exactly where it was seen
+    lo, hi = column_boxes(observed_structure(background, walls))
+    movers = [b for k, b in enumerate(bodies) if k not in set(absorbed)]
+    if movers:
+        olo = np.concatenate([b.piece_lo_rel_m + b.position_m for b in movers])
+        ohi = np.concatenate([b.piece_hi_rel_m + b.position_m for b in movers])
+        lo, hi = carve(lo, hi, olo, ohi)
+    centers = [(lo + hi) / 2.0]
+    halves = [(hi - lo) / 2.0]
+    yaws = [np.zeros(len(lo))]
+    for b in movers:
+        if b.parent != BACKGROUND:
+            continue
+        # The pad spans the object's whole plan extent (it rests on the surface seen around it,
+        # hidden under all of it); unsupport_blocked_pads made sure nothing else was there.
+        if _pad_blocked(b, bodies):
+            continue
+        c, h, yaw = pad_box(b, b.bottom_m)
+        centers.append(c[None])
+        halves.append(h[None])
+        yaws.append(np.array([yaw]))
+    return dataclasses.replace(
+        background,
+        box_centers_m=np.concatenate(centers),
+        box_half_extents_m=np.concatenate(halves),
+        box_yaws_rad=np.concatenate(yaws),
+    )

@@ -1,0 +1,52 @@
+"""Repairs before an object is given up to the background: a pad cut back clear of a neighbour's
+completion (layout.background.clip_pad), the floor under a rug (layout.support.FLOOR_LIKE_M)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from layout.background import clip_pad
+from layout.background_policy import unsupport_blocked_pads
+from layout.bodies import make_body
+from layout.support import BACKGROUND, UNSUPPORTED
+from scene_builder.bench.clutter import box_asset
+from scene_builder.frames import pose
+
+
+def _box_verts(lo, hi) -> np.ndarray:
+    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], dtype=np.float64)
+
+
+def test_clip_pad_keeps_the_most_area_with_the_centre_of_mass_inside():
+    rect = np.array([-1.0, -0.8, 1.0, 0.8])
+    # A neighbour reaching 0.4 m in under the +x end, across the whole width.
+    obstacle = _box_verts([0.6, -2.0, 0.0], [1.5, 2.0, 1.0])
+    out = clip_pad(rect, 0.0, np.zeros(3), 0.0, 0.1, [obstacle], np.zeros(2), 0.1)
+    assert out == pytest.approx([-1.0, -0.8, 0.6, 0.8])
+    # Nothing in the pad's height band: the pad stays whole.
+    high = _box_verts([0.6, -2.0, 0.2], [1.5, 2.0, 1.0])
+    assert clip_pad(rect, 0.0, np.zeros(3), 0.0, 0.1, [high], np.zeros(2), 0.1) == pytest.approx(rect)
+    # The centre of mass over the neighbour: no cut keeps it on the pad.
+    assert clip_pad(rect, 0.0, np.zeros(3), 0.0, 0.1, [obstacle], np.array([0.8, 0.0]), 0.1) is None
+    # The pad's axes turn with the object: yawed 90 degrees, the obstacle at +x cuts its -y side.
+    out = clip_pad(rect, np.pi / 2, np.zeros(3), 0.0, 0.1, [_box_verts([0.6, -2.0, 0.0], [1.5, 2.0, 1.0])], np.zeros(2), 0.1)
+    assert out == pytest.approx([-1.0, -0.6, 1.0, 0.8])
+    # Two neighbours, both sides: cut twice.
+    left = _box_verts([-1.5, 0.5, 0.0], [1.5, 1.0, 1.0])
+    out = clip_pad(rect, 0.0, np.zeros(3), 0.0, 0.1, [obstacle, left], np.zeros(2), 0.1)
+    assert out == pytest.approx([-1.0, -0.8, 0.6, 0.5])
+
+
+def test_a_bed_keeps_its_pad_short_of_a_night_stand_reaching_under_it():
+    bed = make_body(box_asset("bed", (2.0, 1.6, 0.5)), pose(np.eye(3), (0.0, 0.0, 0.1)))
+    stand = make_body(box_asset("stand", (0.5, 0.5, 0.6)), pose(np.eye(3), (1.1, 0.0, 0.0)))  # reaches 15 cm under the bed's end
+    bed.parent, stand.parent = BACKGROUND, -1
+    unsupport_blocked_pads([bed, stand])
+    assert bed.parent == BACKGROUND and bed.pad_rect_m is not None
+    assert bed.pad_rect_m[2] == pytest.approx(1.1 - 0.25)
+    # A neighbour filling the space under the bed's middle leaves it nothing to rest on.
+    under = make_body(box_asset("chest", (0.6, 2.0, 0.6)), pose(np.eye(3), (0.0, 0.0, 0.0)))
+    bed.parent, bed.pad_rect_m = BACKGROUND, None
+    unsupport_blocked_pads([bed, under])
+    assert bed.parent == UNSUPPORTED and "another object's" in bed.unsupported_reason
