@@ -52,11 +52,12 @@ def degenerate_meshes(draw):
     rng = np.random.default_rng(seed)
     if kind == "hull":
         import trimesh
+        from scipy.spatial import QhullError
 
         pts = rng.normal(size=(draw(st.integers(4, 40)), 3)) * extents
         try:
             hull = trimesh.convex.convex_hull(pts, qhull_options="QbB Pp Qt")
-        except Exception:  # noqa: BLE001 - qhull refuses flat sets in many ways; then a box stands in
+        except (QhullError, ValueError):  # qhull refuses some flat sets; then a box stands in
             hull = None
         v, f = (np.array(hull.vertices), np.array(hull.faces)) if hull is not None and len(hull.faces) >= 4 else _box(extents)
     else:
