@@ -250,7 +250,8 @@ def build_support(
             _, _, h, j, k = min(options)
             narrow = float(np.min(np.ptp(foot, axis=0))) if len(foot) else 0.0
             slender = b.asset.label not in STANDS_ON_LEGS and bottom - h > max(MAX_DROP_M, SLENDER_LEGS * narrow)
-            if j in (FLOOR, BACKGROUND) and (slender or (hidden_under and bottom - h > max(MAX_DROP_M, HIDDEN_OWN_SHARE * b.height_m))):
+            legged = b.asset.label in STANDS_ON_LEGS  # stands on its own (hidden) legs, not on a column
+            if j in (FLOOR, BACKGROUND) and (slender or (hidden_under and not legged and bottom - h > max(MAX_DROP_M, HIDDEN_OWN_SHARE * b.height_m))):
                 # Far above the floor or the background below, for its size: a static column
                 # from there up to its bottom stands in for the hidden support (it stays put when
                 # the object is picked up). Nearer (a bed's frame hidden by its own cover), or on
