@@ -62,6 +62,10 @@ class _Slider:
 
         spec = mujoco.MjSpec()
         body = spec.worldbody.add_body(name="pieces", mocap=True)
+        # Only distances are queried: an explicit inertial keeps MuJoCo from summing the pieces'
+        # own (sub-millimetre pieces far apart: 'inertia must have positive eigenvalues').
+        body.explicitinertial = True
+        body.mass, body.inertia = 1.0, [1.0, 1.0, 1.0]
         for k, v in enumerate(moving + statics):
             spec.add_mesh(name=f"p{k}", uservert=v.ravel().tolist())
             body.add_geom(type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"p{k}")

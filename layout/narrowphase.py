@@ -27,7 +27,11 @@ class ConvexWorld:
         spec = mujoco.MjSpec()
         body = spec.worldbody.add_body()
         body.name = "pieces"
-        body.mocap = True  # no inertia needed, geoms never simulated
+        body.mocap = True  # geoms never simulated
+        # An explicit inertial: else MuJoCo sums the pieces' own, and sub-millimetre pieces far
+        # apart fail its check ('inertia must have positive eigenvalues').
+        body.explicitinertial = True
+        body.mass, body.inertia = 1.0, [1.0, 1.0, 1.0]
         self.geom_ids: list[np.ndarray] = []
         g = 0
         for i, obj in enumerate(pieces):

@@ -102,3 +102,18 @@ def test_a_part_whose_only_piece_sits_inside_the_caged_object_keeps_it():
     assert caged(SHELF, [v for a, t in statics for v in _pieces(a, t)], WALL)
     # Before parts kept their last piece this raised ValueError (the handle cut away).
     assert uncage(SHELF, statics, WALL) is None
+
+
+def test_sub_millimetre_pieces_far_apart_are_measured_not_refused():
+    """Two 0.2 mm cubes (the smallest solid piece generation makes) 5 cm apart: MuJoCo summing
+    their own inertias refused the distance model ('inertia must have positive eigenvalues');
+    the cage check and the solver's narrow phase answer instead."""
+    from layout.geometry import Piece
+    from layout.narrowphase import ConvexWorld
+
+    speck = _box(np.zeros(3), np.full(3, 2e-4))
+    far = speck + np.array([0.05, 0.0, 0.0])
+    assert not caged([speck], [far], ())  # free to slide every way
+    pieces = [Piece(v, np.zeros((0, 2), np.int64), v.min(0), v.max(0), np.zeros((0, 2))) for v in (speck, far)]
+    world = ConvexWorld([tuple(pieces)])
+    assert world.model.ngeom == 2
