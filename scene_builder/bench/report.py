@@ -127,6 +127,20 @@ EXTRAS: tuple[Extra, ...] = (
         markdown=True,
     ),
     Extra(
+        "The twin from other viewpoints",
+        "The real multi-view frames of `../shared/data/multiview` (every verified pair: built from frame A, rendered at frame B's "
+        "pose) and procedural rooms rendered from two more cameras turned -30 / +30 degrees about the objects "
+        "(`scene_builder.bench.novel_view`): the share of the other view's valid true depth pixels within 10 %, median AbsRel, "
+        "coverage, PSNR / SSIM against its photo, split into pixels the input camera saw and did not see, beside the controls "
+        "'photo on a box' (the photo on the fitted floor, walls and ceiling) and 'everything background' (the build without its "
+        "objects); then the objects' shapes against the true primitives by the single-image 3D-FRONT protocol (CD-S, F-Score-S, "
+        "CD-O, F-Score-O, IoU-B, as MIDI's evaluation code computes them) beside the observed-shell control and the published "
+        "MIDI, CAST and Gen3DSR figures on 3D-FRONT.",
+        ("-m", "scene_builder.bench.novel_view", "--rooms", "4"),
+        markdown=True,
+        timeout_s=3600.0,
+    ),
+    Extra(
         "Parser fuzzing",
         "Every parser of outside data (`scene_builder.bench.fuzz`): PhysX geometry token decoders (strict and lenient), the "
         "PhysX text protocol, basic_info.json, scene.json, depth, camera.json and image files, on mutated real seeds. "
