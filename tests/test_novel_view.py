@@ -67,7 +67,7 @@ def test_relative_pose_follows_the_multiview_convention():
     measured 1.5-3 %: a few cm at these 1-8 m); the opposite reading of the poses
     (world-to-camera) does not."""
     from scene_builder.bench.novel_view import load_frame, relative_pose, verified_pairs
-    from scene_builder.bench.viewpoints import seen_from
+    from scene_builder.bench.viewpoints import HIDDEN, OUTSIDE, SEEN, visibility
 
     data = require(MULTIVIEW)
     pairs = verified_pairs(data)
@@ -84,11 +84,16 @@ def test_relative_pose_follows_the_multiview_convention():
         ok = d_a > 0
         return np.abs(z[ok] - d_a[ok]) / d_a[ok]
 
+    fa = load_frame(data / pairs[0][0])
+    same = visibility(fa.depth_m, fa.intrinsics, np.eye(4), fa.depth_m, fa.intrinsics)
+    assert np.array_equal(same == SEEN, fa.depth_m > 0)  # a camera sees all it measured
     for a, b in pairs:
         fa, fb = load_frame(data / a), load_frame(data / b)
         a_from_b = relative_pose(fa.world_from_camera, fb.world_from_camera)
-        seen = seen_from(fb.depth_m, fb.intrinsics, a_from_b, fa.depth_m, fa.intrinsics)
-        assert seen.sum() > 0.2 * (fb.depth_m > 0).sum()
+        labels = visibility(fb.depth_m, fb.intrinsics, a_from_b, fa.depth_m, fa.intrinsics)
+        valid = (fb.depth_m > 0).sum()
+        assert (labels == SEEN).sum() > 0.2 * valid
+        assert ((labels == SEEN) | (labels == HIDDEN) | (labels == OUTSIDE)).sum() == valid
         err = errors(a_from_b, fa, fb)
         assert np.median(err) < 0.05
         wrong = fa.world_from_camera @ np.linalg.inv(fb.world_from_camera)  # the poses read as world-to-camera
@@ -171,3 +176,26 @@ def test_view_orbit_writes_a_sheet_whose_views_differ_and_show_the_objects(tmp_p
         assert 0.005 < lit < 0.9  # the objects, on black: no walls, no floor
         assert np.abs(w - o).mean() > 5.0
     assert main(["view", str(tmp_path / "nothing"), "--orbit", str(png)]) == 3
+
+
+def test_pooled_view_figures_weigh_each_view_by_its_pixels():
+    from scene_builder.bench.novel_view import pooled
+
+    def score(n, w, seen_px, w_seen, absrel):
+        return {"valid_px": n, "within10": w, "absrel_median": absrel, "coverage": 1.0, "psnr_db": 20.0, "ssim": 0.5,
+                "seen_px": seen_px, "within10_seen": w_seen, "hidden_px": n - seen_px, "within10_hidden": 0.0, "outside_px": 0, "within10_outside": None}
+
+    p = pooled([score(100, 0.5, 50, 1.0, 0.1), score(300, 1.0, 300, 1.0, 0.3)])
+    assert p["within10"] == pytest.approx((50 + 300) / 400)
+    assert p["within10_seen"] == pytest.approx(1.0) and p["within10_hidden"] == pytest.approx(0.0)
+    assert p["seen_share"] == pytest.approx(350 / 400) and p["outside_share"] == 0.0
+    assert p["absrel_median"] == pytest.approx(0.2) and p["within10_outside"] is None
+
+
+def test_bench_novel_view_refuses_a_missing_data_folder_in_one_line(tmp_path: Path, capsys):
+    from scene_builder.cli import main
+
+    assert main(["bench", "--suite", "novel-view", "--data", str(tmp_path / "nope"), "--json", str(tmp_path / "nv.json")]) == 3
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "multi-view data folder" in err[0]
+    assert not (tmp_path / "nv.json").exists()

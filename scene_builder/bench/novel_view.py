@@ -23,7 +23,8 @@ View figures (:mod:`scene_builder.bench.viewpoints`): ``within10`` = pixels of B
 where the render is within 10 % of it / B's valid-depth pixels (pixels the twin does not cover
 are misses); ``absrel`` = median ``|d - d*| / d*`` over pixels both have; ``coverage``; PSNR / SSIM
 of the render against B's photo; ``within10`` split into B's pixels whose 3D point camera A saw
-(``seen``) and did not (``unseen``: what had to be completed).
+(``seen``), had in view but did not see (``hidden``: behind something, or no depth there; what
+completion must get right) and had out of view (``outside``: what one photo cannot show).
 
     .venv/bin/python -m scene_builder.bench.novel_view                  # both sets, Markdown on stdout
     .venv/bin/python -m scene_builder.bench.novel_view --sets multiview --json nv.json --keep /tmp/nv
@@ -163,13 +164,13 @@ def _method_files(result, work: Path) -> dict[str, Path]:
 
 
 def _score_views(files: dict[str, Path], cameras, truths) -> dict[str, list[dict]]:
-    """method -> one score dict per camera. truths: (depth_m, rgb, seen mask or None) per camera."""
+    """method -> one score dict per camera. truths: (depth_m, rgb, visibility labels or None) per camera."""
     from scene_builder.bench.viewpoints import render_mjcf, score_view
 
     out = {}
     for method, path in files.items():
         views = render_mjcf(path, cameras)
-        out[method] = [dataclasses.asdict(score_view(v, d, rgb, seen)) for v, (d, rgb, seen) in zip(views, truths)]
+        out[method] = [dataclasses.asdict(score_view(v, d, rgb, labels)) for v, (d, rgb, labels) in zip(views, truths)]
     return out
 
 
@@ -180,7 +181,7 @@ def _score_views(files: dict[str, Path], cameras, truths) -> dict[str, list[dict
 
 def run_multiview(data_dir: Path, work: Path, seed: int = 0, console=None) -> list[dict]:
     """Build every frame that starts a verified pair; score the twin and the controls at A's and B's poses."""
-    from scene_builder.bench.viewpoints import seen_from
+    from scene_builder.bench.viewpoints import visibility
 
     data_dir = Path(data_dir)
     pairs = verified_pairs(data_dir)
@@ -196,9 +197,9 @@ def run_multiview(data_dir: Path, work: Path, seed: int = 0, console=None) -> li
         for b in [p[1] for p in pairs if p[0] == a]:
             fb = frames_[b]
             a_from_b = relative_pose(fa.world_from_camera, fb.world_from_camera)
-            seen = seen_from(fb.depth_m, fb.intrinsics, a_from_b, fa.depth_m, fa.intrinsics)
+            labels = visibility(fb.depth_m, fb.intrinsics, a_from_b, fa.depth_m, fa.intrinsics)
             cameras = [(twin_from_cam_a, fa.intrinsics), (twin_from_cam_a @ a_from_b, fb.intrinsics)]
-            scores = _score_views(files, cameras, [(fa.depth_m, fa.rgb, None), (fb.depth_m, fb.rgb, seen)])
+            scores = _score_views(files, cameras, [(fa.depth_m, fa.rgb, None), (fb.depth_m, fb.rgb, labels)])
             rot = float(np.degrees(np.arccos(np.clip((np.trace(a_from_b[:3, :3]) - 1.0) / 2.0, -1.0, 1.0))))
             row = {
                 "a": a, "b": b, "rotation_deg": rot, "translation_m": float(np.linalg.norm(a_from_b[:3, 3])),
@@ -290,7 +291,7 @@ def run_procedural(rooms: int, work: Path, seed: int = 0, n_objects: int = 6, co
     from scene_builder.bench import metrics
     from scene_builder.bench.procedural import make_room
     from scene_builder.bench.render import orbit_cameras, render_room, render_views
-    from scene_builder.bench.viewpoints import seen_from
+    from scene_builder.bench.viewpoints import visibility
 
     rows = []
     for i in range(rooms):
@@ -304,9 +305,9 @@ def run_procedural(rooms: int, work: Path, seed: int = 0, n_objects: int = 6, co
         truths = render_views(spec, views)
         twin_from_truth = result.scene.camera.world_from_camera @ np.linalg.inv(spec.camera.world_from_camera)
         k = spec.camera.intrinsics
-        seen = [None] + [seen_from(t.depth_m, k, relative_pose(spec.camera.world_from_camera, c.world_from_camera), truths[0].depth_m, k) for c, t in zip(views[1:], truths[1:])]
+        labels = [None] + [visibility(t.depth_m, k, relative_pose(spec.camera.world_from_camera, c.world_from_camera), truths[0].depth_m, k) for c, t in zip(views[1:], truths[1:])]
         cameras = [(twin_from_truth @ c.world_from_camera, c.intrinsics) for c in views]
-        scores = _score_views(files, cameras, [(t.depth_m, t.rgb, s) for t, s in zip(truths, seen)])
+        scores = _score_views(files, cameras, [(t.depth_m, t.rgb, lab) for t, lab in zip(truths, labels)])
         # Shapes: true objects seen in the input view, matched to perceived ones by mask IoU.
         inst = truths[0].instances
         counts = np.bincount(inst.ravel(), minlength=len(spec.objects) + 1)
@@ -349,11 +350,16 @@ def _f(v, digits: int = 3) -> str:
 
 def pooled(scores: list[dict]) -> dict:
     """Pixel-pooled figures of several view scores: within10 and coverage over every valid true
-    pixel of them (seen / unseen likewise), the median of the per-view AbsRel medians, mean
-    PSNR / SSIM."""
+    pixel of them (seen / hidden / outside likewise, with their shares of the valid pixels), the
+    median of the per-view AbsRel medians, mean PSNR / SSIM."""
     def pool(share: str, den: str):
         n = sum(s[den] or 0 for s in scores if s.get(den))
         return sum((s[share] or 0.0) * s[den] for s in scores if s.get(den)) / n if n else None
+
+    def share(count: str):
+        if not any(s.get(count) is not None for s in scores):
+            return None
+        return sum(s.get(count) or 0 for s in scores) / max(sum(s["valid_px"] for s in scores), 1)
 
     med = [s["absrel_median"] for s in scores if s["absrel_median"] is not None]
     mean = (lambda k: float(np.mean([s[k] for s in scores if s[k] is not None])) if any(s[k] is not None for s in scores) else None)
@@ -361,9 +367,8 @@ def pooled(scores: list[dict]) -> dict:
         "views": len(scores),
         "valid_px": sum(s["valid_px"] for s in scores),
         "within10": pool("within10", "valid_px"),
-        "within10_seen": pool("within10_seen", "seen_px"),
-        "within10_unseen": pool("within10_unseen", "unseen_px"),
-        "unseen_share": (sum(s.get("unseen_px") or 0 for s in scores) / max(sum(s["valid_px"] for s in scores), 1)) if any(s.get("unseen_px") is not None for s in scores) else None,
+        **{f"within10_{k}": pool(f"within10_{k}", f"{k}_px") for k in ("seen", "hidden", "outside")},
+        **{f"{k}_share": share(f"{k}_px") for k in ("seen", "hidden", "outside")},
         "absrel_median": float(np.median(med)) if med else None,
         "coverage": pool("coverage", "valid_px"),
         "psnr_db": mean("psnr_db"),
@@ -396,12 +401,17 @@ def summarize(doc: dict) -> dict:
     return out
 
 
+def _shares(p: dict) -> str:
+    return (f"{_f(p['seen_share'], 2)} seen by the input camera, {_f(p['hidden_share'], 2)} in its view but hidden or unmeasured, "
+            f"{_f(p['outside_share'], 2)} out of its view")
+
+
 def _view_table(summary: dict, title: str) -> list[str]:
-    rows = [f"| {title} | within 10 % | seen / unseen by the input camera | AbsRel median | coverage | PSNR dB | SSIM |", "|---|---:|---|---:|---:|---:|---:|"]
+    rows = [f"| {title} | within 10 % | seen / hidden / out of view of the input camera | AbsRel median | coverage | PSNR dB | SSIM |", "|---|---:|---|---:|---:|---:|---:|"]
     names = {"twin": "twin", "box": "control: photo on a box", "background": "control: everything background"}
     for m in CONTROLS:
         s = summary[m]
-        rows.append(f"| {names[m]} | {_f(s['within10'])} | {_f(s['within10_seen'])} / {_f(s['within10_unseen'])} | {_f(s['absrel_median'])} | {_f(s['coverage'])} | {_f(s['psnr_db'], 1)} | {_f(s['ssim'], 2)} |")
+        rows.append(f"| {names[m]} | {_f(s['within10'])} | {_f(s['within10_seen'])} / {_f(s['within10_hidden'])} / {_f(s['within10_outside'])} | {_f(s['absrel_median'])} | {_f(s['coverage'])} | {_f(s['psnr_db'], 1)} | {_f(s['ssim'], 2)} |")
     return rows
 
 
@@ -412,14 +422,14 @@ def markdown(doc: dict) -> str:
     if "multiview" in s:
         mv = doc["multiview"]
         out += [f"**Real multi-view frames** (`{doc['multiview_data']}`): {len(mv)} verified pairs; denominators: every valid sensor-depth pixel of the other frame "
-                f"({sum(r['novel']['twin']['valid_px'] for r in mv)} pixels; {_f(s['multiview']['novel']['twin']['unseen_share'], 2)} of them unseen by the input camera).", ""]
+                f"({sum(r['novel']['twin']['valid_px'] for r in mv)} pixels: {_shares(s['multiview']['novel']['twin'])}).", ""]
         out += _view_table(s["multiview"]["novel"], "at the other frame's pose") + [""]
-        out += ["| pair | turn deg / move m | twin within 10 % (seen / unseen) | box | background | twin AbsRel | box AbsRel | background AbsRel | twin PSNR / SSIM | objects |",
+        out += ["| pair | turn deg / move m | twin within 10 % (seen / hidden / out of view) | box | background | twin AbsRel | box AbsRel | background AbsRel | twin PSNR / SSIM | objects |",
                 "|---|---|---|---:|---:|---:|---:|---:|---|---:|"]
         for r in mv:
             n = r["novel"]
             out.append(f"| {r['a'].split('_')[-1]} -> {r['b'].split('_')[-1]} | {r['rotation_deg']:.1f} / {r['translation_m']:.2f} | {_f(n['twin']['within10'])} "
-                       f"({_f(n['twin']['within10_seen'])} / {_f(n['twin']['within10_unseen'])}) | {_f(n['box']['within10'])} | {_f(n['background']['within10'])} | "
+                       f"({_f(n['twin']['within10_seen'])} / {_f(n['twin']['within10_hidden'])} / {_f(n['twin']['within10_outside'])}) | {_f(n['box']['within10'])} | {_f(n['background']['within10'])} | "
                        f"{_f(n['twin']['absrel_median'])} | {_f(n['box']['absrel_median'])} | {_f(n['background']['absrel_median'])} | "
                        f"{_f(n['twin']['psnr_db'], 1)} / {_f(n['twin']['ssim'], 2)} | {r['objects']} |")
         out += ["", "From each frame's own camera (the input view):", ""] + _view_table(s["multiview"]["own"], "at the input frame's pose") + [""]
@@ -428,7 +438,7 @@ def markdown(doc: dict) -> str:
         sp = s["procedural"]
         out += [f"**Procedural rooms** ({len(pr)} rooms, seeds {doc['seed']}..{doc['seed'] + len(pr) - 1}, {doc['n_objects']} objects asked each, every other room "
                 f"with sensor-like depth noise; two cameras turned -30 / +30 degrees about the objects; exact rendered truth; "
-                f"{sp['novel']['twin']['valid_px']} true pixels, {_f(sp['novel']['twin']['unseen_share'], 2)} of them unseen by the input camera).", ""]
+                f"{sp['novel']['twin']['valid_px']} true pixels: {_shares(sp['novel']['twin'])}).", ""]
         out += _view_table(sp["novel"], "at the orbit cameras") + [""]
         out += ["From the input camera:", ""] + _view_table(sp["own"], "at the input camera") + [""]
         sh = sp["shapes"]

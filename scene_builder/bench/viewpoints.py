@@ -32,8 +32,10 @@ Against a true view (depth, 0 where invalid; RGB): ``within10`` = pixels of vali
 where the twin's depth is within 10 % of it / pixels of valid true depth (a pixel the twin does
 not cover counts as a miss); ``absrel_median`` = median ``|d - d*| / d*`` over pixels both have;
 ``coverage`` = pixels both have / valid true pixels; PSNR and SSIM (scikit-image) of the RGB
-render against the true photo over the whole image. With a ``seen`` mask (true pixels whose 3D
-point the input camera saw, :func:`seen_from`), ``within10`` is split into seen and unseen.
+render against the true photo over the whole image. With the true view's :func:`visibility`
+from the input camera, ``within10`` is split into the pixels whose 3D point the input camera
+saw, had in view but did not see (hidden behind something, or no depth measured there: what
+completion has to get right) and had out of view (what one photo cannot show).
 """
 
 from __future__ import annotations
@@ -55,7 +57,7 @@ __all__ = [
     "photo_on_box",
     "render_mjcf",
     "score_view",
-    "seen_from",
+    "visibility",
 ]
 
 #: A pixel is right when its depth is within this share of the true depth.
@@ -199,15 +201,19 @@ def photo_on_box(scene: Scene, photo_rgb: np.ndarray) -> Scene:
 # --------------------------------------------------------------------------------------------
 
 
-def seen_from(depth_b_m: np.ndarray, k_b: CameraIntrinsics, a_from_b: np.ndarray, depth_a_m: np.ndarray, k_a: CameraIntrinsics) -> np.ndarray:
-    """(H_b, W_b) bool: pixels of view B with valid depth whose 3D point camera A saw: it
-    projects into A's image in front of A, where A has valid depth, at most :data:`SEEN_TOL`
-    beyond it (not hidden behind something A saw). ``a_from_b``: camera B's frame to camera A's."""
+#: Labels of :func:`visibility`.
+INVALID, SEEN, HIDDEN, OUTSIDE = 0, 1, 2, 3
+
+
+def visibility(depth_b_m: np.ndarray, k_b: CameraIntrinsics, a_from_b: np.ndarray, depth_a_m: np.ndarray, k_a: CameraIntrinsics) -> np.ndarray:
+    """(H_b, W_b) uint8 label of each pixel of view B as camera A saw its 3D point: :data:`SEEN`
+    (it projects into A's image in front of A, where A has valid depth, at most
+    :data:`SEEN_TOL` beyond it), :data:`HIDDEN` (in A's image but behind what A saw, or where A
+    measured nothing), :data:`OUTSIDE` (outside A's image or behind A), :data:`INVALID` (no true
+    depth in B). ``a_from_b``: camera B's frame to camera A's."""
     valid = depth_b_m > 0
-    pts_b = k_b.unproject(np.where(valid, depth_b_m, 0.0))[valid]
-    pts_a = frames.transform_points(a_from_b, pts_b)
+    pts_a = frames.transform_points(a_from_b, k_b.unproject(np.where(valid, depth_b_m, 0.0))[valid])
     z = pts_a[:, 2]
-    out = np.zeros(depth_b_m.shape, dtype=bool)
     front = z > 1e-3
     uv = np.full((len(z), 2), -1.0)
     uv[front] = k_a.project(pts_a[front])
@@ -216,15 +222,17 @@ def seen_from(depth_b_m: np.ndarray, k_b: CameraIntrinsics, a_from_b: np.ndarray
     d_a = np.zeros(len(z))
     d_a[inside] = depth_a_m[v[inside], u[inside]]
     seen = inside & (d_a > 0) & (z <= d_a * (1.0 + SEEN_TOL))
-    out[valid] = seen
+    out = np.full(depth_b_m.shape, INVALID, dtype=np.uint8)
+    out[valid] = np.where(seen, SEEN, np.where(inside, HIDDEN, OUTSIDE))
     return out
 
 
 @dataclass(frozen=True)
 class ViewScore:
     """One render against one true view (definitions in the module docstring). valid_px: the
-    denominator (pixels with valid true depth); seen_px / unseen_px: those the input camera saw /
-    did not see (None without a seen mask)."""
+    denominator (pixels with valid true depth); with visibility labels, ``within10`` again over
+    the valid pixels the input camera saw, had in view but did not see (hidden or unmeasured),
+    and had out of view, with their counts (None without labels)."""
 
     valid_px: int
     within10: float | None
@@ -234,12 +242,15 @@ class ViewScore:
     ssim: float | None
     seen_px: int | None = None
     within10_seen: float | None = None
-    unseen_px: int | None = None
-    within10_unseen: float | None = None
+    hidden_px: int | None = None
+    within10_hidden: float | None = None
+    outside_px: int | None = None
+    within10_outside: float | None = None
 
 
-def score_view(view: View, true_depth_m: np.ndarray, true_rgb: np.ndarray | None = None, seen: np.ndarray | None = None) -> ViewScore:
-    """Score ``view`` against the true depth (0 = invalid) and photo of the same camera."""
+def score_view(view: View, true_depth_m: np.ndarray, true_rgb: np.ndarray | None = None, labels: np.ndarray | None = None) -> ViewScore:
+    """Score ``view`` against the true depth (0 = invalid) and photo of the same camera;
+    ``labels``: :func:`visibility` of the true view from the input camera."""
     valid = np.asarray(true_depth_m) > 0
     n = int(valid.sum())
     pred = view.depth_m.astype(np.float64)
@@ -255,14 +266,11 @@ def score_view(view: View, true_depth_m: np.ndarray, true_rgb: np.ndarray | None
         psnr = float(peak_signal_noise_ratio(photo, view.rgb, data_range=255))
         ssim = float(structural_similarity(photo, view.rgb, channel_axis=2, data_range=255))
     extra = {}
-    if seen is not None:
-        s, u = valid & seen, valid & ~seen
-        extra = {
-            "seen_px": int(s.sum()),
-            "within10_seen": float((good & s).sum() / s.sum()) if s.any() else None,
-            "unseen_px": int(u.sum()),
-            "within10_unseen": float((good & u).sum() / u.sum()) if u.any() else None,
-        }
+    if labels is not None:
+        for name, label in (("seen", SEEN), ("hidden", HIDDEN), ("outside", OUTSIDE)):
+            sel = valid & (labels == label)
+            extra[f"{name}_px"] = int(sel.sum())
+            extra[f"within10_{name}"] = float((good & sel).sum() / sel.sum()) if sel.any() else None
     return ViewScore(
         valid_px=n,
         within10=float(good.sum() / n) if n else None,
