@@ -30,6 +30,10 @@ ORBIT_DEG = (-30.0, 30.0)
 #: down at this elevation.
 ORBIT_RAISE_DEG = 15.0
 TOP_ELEVATION_DEG = -75.0
+#: The orbit cameras stand this many times the input camera's distance from the objects, the
+#: view from above TOP_DISTANCE times: far enough to show the room around them.
+ORBIT_DISTANCE = 1.5
+TOP_DISTANCE = 2.0
 #: Each panel of the sheet is the render scaled by this factor.
 PANEL_SCALE = 0.5
 TITLES = ("photo", "input camera", "orbit -30 deg", "orbit +30 deg", "from above")
@@ -86,7 +90,7 @@ def orbit_views(mjcf_path: Path) -> tuple[list[np.ndarray], list[np.ndarray]]:
         c.distance, c.azimuth, c.elevation = distance, az, el
         return c
 
-    cameras = [cid] + [free(az0 + a, el0 - ORBIT_RAISE_DEG, dist * 1.1) for a in ORBIT_DEG] + [free(az0, TOP_ELEVATION_DEG, dist * 1.5)]
+    cameras = [cid] + [free(az0 + a, el0 - ORBIT_RAISE_DEG, dist * ORBIT_DISTANCE) for a in ORBIT_DEG] + [free(az0, TOP_ELEVATION_DEG, dist * TOP_DISTANCE)]
     whole, objects = [], []
     objects_only = mujoco.MjvOption()
     objects_only.geomgroup[:] = 0
@@ -125,12 +129,17 @@ def orbit_sheet(out_dir: Path, png: Path) -> Path:
     bottom = [None, *objects]
     sheet = Image.new("RGB", (pw * len(top), ph * 2), (255, 255, 255))
     draw = ImageDraw.Draw(sheet)
+    def title(x: int, y: int, text: str) -> None:
+        box = draw.textbbox((x, y), text)
+        draw.rectangle((box[0] - 3, box[1] - 2, box[2] + 3, box[3] + 2), fill=(0, 0, 0))
+        draw.text((x, y), text, fill=(255, 255, 0))
+
     for i, (a, b) in enumerate(zip(top, bottom)):
         sheet.paste(Image.fromarray(a).resize((pw, ph), Image.LANCZOS), (i * pw, 0))
-        draw.text((i * pw + 6, 4), TITLES[i], fill=(255, 255, 0))
+        title(i * pw + 6, 4, TITLES[i])
         if b is not None:
             sheet.paste(Image.fromarray(b).resize((pw, ph), Image.LANCZOS), (i * pw, ph))
-            draw.text((i * pw + 6, ph + 4), TITLES[i] + ", objects only", fill=(255, 255, 0))
+            title(i * pw + 6, ph + 4, TITLES[i] + ", objects only")
     draw.text((6, ph + 4), "whole twin above,\nobjects alone below", fill=(0, 0, 0))
     png = Path(png)
     png.parent.mkdir(parents=True, exist_ok=True)
