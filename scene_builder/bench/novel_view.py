@@ -316,7 +316,7 @@ def run_procedural(rooms: int, work: Path, seed: int = 0, n_objects: int = 6, co
         perception = result.perception
         ids = [o.object_id for o in spec.objects]
         m = metrics.match_by_mask_iou(metrics.mask_iou_matrix([o.mask for o in perception.objects], inst, ids))
-        matched = [(perception.objects[p].name, spec.objects[t].name) for p, t in m.pairs]
+        matched = [(perception.objects[p].name, spec.objects[t].name) for p, t in m.pairs if spec.objects[t].name in true_pts]
         truth_from_twin = np.linalg.inv(twin_from_truth)
         shapes = {
             "twin": _shapes(_scene_object_points(result.scene, truth_from_twin, seed), true_pts, matched),
