@@ -210,7 +210,8 @@ def visibility(depth_b_m: np.ndarray, k_b: CameraIntrinsics, a_from_b: np.ndarra
     (it projects into A's image in front of A, where A has valid depth, at most
     :data:`SEEN_TOL` beyond it), :data:`HIDDEN` (in A's image but behind what A saw, or where A
     measured nothing), :data:`OUTSIDE` (outside A's image or behind A), :data:`INVALID` (no true
-    depth in B). ``a_from_b``: camera B's frame to camera A's."""
+    depth in B). ``a_from_b``: camera B's frame to camera A's. What A saw is its depth map (the
+    real frames have no mesh to ray cast against), so this is a z-test against that map."""
     valid = depth_b_m > 0
     pts_a = frames.transform_points(a_from_b, k_b.unproject(np.where(valid, depth_b_m, 0.0))[valid])
     z = pts_a[:, 2]
