@@ -37,6 +37,7 @@ import argparse
 import dataclasses
 import datetime
 import json
+import sys
 import tempfile
 import time
 from dataclasses import dataclass
@@ -44,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scene_builder.model import Camera, CameraIntrinsics
+from scene_builder.model import CameraIntrinsics
 
 __all__ = [
     "CONTROLS",
@@ -517,7 +518,7 @@ def main(argv: list[str] | None = None) -> int:
     except SceneBuilderError as err:
         console.print(f"error: {err}")
         return err.exit_code
-    doc["command"] = "python -m scene_builder.bench.novel_view " + " ".join(argv if argv is not None else __import__("sys").argv[1:])
+    doc["command"] = "python -m scene_builder.bench.novel_view " + " ".join(argv if argv is not None else sys.argv[1:])
     if args.json:
         args.json.write_text(json.dumps(doc, indent=1, default=str) + "\n")
     print(markdown(doc))

@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from scene_builder import frames
-from scene_builder.model import Background, Camera, CameraIntrinsics, Plane, Room, Scene, Texture, TriangleMesh
+from scene_builder.model import Background, CameraIntrinsics, Plane, Room, Scene, Texture, TriangleMesh
 
 __all__ = [
     "REL_TOL",
@@ -281,10 +281,6 @@ def score_view(view: View, true_depth_m: np.ndarray, true_rgb: np.ndarray | None
         ssim=ssim,
         **extra,
     )
-
-
-def _camera(world_from_camera: np.ndarray, k: CameraIntrinsics) -> Camera:
-    return Camera(k, np.asarray(world_from_camera, dtype=np.float64))
 
 
 # --------------------------------------------------------------------------------------------
