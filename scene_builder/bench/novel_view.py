@@ -490,7 +490,21 @@ def run(sets=("multiview", "procedural"), rooms: int = 4, seed: int = 0, data_di
     doc["seconds"] = time.perf_counter() - t0
     doc["machine"] = machine_description()
     doc["date"] = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+    doc["commit"] = _commit()
     return doc
+
+
+def _commit() -> str:
+    """The short commit of the code measured (``?`` outside a git checkout), so a figure in the
+    README names the code that produced it."""
+    import subprocess
+
+    try:
+        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=Path(__file__).resolve().parents[2],
+                             capture_output=True, text=True, timeout=10, check=False).stdout.strip()
+    except OSError:
+        out = ""
+    return out or "?"
 
 
 def main(argv: list[str] | None = None) -> int:
