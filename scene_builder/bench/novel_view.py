@@ -477,7 +477,8 @@ def run(sets=("multiview", "procedural"), rooms: int = 4, seed: int = 0, data_di
         raise InputError(f"multi-view data folder {data_dir} not found; pass --data with the ../shared/data/multiview layout")
     if "procedural" in sets and rooms < 1:
         raise InputError(f"--rooms must be at least 1, got {rooms}")
-    doc: dict = {"sets": list(sets), "seed": seed, "n_objects": n_objects, "multiview_data": str(data_dir)}
+    # the commit when the run starts: the code imported is the code measured
+    doc: dict = {"sets": list(sets), "seed": seed, "n_objects": n_objects, "multiview_data": str(data_dir), "commit": _commit()}
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="sb-novel-view-") as tmp:
         root = Path(keep) if keep is not None else Path(tmp)
@@ -490,7 +491,6 @@ def run(sets=("multiview", "procedural"), rooms: int = 4, seed: int = 0, data_di
     doc["seconds"] = time.perf_counter() - t0
     doc["machine"] = machine_description()
     doc["date"] = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
-    doc["commit"] = _commit()
     return doc
 
 
