@@ -352,7 +352,9 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     room = frame.room
     if config.background:
         from perception.background import observed_background
+        from perception.room import ceiling_plane
 
-        room = Room(walls=room.walls, background=observed_background(observation, camera, room.walls, tuple(objects), config.max_depth_m, removed=removed))
+        bg = observed_background(observation, camera, room.walls, tuple(objects), config.max_depth_m, removed=removed, ceiling=ceiling_plane(frame))
+        room = Room(walls=room.walls, background=bg)
     return Perception(observation, camera, room, tuple(objects), tuple(backends), removed_mask=removed)
 

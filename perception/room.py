@@ -34,6 +34,7 @@ __all__ = [
     "TYPICAL_PITCH_DEG",
     "CameraPlane",
     "RoomFrame",
+    "ceiling_plane",
     "estimate_room",
     "inlier_threshold_m",
     "place_floor_under",
@@ -438,6 +439,24 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0, up_h
         gravity=gravity,
         planes=tuple(cam_planes),
     )
+
+
+def ceiling_plane(frame: RoomFrame) -> Plane | None:
+    """The ceiling found (if any) as a horizontal world plane, normal down (into the room), at the
+    height where the fitted plane passes over the camera."""
+    for p in frame.planes:
+        if p.kind != "ceiling":
+            continue
+        rot, t = frame.world_from_camera[:3, :3], frame.world_from_camera[:3, 3]
+        n = rot @ p.normal
+        off = p.offset_m - n @ t
+        if abs(n[2]) < 1e-6:
+            return None
+        z = -(off + n[0] * t[0] + n[1] * t[1]) / n[2]
+        if z <= t[2]:
+            return None
+        return Plane(np.array([0.0, 0.0, -1.0]), float(z), "ceiling", int(p.inliers.sum()))
+    return None
 
 
 def place_floor_under(frame: RoomFrame, lowest_z_m: float) -> RoomFrame:
