@@ -36,6 +36,7 @@ __all__ = [
     "RoomFrame",
     "ceiling_plane",
     "estimate_room",
+    "vertical_plane_candidates",
     "inlier_threshold_m",
     "place_floor_under",
     "world_from_camera_for",
@@ -50,6 +51,15 @@ WALL_MIN_WIDTH_M = 1.0
 WALL_MIN_TOP_M = 1.5
 #: Downward pitch assumed when nothing in the image tells where gravity points.
 TYPICAL_PITCH_DEG = 10.0
+#: Surface normals (open3d) for wall candidates: voxel size, neighbourhood radius; a wall point's
+#: normal lies within WALL_NORMAL_TILT_DEG of horizontal and of its wall's normal.
+NORMAL_VOXEL_M = 0.03
+NORMAL_RADIUS_M = 0.1
+WALL_NORMAL_TILT_DEG = 12.0
+CANDIDATE_SHARE = 0.2
+#: A vertical plane parallel to a wall found and this close to it is the same wall (a curtain
+#: hung in front of it, the wall's skirting) and is not added again.
+WALL_MERGE_M = 0.5
 #: Points sampled for RANSAC (seeded); planes are refined on all points afterwards.
 RANSAC_SAMPLES = 10_000
 _RANSAC_THRESHOLD_M = 0.025
@@ -209,6 +219,63 @@ def _refine(
             n_new, d_new = -n_new, -d_new
         n, d = n_new, d_new
     return n, d, np.abs(points @ n + d) < thr
+
+
+def vertical_plane_candidates(points_cam: np.ndarray, up: np.ndarray, min_points: int) -> list[tuple[np.ndarray, float, int]]:
+    """Vertical planes (normal, offset, support) in the camera frame, normals towards the camera,
+    from the points' surface normals: the directions where many horizontal normals agree
+    (peaks of their azimuths), then, along each, the offsets where many of those points lie
+    (peaks of a 2 cm histogram). RANSAC on a random subsample misses a wall seen edge-on or far
+    away (few points, spread by depth noise); the normals of its points still agree.
+
+    Normals by open3d (``estimate_normals`` on a 3 cm voxel grid, oriented towards the camera).
+    """
+    import open3d as o3d
+
+    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points_cam, dtype=np.float64)))
+    pc = pc.voxel_down_sample(NORMAL_VOXEL_M)
+    pc.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=NORMAL_RADIUS_M, max_nn=30))
+    pc.orient_normals_towards_camera_location(np.zeros(3))
+    q, nrm = np.asarray(pc.points), np.asarray(pc.normals)
+    if len(q) == 0:
+        return []
+    scale = len(points_cam) / len(q)  # voxels stand for this many points each, on average
+    horizontal = np.abs(nrm @ up) < np.sin(np.radians(WALL_NORMAL_TILT_DEG))
+    if horizontal.sum() < 3:
+        return []
+    a = _unit(np.cross(up, [1.0, 0.0, 0.0]) if abs(up[0]) < 0.9 else np.cross(up, [0.0, 0.0, 1.0]))
+    b = np.cross(up, a)
+    az = np.degrees(np.arctan2(nrm[horizontal] @ b, nrm[horizontal] @ a)) % 360.0
+    hist = np.bincount(np.floor(az).astype(np.int64) % 360, minlength=360).astype(np.float64)
+    smooth = np.convolve(np.concatenate([hist[-4:], hist, hist[:4]]), np.ones(9), mode="valid")
+    out = []
+    # Candidates only: the caller counts the plane's inliers among all points (within the depth
+    # noise, which spreads a far wall over many 2 cm bins) and decides.
+    min_voxels = CANDIDATE_SHARE * min_points / scale
+    for k in np.argsort(-smooth):
+        if smooth[k] < min_voxels:
+            break
+        if smooth[k] < smooth[(k - 1) % 360] or smooth[k] < smooth[(k + 1) % 360]:
+            continue
+        ang = np.radians(k + 0.5)
+        d = np.cos(ang) * a + np.sin(ang) * b
+        sel = horizontal & (nrm @ d > np.cos(np.radians(WALL_NORMAL_TILT_DEG)))
+        if sel.sum() < min_voxels:
+            continue
+        d = _unit(nrm[sel].sum(axis=0) - (nrm[sel].sum(axis=0) @ up) * up)
+        off = -(q[sel] @ d)  # plane d . p + off = 0; off > 0: the camera is on the normal's side
+        bins = np.arange(off.min() - 0.02, off.max() + 0.04, 0.02)
+        h, edges = np.histogram(off, bins=bins)
+        hs = np.convolve(h, [1, 2, 1], mode="same") / 2.0
+        for i in np.argsort(-hs):
+            if hs[i] < min_voxels:
+                break
+            if (i > 0 and hs[i - 1] > hs[i]) or (i + 1 < len(hs) and hs[i + 1] > hs[i]):
+                continue
+            o = float(0.5 * (edges[i] + edges[i + 1]))
+            if o > 0:
+                out.append((d, o, int(hs[i] * scale)))
+    return out
 
 
 def _manhattan_up(planes: list[tuple[np.ndarray, float, int]], image_up: np.ndarray, cos_max: float) -> np.ndarray | None:
@@ -397,7 +464,10 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0, up_h
     on_floor = (pts @ up + height) < thr  # on or under the floor
     rows, cols = idx // w, idx % w
     min_wall = max(200, int(_MIN_PLANE_FRACTION * len(pts)))
-    for n0, d0, _ in sorted(planes, key=lambda p: -p[2]) if floor_found else ():
+    candidates = sorted(planes, key=lambda p: -p[2])
+    if floor_found:
+        candidates += vertical_plane_candidates(pts, up, min_wall)
+    for n0, d0, _ in candidates if floor_found else ():
         if abs(n0 @ up) < sin_wall:
             n = _unit(n0 - (n0 @ up) * up)
             _, _, inl = _refine(pts, thr, n, d0, seed, iterations=1)
@@ -416,7 +486,7 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0, up_h
                 continue
             if not _is_wall(pts @ np.cross(up, n), dist, thr, inl, rows, cols, h, w):
                 continue
-            if any(p.kind == "wall" and abs(p.normal @ n) > np.cos(np.radians(5.0)) and abs(p.offset_m - d) < 0.1 for p in cam_planes):
+            if any(p.kind == "wall" and abs(p.normal @ n) > np.cos(np.radians(5.0)) and abs(p.offset_m - d) < WALL_MERGE_M for p in cam_planes):
                 continue
             cam_planes.append(CameraPlane(n, d, "wall", to_image(inl)))
         elif -(n0 @ up) > cos_floor:
