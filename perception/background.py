@@ -225,14 +225,15 @@ def observed_background(
     keep_stretched: bool = False,
     max_nodes: int = MAX_NODES,
     removed: np.ndarray | None = None,
-    ceiling: Plane | None = None,
+    extra_planes: tuple[Plane, ...] = (),
     complete_room: bool = True,
 ) -> Background:
     """The static background of an observation (see the module docstring).
 
     removed: None, or (H, W) bool pixels of people and animals: like an object's, they are filled
     with what lies behind them and their colour is inpainted (:mod:`perception.people`).
-    ceiling: the ceiling plane (world frame, normal down) when one was found.
+    extra_planes: more of the room's planes (world frame) for its completion: the ceiling (normal
+    down) and walls seen only in part (``perception.room.completion_planes``).
     complete_room: add the room's planes where the photo does not show them
     (:mod:`perception.room_surfaces`); False keeps the grid alone (grid faces hidden behind
     objects included).
@@ -253,7 +254,9 @@ def observed_background(
     v = np.linspace(-0.5, h - 0.5, nv)
     ui = np.clip(np.round(u).astype(int), 0, w - 1)
     vi = np.clip(np.round(v).astype(int), 0, h - 1)
-    planes = [FLOOR, *walls, *([ceiling] if ceiling is not None else [])]
+    planes = [FLOOR, *walls, *extra_planes]
+    side = tuple(walls) + tuple(p for p in extra_planes if p.kind == "wall")
+    ceiling = next((p for p in extra_planes if p.kind == "ceiling"), None)
 
     depth = np.asarray(observation.depth_m, dtype=np.float64)
     depth = np.where((depth > 0) & (depth < max_depth_m), depth, 0.0)
@@ -268,7 +271,7 @@ def observed_background(
     far = float(depth.max()) if np.any(depth > 0) else 10.0
     shown = plane_labels(px_world, depth, px_rays, camera, planes, obj_px, MAX_FILL_FACTOR * far)
     seen_pts = px_world[depth > 0]
-    footprint = room_surfaces.room_footprint(seen_pts, camera.world_from_camera[:2, 3], tuple(walls)) if complete_room else None
+    footprint = room_surfaces.room_footprint(seen_pts, camera.world_from_camera[:2, 3], side) if complete_room else None
     # Object depth at each node (for the "behind" bound): the nearest object pixel of the cell.
     node_depth = depth[np.ix_(vi, ui)]
     valid = node_depth > 0
@@ -285,7 +288,7 @@ def observed_background(
         lower = np.where(node_obj & ~valid, med + BEHIND_MARGIN_M, lower)
     uu, vv = np.meshgrid(u, v)
     rays = np.stack([(uu - k.cx_px) / k.fx_px, (vv - k.cy_px) / k.fy_px, np.ones_like(uu)], axis=-1)
-    filled = fill_depth_behind(np.where(valid, node_depth, 0.0), need, lower, rays, camera, tuple(walls) + ((ceiling,) if ceiling is not None else ()), footprint)
+    filled = fill_depth_behind(np.where(valid, node_depth, 0.0), need, lower, rays, camera, tuple(planes[1:]), footprint)
     t_planes = _plane_depths(rays.reshape(-1, 3), camera, planes).reshape(len(planes), nv, nu)
     # Observed nodes on a room plane lie on it exactly (the plane is the fit of many noisy points).
     node_shown = shown[np.ix_(vi, ui)]
