@@ -18,10 +18,12 @@ from layout.support import BACKGROUND, UNSUPPORTED, pad_box
 from scene_builder.model import AssetKind, Background, Plane, TriangleMesh
 
 
-def _pad_frame(b: Body) -> tuple[np.ndarray, float, float, float]:
+def _pad_frame(b: Body, legs_pending: bool = False) -> tuple[np.ndarray, float, float, float]:
     """The pad under ``b``: its rectangle (lo_x, lo_y, hi_x, hi_y) in ``b``'s yawed axes relative
-    to its position, its yaw, and its height band (bottom, top less the carve clearance)."""
-    centre, half, yaw = pad_box(b, b.bottom_m)
+    to its position, its yaw, and its height band (bottom, top less the carve clearance). The pad's
+    top is where ``b`` rests: its bottom, less its legs when they are still to be made
+    (``legs_pending``)."""
+    centre, half, yaw = pad_box(b, b.bottom_m - (b.legs_m if legs_pending else 0.0))
     c, s = np.cos(yaw), np.sin(yaw)
     mid = (centre[:2] - b.position_m[:2]) @ np.array([[c, -s], [s, c]])
     rect = np.concatenate([mid - half[:2], mid + half[:2]])
@@ -33,33 +35,42 @@ def _obstacles(b: Body, bodies: list[Body]) -> list[np.ndarray]:
     return [p.verts_rel_m + o.position_m for o in bodies if o is not b for p in o.pieces]
 
 
-def _pad_blocked(b: Body, bodies: list[Body]) -> bool:
+def _pad_blocked(b: Body, bodies: list[Body], legs_pending: bool = False) -> bool:
     """Whether the pad under ``b`` (resting on the background) reaches into another body's
     pieces (their extent in the pad's axes, within its height band)."""
-    rect, yaw, z_lo, z_hi = _pad_frame(b)
+    rect, yaw, z_lo, z_hi = _pad_frame(b, legs_pending)
     return clip_pad(rect, yaw, b.position_m, z_lo, z_hi, _obstacles(b, bodies), np.zeros(2), 0.0, probe=True) is None
 
 
-def unsupport_blocked_pads(bodies: list[Body]) -> None:
+def unsupport_blocked_pads(bodies: list[Body]) -> set[str]:
     """A body resting on the background whose pad would reach into another body (one placed
     after it in the support graph, e.g. overlapping it from the side) gets its pad cut back clear
-    of it (``layout.background.clip_pad``, keeping its centre of mass over the pad); only when no
-    cut does is it left where it was seen (``UNSUPPORTED``), like any object with nothing under
-    it; what rests on it then rests on the background."""
+    of it (``layout.background.clip_pad``, keeping its centre of mass over the pad); furniture on
+    legs for which no cut does stands on legs down to the floor instead (a desk over a cabinet
+    seen under it); only then is it left where it was seen (``UNSUPPORTED``), like any object
+    with nothing under it; what rests on it then rests on the background. Called before the legs
+    are made (``Body.legs_m`` still to come). Returns the names of the bodies now on the floor."""
     from layout.pushes import support_inset_m
+    from layout.support import FLOOR, LEGS_MAX_DROP_M, STANDS_ON_LEGS
 
+    to_floor = set()
     for b in bodies:
-        if b.parent != BACKGROUND or not _pad_blocked(b, bodies):
+        if b.parent != BACKGROUND or not _pad_blocked(b, bodies, legs_pending=True):
             continue
-        rect, yaw, z_lo, z_hi = _pad_frame(b)
+        rect, yaw, z_lo, z_hi = _pad_frame(b, legs_pending=True)
         c, s = np.cos(yaw), np.sin(yaw)
         com = b.com_rel_m[:2] @ np.array([[c, -s], [s, c]])
         clipped = clip_pad(rect, yaw, b.position_m, z_lo, z_hi, _obstacles(b, bodies), com, support_inset_m(b))
         if clipped is not None:
             b.pad_rect_m = clipped
             continue
+        if b.asset.label in STANDS_ON_LEGS and 0.0 < b.bottom_m <= LEGS_MAX_DROP_M:
+            b.parent, b.support_surface, b.legs_m, b.pad_bottom_m, b.pad_rect_m = FLOOR, -1, b.bottom_m, None, None
+            to_floor.add(b.name)
+            continue
         b.parent = UNSUPPORTED
         b.unsupported_reason = "what is under it is another object's, with no face to rest on"
+    return to_floor
 
 
 def unsupport_in_walls(solver: Solver, max_push_m: float) -> None:

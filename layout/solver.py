@@ -194,6 +194,10 @@ def solve_layout_with_stats(
     ground = BackgroundSupport(background, walls)
     hidden = HiddenBelow(perception.observation, perception.camera)
     edges, _ = build_support(bodies, walls, solver.vertical_clash, ground.height_under if background is not None else None, config.max_lower_m, hidden)
+    # Pads under bodies resting on the background are cut back clear of their neighbours (legged
+    # furniture whose pad cannot be stands on legs down to the floor) before the legs are made.
+    to_floor = unsupport_blocked_pads(bodies)
+    edges = [dataclasses.replace(e, parent="floor") if e.child in to_floor else e for e in edges]
     for i, b in enumerate(bodies):
         if b.legs_m > 0.0 and b.parent != UNSUPPORTED:
             bodies[i] = with_legs(b)
@@ -202,7 +206,6 @@ def solve_layout_with_stats(
     # Completions reaching into a wall are cut at it before anything is judged to be in one.
     if _trim_walls(solver, {g.asset.name: g.observed_points_world_m for g in generated}, float(config.clearance_m)):
         solver = Solver(bodies, walls, config, seed)
-    unsupport_blocked_pads(bodies)
     unsupport_in_walls(solver, config.max_wall_push_m)
     absorbed = [i for i, b in enumerate(bodies) if b.parent == UNSUPPORTED]
     for i in absorbed:
@@ -214,8 +217,9 @@ def solve_layout_with_stats(
     for i, b in enumerate(bodies):
         solver.world.set_position(i, b.position_m)
     lap("support")
+    observed = {g.asset.name: g.observed_points_world_m for g in generated}
     for _ in range(TRIM_PASSES):  # a cut changes the pieces: look again
-        if not _trim_overlaps(solver, {g.asset.name: g.observed_points_world_m for g in generated}):
+        if not _trim_overlaps(solver, observed):
             break
         solver = Solver(bodies, walls, config, seed)
     lap("trim")
