@@ -339,10 +339,11 @@ def plane_surfaces(
 
 
 def pack_atlas(images: list[np.ndarray], pad_px: int = 2) -> tuple[np.ndarray, list[tuple[int, int]]]:
-    """Shelf-pack (h, w, 3) images into one (tallest first, rows left to right); each keeps a
-    border of ``pad_px`` edge-replicated texels so that filtering does not bleed between them.
-    Returns the atlas and each image's (row, column) of its top-left texel."""
-    order = sorted(range(len(images)), key=lambda i: (-images[i].shape[0], i))
+    """Shelf-pack (h, w, 3) images into one (the first, the photo, at the top left: its texels
+    start at (pad_px, pad_px) whatever the others' sizes; the rest tallest first, rows left to
+    right); each keeps a border of ``pad_px`` edge-replicated texels so that filtering does not
+    bleed between them. Returns the atlas and each image's (row, column) of its top-left texel."""
+    order = [0] + sorted(range(1, len(images)), key=lambda i: (-images[i].shape[0], i)) if images else []
     width = max(max(im.shape[1] for im in images) + 2 * pad_px, 1)
     width = max(width, int(np.ceil(np.sqrt(sum((im.shape[0] + 2 * pad_px) * (im.shape[1] + 2 * pad_px) for im in images)))))
     pos: list[tuple[int, int]] = [(0, 0)] * len(images)

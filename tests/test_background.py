@@ -187,3 +187,16 @@ def test_texture_keeps_the_full_resolution_photo():
     assert tex.shape == full.shape
     mask_full = np.repeat(np.repeat(board.mask, 3, axis=0), 3, axis=1)
     np.testing.assert_array_equal(tex[~mask_full], full[~mask_full])
+
+
+def test_pack_atlas_keeps_the_photo_at_the_top_left_and_every_image_whole():
+    """The photo (first image) starts at (pad, pad) even beside a taller plane texture, and every
+    image is found unchanged at the position returned."""
+    from perception.room_surfaces import pack_atlas
+
+    rng = np.random.default_rng(0)
+    images = [rng.integers(0, 256, (s, t, 3), dtype=np.uint8) for s, t in ((20, 30), (50, 10), (5, 40), (20, 20))]
+    atlas, pos = pack_atlas(images)
+    assert pos[0] == (2, 2)
+    for im, (r, c) in zip(images, pos):
+        assert np.array_equal(atlas[r : r + im.shape[0], c : c + im.shape[1]], im)
