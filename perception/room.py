@@ -60,8 +60,8 @@ TYPICAL_PITCH_DEG = 10.0
 #: Height of the camera above a floor it does not see, unless something seen lies lower: the
 #: median of the 17 RGB-D frames with a floor in ../shared/data (0.99-1.67 m, median 1.27 m).
 CAMERA_HEIGHT_PRIOR_M = 1.3
-#: Surface normals for wall candidates (grid_normals: window and stride in pixels; open3d's for
-#: the comparison: voxel size, neighbourhood radius); a wall point's
+#: Surface normals for wall candidates (open3d's, what builds use: voxel size, neighbourhood
+#: radius; grid_normals, the measured alternative: window and stride in pixels); a wall point's
 #: normal lies within WALL_NORMAL_TILT_DEG of horizontal and of its wall's normal.
 NORMAL_VOXEL_M = 0.03
 NORMAL_RADIUS_M = 0.1
@@ -249,11 +249,12 @@ def grid_normals(points_cam: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray,
     the camera) on every NORMAL_STRIDE_PX-th pixel, from the points averaged over
     NORMAL_WINDOW_PX windows (depth noise) and differenced across the window.
 
-    Hand-written rather than open3d's ``estimate_normals``: the depth map is a grid, so the
-    neighbours are known without a KD-tree; on the multiview frames this takes about 30 ms where
-    open3d's (3 cm voxels, 10 cm radius) took about 0.5 s plus 1.5-3 s to import open3d (its
-    package import loads its plotting stack), and both give the same walls
-    (``python -m scene_builder.bench.room_planes``)."""
+    The alternative to open3d's ``estimate_normals`` (the depth map is a grid, so the neighbours
+    are known without a KD-tree), measured against it by ``python -m scene_builder.bench.room_planes``
+    on the 17 RGB-D frames of ../shared/data (2 loaded cores): median 0.12 s against 0.58 s, and
+    no open3d import (2.7 s); but the same walls on only 11 of 17 frames, and it misses the far
+    right walls of multiview frames 3 and 5 that open3d's normals find (a 7-pixel window is a few
+    cm on a far wall: too noisy). So builds use open3d's (:func:`open3d_normals`)."""
     import cv2
 
     p = np.where(valid[..., None], points_cam, 0.0).astype(np.float32)
@@ -280,8 +281,7 @@ def grid_normals(points_cam: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray,
 
 def open3d_normals(points_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """((N, 3) points, (N, 3) normals towards the camera) by open3d on a NORMAL_VOXEL_M voxel
-    grid (``estimate_normals``, NORMAL_RADIUS_M): the library's answer, for the comparison in
-    ``scene_builder.bench.room_planes``."""
+    grid (``estimate_normals``, NORMAL_RADIUS_M): what builds use for the wall candidates."""
     import open3d as o3d
 
     pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points_cam, dtype=np.float64).reshape(-1, 3)))
@@ -457,15 +457,15 @@ def _world_walls(world_from_camera: np.ndarray, planes: list[CameraPlane]) -> tu
     return tuple(walls)
 
 
-def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0, up_hint: np.ndarray | None = None, normals: str = "grid") -> RoomFrame:
+def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0, up_hint: np.ndarray | None = None, normals: str = "open3d") -> RoomFrame:
     """Find gravity, floor, walls and ceiling.
 
     points_cam: (H, W, 3) float64 camera-frame points (from ``CameraIntrinsics.unproject``).
     valid: (H, W) bool, pixels with usable depth.
     up_hint: (3,) up in the camera frame measured by the depth estimator (vanishing points), used
     when no floor is visible (before the vertical-planes and camera-prior fallbacks).
-    normals: "grid" (:func:`grid_normals`) or "open3d" (:func:`open3d_normals`) for the wall
-    candidates.
+    normals: "open3d" (:func:`open3d_normals`, the default) or "grid" (:func:`grid_normals`, the
+    measured alternative) for the wall candidates.
     """
     h, w = valid.shape
     idx = np.flatnonzero(valid.reshape(-1))
