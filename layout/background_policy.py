@@ -13,6 +13,7 @@ import numpy as np
 
 from layout.background import CARVE_CLEARANCE_M, absorb, carve, clip_pad, column_boxes, observed_structure
 from layout.bodies import Body
+from layout.geometry import swept_part_boxes
 from layout.pushes import Solver
 from layout.support import BACKGROUND, UNSUPPORTED, pad_box
 from scene_builder.model import AssetKind, Background, Plane, TriangleMesh
@@ -131,8 +132,11 @@ def static_background(
     lo, hi = column_boxes(observed_structure(background, walls))
     movers = [b for k, b in enumerate(bodies) if k not in set(absorbed)]
     if movers:
-        olo = np.concatenate([b.piece_lo_rel_m + b.position_m for b in movers])
-        ohi = np.concatenate([b.piece_hi_rel_m + b.position_m for b in movers])
+        # Clear of every mover's pieces and of the room its doors swing and drawers slide in
+        # (columns of the seen front of a cabinet stood 2 cm before its closed door).
+        swept = [swept_part_boxes(b.asset, b.world_from_asset()) for b in movers]
+        olo = np.concatenate([b.piece_lo_rel_m + b.position_m for b in movers] + [lo_ for lo_, _ in swept])
+        ohi = np.concatenate([b.piece_hi_rel_m + b.position_m for b in movers] + [hi_ for _, hi_ in swept])
         lo, hi = carve(lo, hi, olo, ohi)
     centers = [(lo + hi) / 2.0]
     halves = [(hi - lo) / 2.0]

@@ -391,3 +391,52 @@ def closest_point_in_polygon(point: np.ndarray, poly: np.ndarray, inset_m: float
     t = np.clip(np.einsum("ij,ij->i", w, d) / np.maximum(np.einsum("ij,ij->i", d, d), 1e-18), 0.0, 1.0)
     proj = shrunk + t[:, None] * d
     return proj[int(np.argmin(np.linalg.norm(proj - point, axis=1)))]
+
+
+SWEEP_STEPS = 8  # joint positions sampled over each moving part's range
+
+
+def swept_part_boxes(asset, world_from_asset: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World AABBs (lo (K, 3), hi (K, 3)) of the collision pieces of every part that moves on a
+    revolute or prismatic joint (with the parts attached to it), over SWEEP_STEPS positions of its
+    range: the room a door needs to swing and a drawer to slide out. Only a part's own joint is
+    swept (a handle rides on its door; nested moving joints take their parent's rest pose)."""
+    from scene_builder.model import JointType
+
+    parts = {p.name: p for p in asset.parts}
+    children: dict[str, list[str]] = {}
+    for p in asset.parts:
+        if p.parent is not None:
+            children.setdefault(p.parent, []).append(p.name)
+
+    def carried(name: str) -> list[str]:
+        out, todo = [], [name]
+        while todo:
+            n = todo.pop()
+            out.append(n)
+            todo.extend(children.get(n, ()))
+        return out
+
+    rot, trans = world_from_asset[:3, :3], world_from_asset[:3, 3]
+    lo, hi = [], []
+    for p in asset.parts:
+        j = p.joint
+        if j is None or j.type not in (JointType.REVOLUTE, JointType.PRISMATIC, JointType.REVOLUTE_PRISMATIC):
+            continue
+        verts = np.concatenate([piece.vertices_m for n in carried(p.name) for piece in parts[n].collision])
+        swept = []
+        for q in np.linspace(j.lower, j.upper, SWEEP_STEPS):
+            if j.type is JointType.PRISMATIC:
+                moved = verts + q * j.axis
+            else:
+                x, y, z = j.axis
+                k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+                r = np.eye(3) + np.sin(q) * k + (1.0 - np.cos(q)) * (k @ k)  # Rodrigues
+                moved = (verts - j.anchor_m) @ r.T + j.anchor_m
+            swept.append(moved @ rot.T + trans)
+        pts = np.concatenate(swept)
+        lo.append(pts.min(axis=0))
+        hi.append(pts.max(axis=0))
+    if not lo:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    return np.array(lo), np.array(hi)

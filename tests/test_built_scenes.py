@@ -280,7 +280,9 @@ def test_newton_masses_match_mujoco(built, newton):
             mj_name = obj.name if part.parent is None else f"{obj.name}/{part.name}"
         assert masses[i] == pytest.approx(mj[mj_name], rel=MASS_RTOL), label
         checked += 1
-    assert checked >= 3
+    # every simulated body of every rigid and articulated object was compared
+    bodies = sum(len(o.asset.parts) for o in scene.objects if o.asset.deformable is None and not o.asset.is_fixed)
+    assert checked >= 1 and checked >= bodies
 
 
 def _prim_name(name: str) -> str:

@@ -50,3 +50,24 @@ def test_a_bed_keeps_its_pad_short_of_a_night_stand_reaching_under_it():
     bed.parent, bed.pad_rect_m = BACKGROUND, None
     unsupport_blocked_pads([bed, under])
     assert bed.parent == UNSUPPORTED and "another object's" in bed.unsupported_reason
+
+
+def test_swept_boxes_cover_an_open_door_and_a_pulled_drawer():
+    """The room a door swings through and a drawer slides into (layout.geometry.swept_part_boxes),
+    which the background's collision boxes are carved clear of: a cabinet photo's door was held
+    at 2 % of its range by columns of the background seen 2 cm before it."""
+    from layout.geometry import swept_part_boxes
+    from tests.fixtures_scenes import CAB_D, CAB_W, DRAWER_RANGE_M, cabinet_asset
+
+    asset = cabinet_asset()
+    t = pose(np.eye(3), np.array([1.0, 2.0, 0.0]))
+    lo, hi = swept_part_boxes(asset, t)
+    assert len(lo) == 2  # the door and the drawer; the carcass does not move
+    door, drawer = (0, 1) if hi[0, 2] > hi[1, 2] else (1, 0)
+    # The door (hinged on its -y edge, opening 90 deg outwards) reaches a door width out in +x.
+    assert hi[door, 0] == pytest.approx(1.0 + CAB_D / 2 + CAB_W, abs=0.01)
+    assert lo[door, 1] == pytest.approx(2.0 - CAB_W / 2, abs=0.01)
+    # The drawer slides out by its full travel.
+    assert hi[drawer, 0] == pytest.approx(1.0 + CAB_D / 2 + DRAWER_RANGE_M[1], abs=1e-6)
+    # A rigid box sweeps nothing.
+    assert len(swept_part_boxes(box_asset("b", (1.0, 1.0, 1.0)), t)[0]) == 0

@@ -109,7 +109,8 @@ def test_a_build_downloads_once_then_the_learned_backends_answer(online, tmp_pat
     assert depth.estimate(np.zeros((20, 30, 3), np.uint8)).depth_m.shape == (20, 30)
     # Grounding DINO's boxes prompt SAM 2 (Grounded-SAM-2): the detection-driven segmenter answers
     seg, use = after.segmentation.resolve()
-    assert use.backend == "detections" and [d.name for d in seg.detectors] == [GD.name]
+    # ... beside the bundled closed-vocabulary detectors (their boxes are merged after its own)
+    assert use.backend == "detections" and [d.name for d in seg.detectors] == [GD.name, "centernet-mbv3-coco", "ssd-mobilenet-oid"]
     assert seg.box_segmenter.name == "sam2"
     # the second run finds them: nothing is asked of the hub
     n = len(online.requests)
@@ -238,7 +239,7 @@ def test_a_networked_build_downloads_grounding_dino_and_its_boxes_prompt_sam2(on
     report = json.loads((out / "report.json").read_text())
     uses = {b["task"]: b for b in report["backends"]}
     assert uses["segmentation"]["backend"] == "detections"
-    assert uses["detection"]["backend"] == GD.name and f"before merging: {GD.name} " in uses["detection"]["reason"]
+    assert uses["detection"]["backend"] == f"{GD.name}+centernet-mbv3-coco+ssd-mobilenet-oid" and f"before merging: {GD.name} " in uses["detection"]["reason"]
     assert uses["box-segmentation"]["backend"] == "sam2"
     served = {p for m, p in online.requests if m == "GET" and p.endswith("/model.safetensors")}
     assert served == {f"/{m.repo_id}/resolve/{online.commits[m.repo_id]}/model.safetensors" for m in (SAM, GD)}

@@ -175,7 +175,7 @@ def test_two_processes_build_identical_bytes_and_logs_are_not_wrapped(room, tmp_
     for name in a:
         assert a[name] == b[name], f"{name} differs between two builds of the same input"
     lines = runs[1].stderr.splitlines()
-    assert any(re.search(rf"objects -> .*{long_name}/ +\(max penetration", line) for line in lines), lines[-3:]
+    assert any(re.search(rf"perceived: .* -> .*{long_name}/ +\(max penetration", line) for line in lines), lines[-3:]
     stage_lines = [line for line in lines if line.startswith("✓")]
     assert {line.split()[1] for line in stage_lines} >= {"perception", "generation", "layout", "export"}
 
