@@ -64,4 +64,5 @@ def test_stage_benchmarks_run_in_their_own_process_and_are_pasted_with_their_com
         "scene_builder.bench.outdir",
         "scene_builder.bench.novel_view",
         "scene_builder.bench.groundtruth",
+        "scene_builder.bench.room_planes",
     }

@@ -174,6 +174,16 @@ EXTRAS: tuple[Extra, ...] = (
         timeout_s=5400.0,
     ),
     Extra(
+        "The room's planes: RANSAC, the floor not seen, walls",
+        "The RGB-D frames of `../shared/data/real` and `multiview` (`scene_builder.bench.room_planes`): the hand-written plane "
+        "RANSAC against open3d's `segment_plane` on the same subsample (milliseconds, inliers, repeatability); the camera's "
+        "height when nothing below h is seen, by the lowest point seen, by the prior `CAMERA_HEIGHT_PRIOR_M` (the median of "
+        "these same frames: in-sample) and by the larger of both, and how often a furniture top is taken for the floor; "
+        "walls found with the depth grid's normals or open3d's, with the normals' milliseconds.",
+        ("-m", "scene_builder.bench.room_planes"),
+        markdown=True,
+    ),
+    Extra(
         "Parser fuzzing",
         "Every parser of outside data (`scene_builder.bench.fuzz`): PhysX geometry token decoders (strict and lenient), the "
         "PhysX text protocol, basic_info.json, scene.json, depth, camera.json and image files, on mutated real seeds. "
