@@ -1,16 +1,26 @@
-"""Photo textures for generated assets: the photo projected onto each asset from the input camera.
+"""Photo textures for generated assets: what the camera saw of an object carries the photo; what
+it did not see carries the object's own material, never the photo stretched along the rays.
 
-The visible surfaces of an object carry the photo's colours, as a texture projected from the
-camera that took it: each visual-mesh vertex, placed at the pose where the object was seen
-(``GeneratedAsset.world_from_asset``), projects to a pixel, and that pixel's position in a crop
-of the photo around the object's mask is the vertex's texture coordinate. Hidden surfaces
-project into the same silhouette (the back of a box lands on its front), or onto pixels of
-whatever hides them: the crop's pixels outside the object's mask are replaced by the colour of
-the nearest mask pixel, so hidden surfaces get a plausible fill from the object's own visible
-colours. The texture moves with the object (the coordinates are fixed at the observed pose).
+Each visual-mesh face, placed at the pose where the object was seen
+(``GeneratedAsset.world_from_asset``), is one of:
 
-The crop keeps the photo's full resolution (``Observation.photo_rgb``, the stored photo when
-perception analysed a downscaled copy).
+* **seen**: it faces the camera (within :data:`MAX_VIEW_DEG`) and its corners project onto the
+  object's mask at the depth observed there. Its texture coordinates are its corners' pixels in
+  a crop of the photo around the mask (the photo projected from the input camera).
+* **mirrored**: hidden, but its mirror image across the asset's left-right plane (asset frame
+  ``y = 0``: the asset's front is +X, so this swaps its left and right sides; furniture is
+  built symmetric about it) is seen: it takes the photo where its mirror image was seen (the
+  hidden flank of a bed shows the seen flank).
+* **material**: the rest (backs, undersides, faces seen edge-on, whose projection would smear
+  the silhouette's boundary pixels along them: the "streaked flank"). They carry a swatch of the
+  object's own texture: the largest square seen inside the mask, scaled to its size in metres
+  and mirror-tiled, mapped by the face's dominant axis (box mapping), so the grain keeps its
+  scale on every side.
+
+The texture is one image per object: the crop (pixels outside the mask filled from the nearest
+mask pixel, for filtering at the silhouette) beside the swatch. The coordinates are fixed at the
+observed pose (the texture moves with the object). The crop keeps the photo's full resolution
+(``Observation.photo_rgb``).
 """
 
 from __future__ import annotations
@@ -22,17 +32,34 @@ import numpy as np
 from scene_builder.frames import transform_points
 from scene_builder.model import Camera, GeneratedAsset, Observation, PerceivedObject, Texture
 
-__all__ = ["CROP_MARGIN_PX", "object_texture", "photo_textured"]
+__all__ = ["CROP_MARGIN_PX", "MAX_VIEW_DEG", "SWATCH_PX", "face_sources", "material_swatch", "object_texture", "photo_textured"]
 
 #: The crop reaches this many pixels past the mask's bounding box (texture filtering reads a
 #: little around each texel).
 CROP_MARGIN_PX = 4
+#: A face seen more edge-on than this (angle between its normal and the ray to the camera) is
+#: not textured from the photo: its pixels would be smeared across it.
+MAX_VIEW_DEG = 75.0
+#: A face corner counts as seen where the depth observed at its pixel is within this of its own
+#: (metres, plus DEPTH_TOL_REL of the depth): the shapes' seen surface lies on the observed depth.
+DEPTH_TOL_M = 0.05
+DEPTH_TOL_REL = 0.03
+#: Side of the material swatch (texels) and the least size of the square it is taken from.
+SWATCH_PX = 128
+MIN_PATCH_PX = 4
+#: Texels between the crop and the swatch in the texture image.
+GAP_PX = 2
+SEEN, MIRRORED, MATERIAL = 0, 1, 2
+#: Points on each face (barycentric weights: the centroid, and towards each corner) whose
+#: visibility decides the face's texture source; a face is seen where SEEN_SHARE of them are.
+SAMPLE_WEIGHTS = np.array([[1 / 3, 1 / 3, 1 / 3], [0.7, 0.15, 0.15], [0.15, 0.7, 0.15], [0.15, 0.15, 0.7]])
+SEEN_SHARE = 0.75
 
 
 def object_texture(rgb: np.ndarray, mask: np.ndarray, name: str) -> tuple[Texture, tuple[int, int]]:
-    """The texture of one object: the (h, w, 3) crop of ``rgb`` around ``mask`` ((H, W) bool),
+    """The photo crop of one object: the (h, w, 3) crop of ``rgb`` around ``mask`` ((H, W) bool),
     pixels outside the mask (eroded by one pixel: edge pixels mix in the background) replaced by
-    the nearest mask pixel's colour. Returns the texture and the crop's top-left (row, column)."""
+    the nearest mask pixel's colour. Returns the crop as a texture and its top-left (row, column)."""
     from scipy import ndimage
 
     rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
@@ -51,9 +78,94 @@ def object_texture(rgb: np.ndarray, mask: np.ndarray, name: str) -> tuple[Textur
     return Texture(name, filled), (int(r0), int(c0))
 
 
+def material_swatch(crop_rgb: np.ndarray, crop_mask: np.ndarray, metres_per_px: float, extent_m: float, size_px: int = SWATCH_PX) -> np.ndarray:
+    """(size_px, size_px, 3) uint8: the object's own texture covering ``extent_m`` metres.
+
+    The largest square inside the mask (eroded by two pixels: the silhouette's edge mixes in the
+    background and outlines), resampled from ``metres_per_px`` (the photo's pixel size on the
+    object) to the swatch's scale, mirror-tiled; the median colour of the mask where no square
+    of MIN_PATCH_PX fits."""
+    import cv2
+    from scipy import ndimage
+
+    core = ndimage.binary_erosion(crop_mask, iterations=2)
+    if not core.any():
+        core = crop_mask
+    median = np.median(crop_rgb[core], axis=0).astype(np.uint8)
+    dist = ndimage.distance_transform_cdt(np.pad(core, 1), metric="chessboard")[1:-1, 1:-1]
+    r = int(dist.max()) - 1
+    if 2 * r + 1 < MIN_PATCH_PX:
+        return np.broadcast_to(median, (size_px, size_px, 3)).copy()
+    cy, cx = np.unravel_index(int(np.argmax(dist)), dist.shape)
+    patch = crop_rgb[cy - r : cy + r + 1, cx - r : cx + r + 1]
+    side = int(np.clip(round((2 * r + 1) * metres_per_px * size_px / max(extent_m, 1e-6)), MIN_PATCH_PX, size_px))
+    patch = cv2.resize(np.ascontiguousarray(patch), (side, side), interpolation=cv2.INTER_AREA)
+    tile = np.concatenate([patch, patch[:, ::-1]], axis=1)
+    tile = np.concatenate([tile, tile[::-1]], axis=0)
+    reps = int(np.ceil(size_px / tile.shape[0]))
+    return np.tile(tile, (reps, reps, 1))[:size_px, :size_px].copy()
+
+
+def _corner_seen(p_cam: np.ndarray, k, mask: np.ndarray, depth_m: np.ndarray) -> np.ndarray:
+    """(N,) bool: camera-frame points that project onto the mask (analysis resolution, dilated
+    by a pixel) where the observed depth matches theirs (or none was observed)."""
+    from scipy import ndimage
+
+    h, w = mask.shape
+    z = p_cam[:, 2]
+    zs = np.where(z > 1e-3, z, 1.0)
+    col = np.round(k.fx_px * p_cam[:, 0] / zs + k.cx_px).astype(np.int64)
+    row = np.round(k.fy_px * p_cam[:, 1] / zs + k.cy_px).astype(np.int64)
+    inside = (z > 1e-3) & (col >= 0) & (col < w) & (row >= 0) & (row < h)
+    grown = ndimage.binary_dilation(mask)
+    out = np.zeros(len(p_cam), dtype=bool)
+    ci, ri = col[inside], row[inside]
+    d = depth_m[ri, ci]
+    out[inside] = grown[ri, ci] & ((d <= 0) | (np.abs(d - z[inside]) < DEPTH_TOL_M + DEPTH_TOL_REL * z[inside]))
+    return out
+
+
+def _facing(tri_cam: np.ndarray) -> np.ndarray:
+    """(F,) bool: triangles ((F, 3, 3), camera frame, counter-clockwise seen from outside) facing
+    the camera within MAX_VIEW_DEG."""
+    n = np.cross(tri_cam[:, 1] - tri_cam[:, 0], tri_cam[:, 2] - tri_cam[:, 0])
+    to_cam = -tri_cam.mean(axis=1)
+    cos = np.einsum("ij,ij->i", n, to_cam) / np.maximum(np.linalg.norm(n, axis=1) * np.linalg.norm(to_cam, axis=1), 1e-12)
+    return cos > np.cos(np.radians(MAX_VIEW_DEG))
+
+
+def face_sources(vertices_asset: np.ndarray, faces: np.ndarray, camera_from_asset: np.ndarray, k, mask: np.ndarray, depth_m: np.ndarray) -> np.ndarray:
+    """(F,) int per face: SEEN, MIRRORED or MATERIAL (see the module docstring). k: the
+    intrinsics of ``mask`` and ``depth_m`` (analysis resolution). A face is seen where at least
+    SEEN_SHARE of SAMPLE_WEIGHTS' points on it are (large faces reach past the silhouette)."""
+    mirror = np.array([1.0, -1.0, 1.0])
+    out = np.full(len(faces), MATERIAL, dtype=np.int64)
+    for kind, verts, order in ((MIRRORED, vertices_asset * mirror, [0, 2, 1]), (SEEN, vertices_asset, [0, 1, 2])):
+        p = transform_points(camera_from_asset, verts)
+        tri = p[faces[:, order]]
+        samples = np.einsum("sk,fkc->fsc", SAMPLE_WEIGHTS, tri)  # (F, S, 3)
+        seen = _corner_seen(samples.reshape(-1, 3), k, mask, depth_m).reshape(len(faces), -1).mean(axis=1)
+        ok = (seen >= SEEN_SHARE) & _facing(tri)
+        out[ok] = kind
+    return out
+
+
+def _box_uv(tri_asset: np.ndarray, lo: np.ndarray, extent_m: float) -> np.ndarray:
+    """(F, 3, 2) swatch coordinates in [0, 1] of triangles (F, 3, 3) in the asset frame: the two
+    coordinates across each face's dominant normal axis, from the asset's low corner ``lo``."""
+    n = np.cross(tri_asset[:, 1] - tri_asset[:, 0], tri_asset[:, 2] - tri_asset[:, 0])
+    axis = np.argmax(np.abs(n), axis=1)
+    other = np.array([[1, 2], [0, 2], [0, 1]])[axis]  # (F, 2): the two axes across the normal
+    rel = (tri_asset - lo) / max(extent_m, 1e-6)
+    uv = np.take_along_axis(rel, np.repeat(other[:, None, :], 3, axis=1), axis=2)
+    uv[..., 1] = 1.0 - uv[..., 1]  # image rows run down, heights up
+    return np.clip(uv, 0.0, 1.0)
+
+
 def photo_textured(generated: GeneratedAsset, obj: PerceivedObject, observation: Observation, camera: Camera) -> GeneratedAsset:
-    """``generated`` with every visual mesh of its asset textured with the photo (see the module
-    docstring). Deformables keep their colours (a MuJoCo flex carries no texture)."""
+    """``generated`` with every visual mesh of its asset textured (see the module docstring).
+    Deformables keep their colours (a MuJoCo flex carries no texture). Faces get their own
+    corners where their texture sources differ (the geometry is unchanged)."""
     photo = observation.photo_rgb  # full resolution when the analysis ran downscaled
     mask = obj.mask
     scale = photo.shape[1] / observation.rgb.shape[1]
@@ -61,18 +173,49 @@ def photo_textured(generated: GeneratedAsset, obj: PerceivedObject, observation:
         import cv2
 
         mask = cv2.resize(mask.astype(np.uint8), (photo.shape[1], photo.shape[0]), interpolation=cv2.INTER_NEAREST) > 0
-    texture, (r0, c0) = object_texture(photo, mask, generated.asset.name)
-    th, tw = texture.image_rgb.shape[:2]
+    crop_tex, (r0, c0) = object_texture(photo, mask, generated.asset.name)
+    crop = crop_tex.image_rgb
+    th, tw = crop.shape[:2]
     k = camera.intrinsics.scaled(photo.shape[1], photo.shape[0]) if scale != 1.0 else camera.intrinsics
     camera_from_asset = np.linalg.inv(camera.world_from_camera) @ generated.world_from_asset
+    all_v = np.concatenate([p.visual.vertices_m for p in generated.asset.parts])
+    lo = all_v.min(axis=0)
+    extent = float(np.max(all_v.max(axis=0) - lo))
+    obs_depth = np.asarray(observation.depth_m, dtype=np.float64)
+    z_obj = obs_depth[obj.mask & (obs_depth > 0)]
+    z_med = float(np.median(z_obj)) if len(z_obj) else float(np.median(transform_points(camera_from_asset, all_v)[:, 2]))
+    swatch = material_swatch(crop, mask[r0 : r0 + th, c0 : c0 + tw], z_med / k.fx_px, extent)
+    s = swatch.shape[0]
+    height, width = max(th, s), tw + GAP_PX + s
+    image = np.zeros((height, width, 3), dtype=np.uint8)
+    image[:th, :tw] = crop
+    image[th:, :tw] = crop[-1:]
+    image[:, tw : tw + GAP_PX] = image[:, tw - 1 : tw]
+    image[:s, tw + GAP_PX :] = swatch
+    image[s:, tw + GAP_PX :] = swatch[-1:]
+    texture = Texture(generated.asset.name, image)
     parts = []
     for part in generated.asset.parts:
-        p = transform_points(camera_from_asset, part.visual.vertices_m)
+        v, f = part.visual.vertices_m, part.visual.faces
+        source = face_sources(v, f, camera_from_asset, camera.intrinsics, obj.mask, obs_depth)
+        corners = v[f]  # (F, 3, 3)
+        mirrored = np.where((source == MIRRORED)[:, None, None], corners * np.array([1.0, -1.0, 1.0]), corners)
+        p = transform_points(camera_from_asset, mirrored.reshape(-1, 3))
         z = np.maximum(p[:, 2], 1e-3)
         x = k.fx_px * p[:, 0] / z + k.cx_px
         y = k.fy_px * p[:, 1] / z + k.cy_px
-        uv = np.stack([(x - c0 + 0.5) / tw, (y - r0 + 0.5) / th], axis=1)
-        visual = dataclasses.replace(part.visual, uv=np.clip(uv, 0.0, 1.0), texture=texture)
+        uv_photo = np.stack([(x - c0 + 0.5) / width, (y - r0 + 0.5) / height], axis=1).reshape(-1, 3, 2)
+        sw = _box_uv(corners, lo, extent)
+        uv_swatch = np.stack([(tw + GAP_PX + sw[..., 0] * s) / width, (sw[..., 1] * s) / height], axis=-1)
+        uv = np.where((source == MATERIAL)[:, None, None], uv_swatch, uv_photo).reshape(-1, 2)
+        # One corner per (vertex, texture coordinate) pair.
+        key = np.concatenate([f.reshape(-1, 1).astype(np.float64), np.round(uv * 1e7)], axis=1)
+        _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+        inverse = inverse.reshape(-1)
+        new_v = v[f.reshape(-1)[first]]
+        new_uv = np.clip(uv[first], 0.0, 1.0)
+        visual = dataclasses.replace(part.visual, vertices_m=new_v, faces=inverse.reshape(-1, 3).astype(np.int64), uv=new_uv, texture=texture,
+                                     vertex_colors_rgba=None if part.visual.vertex_colors_rgba is None else part.visual.vertex_colors_rgba[f.reshape(-1)[first]])
         parts.append(dataclasses.replace(part, visual=visual))
     asset = dataclasses.replace(generated.asset, parts=tuple(parts))
     return dataclasses.replace(generated, asset=asset)

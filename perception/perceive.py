@@ -288,6 +288,8 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     if not frame.floor_found:
         lowest = min(float(np.quantile(transform_points(frame.world_from_camera, points_cam[pix])[:, 2], 0.01)) for _, pix in kept)
         frame = place_floor_under(frame, lowest)
+    if frame.floor is not None:
+        backends.append(frame.floor)
 
     namer, name_use = registries.naming.resolve(config.naming_backend)
     backends.append(name_use)
@@ -368,7 +370,9 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     room = frame.room
     if config.background:
         from perception.background import observed_background
+        from perception.room import completion_planes
 
-        room = Room(walls=room.walls, background=observed_background(observation, camera, room.walls, tuple(objects), config.max_depth_m, removed=removed))
+        bg = observed_background(observation, camera, room.walls, tuple(objects), config.max_depth_m, removed=removed, extra_planes=completion_planes(frame))
+        room = Room(walls=room.walls, background=bg)
     return Perception(observation, camera, room, tuple(objects), tuple(backends), removed_mask=removed)
 

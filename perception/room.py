@@ -14,10 +14,12 @@ The world frame (see :mod:`scene_builder.model`): Z up, floor ``z = 0``, the cam
 origin, X the horizontal projection of the optical axis, snapped to the nearest dominant wall
 direction when walls were found (Manhattan frame).
 
-Without a visible floor (a close-up of a cabinet), gravity comes from two non-parallel vertical
-planes when there are, else from the camera's -y axis tilted by a typical
-:data:`TYPICAL_PITCH_DEG` downward pitch; the floor then goes under the lowest object point
-(:func:`place_floor_under`). The choice is recorded in ``RoomFrame.gravity``.
+Without a visible floor (a close-up of a cabinet), gravity comes from the photo's vertical
+vanishing point (estimated depth), two non-parallel vertical planes when there are, else from the
+camera's -y axis tilted by a typical :data:`TYPICAL_PITCH_DEG` downward pitch; the floor then goes
+under everything seen and at least a typical camera height :data:`CAMERA_HEIGHT_PRIOR_M` under the
+camera (:func:`place_floor_under` lowers it further under an object point below it). The choices
+are recorded in ``RoomFrame.gravity`` and ``RoomFrame.floor``.
 """
 
 from __future__ import annotations
@@ -30,11 +32,17 @@ from scene_builder.frames import pose
 from scene_builder.model import BackendUse, Plane, Room
 
 __all__ = [
+    "CAMERA_HEIGHT_PRIOR_M",
     "FLOOR_MAX_TILT_DEG",
     "TYPICAL_PITCH_DEG",
     "CameraPlane",
     "RoomFrame",
+    "ceiling_plane",
+    "completion_planes",
     "estimate_room",
+    "grid_normals",
+    "open3d_normals",
+    "vertical_plane_candidates",
     "inlier_threshold_m",
     "place_floor_under",
     "world_from_camera_for",
@@ -49,6 +57,27 @@ WALL_MIN_WIDTH_M = 1.0
 WALL_MIN_TOP_M = 1.5
 #: Downward pitch assumed when nothing in the image tells where gravity points.
 TYPICAL_PITCH_DEG = 10.0
+#: Height of the camera above a floor it does not see, unless something seen lies lower: the
+#: median of the 17 RGB-D frames with a floor in ../shared/data (0.99-1.67 m, median 1.27 m).
+CAMERA_HEIGHT_PRIOR_M = 1.3
+#: Surface normals for wall candidates (open3d's, what builds use: voxel size, neighbourhood
+#: radius; grid_normals, the measured alternative: window and stride in pixels); a wall point's
+#: normal lies within WALL_NORMAL_TILT_DEG of horizontal and of its wall's normal.
+NORMAL_VOXEL_M = 0.03
+NORMAL_RADIUS_M = 0.1
+NORMAL_WINDOW_PX = 7
+NORMAL_STRIDE_PX = 2
+WALL_NORMAL_TILT_DEG = 12.0
+CANDIDATE_SHARE = 0.2
+#: A vertical plane parallel to a wall found and this close to it is the same wall (a curtain
+#: hung in front of it, the wall's skirting) and is not added again.
+WALL_MERGE_M = 0.5
+#: A wall seen in part (narrower than WALL_MIN_WIDTH_M, or fewer than _MIN_PLANE_FRACTION of the
+#: points: the side wall beside the camera, seen edge-on) that passes the other wall tests is a
+#: "partial-wall": it completes the room's surface (perception.background) but is no collision
+#: wall, does not leave objects out behind it and its pixels stay open to the segmenter.
+PARTIAL_WALL_MIN_WIDTH_M = 0.5
+PARTIAL_WALL_MIN_FRACTION = 0.01
 #: Points sampled for RANSAC (seeded); planes are refined on all points afterwards.
 RANSAC_SAMPLES = 10_000
 _RANSAC_THRESHOLD_M = 0.025
@@ -88,7 +117,8 @@ class RoomFrame:
     background: (H, W) bool, pixels explained by the floor, walls or ceiling (or below the floor).
     floor_found: False when gravity and the floor height come from a fallback.
     gravity: how up was found (recorded in ``Perception.backends``).
-    planes: the floor, walls and ceiling in the camera frame.
+    planes: the floor, walls, partial walls and ceiling in the camera frame.
+    floor: how the floor's height was found (recorded in ``Perception.backends``).
     """
 
     world_from_camera: np.ndarray
@@ -98,6 +128,7 @@ class RoomFrame:
     floor_found: bool
     gravity: BackendUse
     planes: tuple[CameraPlane, ...] = ()
+    floor: BackendUse | None = None
 
     @property
     def camera_height_m(self) -> float:
@@ -148,6 +179,9 @@ def ransac_plane(points: np.ndarray, threshold_m: float, iterations: int, rng: n
     normals = np.cross(b - a, c - a)
     norms = np.linalg.norm(normals, axis=1)
     ok = norms > 1e-12
+    if not ok.any():  # every sampled triple collinear (points along a line): least squares
+        nrm, off = _fit_plane(points)
+        return nrm, off, np.abs(points @ nrm + off) < threshold_m
     normals, offsets = normals[ok] / norms[ok, None], -np.einsum("ij,ij->i", normals[ok] / norms[ok, None], a[ok])
     # Hypotheses are scored on a fixed subset of at most 2000 points (the inlier fraction is
     # estimated to about 1 %, plenty to rank planes), the winner on all points.
@@ -208,6 +242,100 @@ def _refine(
             n_new, d_new = -n_new, -d_new
         n, d = n_new, d_new
     return n, d, np.abs(points @ n + d) < thr
+
+
+def grid_normals(points_cam: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Surface normals of an organised point cloud: ((N, 3) points, (N, 3) unit normals towards
+    the camera) on every NORMAL_STRIDE_PX-th pixel, from the points averaged over
+    NORMAL_WINDOW_PX windows (depth noise) and differenced across the window.
+
+    The alternative to open3d's ``estimate_normals`` (the depth map is a grid, so the neighbours
+    are known without a KD-tree), measured against it by ``python -m scene_builder.bench.room_planes``
+    on the 17 RGB-D frames of ../shared/data (2 loaded cores): median 0.12 s against 0.58 s, and
+    no open3d import (2.7 s); but the same walls on only 11 of 17 frames, and it misses the far
+    right walls of multiview frames 3 and 5 that open3d's normals find (a 7-pixel window is a few
+    cm on a far wall: too noisy). So builds use open3d's (:func:`open3d_normals`)."""
+    import cv2
+
+    p = np.where(valid[..., None], points_cam, 0.0).astype(np.float32)
+    wgt = valid.astype(np.float32)
+    k = NORMAL_WINDOW_PX
+    cnt = cv2.boxFilter(wgt, -1, (k, k), normalize=False)
+    mean = np.stack([cv2.boxFilter(p[..., i], -1, (k, k), normalize=False) for i in range(3)], axis=-1) / np.maximum(cnt[..., None], 1e-6)
+    full = cnt >= 0.8 * k * k
+    r = k // 2
+    s = NORMAL_STRIDE_PX
+    h, w = valid.shape
+    rows, cols = np.arange(r, h - r, s), np.arange(r, w - r, s)
+    rr, cc = np.meshgrid(rows, cols, indexing="ij")
+    up_, dn = np.clip(rr - r, 0, h - 1), np.clip(rr + r, 0, h - 1)
+    lf, rt = np.clip(cc - r, 0, w - 1), np.clip(cc + r, 0, w - 1)
+    ok = full[rr, cc] & full[up_, cc] & full[dn, cc] & full[rr, lf] & full[rr, rt] & valid[rr, cc]
+    n = np.cross(mean[rr, rt] - mean[rr, lf], mean[dn, cc] - mean[up_, cc]).astype(np.float64)
+    norm = np.linalg.norm(n, axis=-1)
+    ok &= norm > 1e-12
+    pts, n = mean[rr, cc][ok].astype(np.float64), n[ok] / norm[ok, None]
+    n = np.where(((n * pts).sum(axis=1) > 0)[:, None], -n, n)  # towards the camera
+    return pts, n
+
+
+def open3d_normals(points_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """((N, 3) points, (N, 3) normals towards the camera) by open3d on a NORMAL_VOXEL_M voxel
+    grid (``estimate_normals``, NORMAL_RADIUS_M): what builds use for the wall candidates."""
+    import open3d as o3d
+
+    pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points_cam, dtype=np.float64).reshape(-1, 3)))
+    pc = pc.voxel_down_sample(NORMAL_VOXEL_M)
+    pc.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=NORMAL_RADIUS_M, max_nn=30))
+    pc.orient_normals_towards_camera_location(np.zeros(3))
+    return np.asarray(pc.points), np.asarray(pc.normals)
+
+
+def vertical_plane_candidates(q: np.ndarray, nrm: np.ndarray, up: np.ndarray, min_points: int, scale: float) -> list[tuple[np.ndarray, float, int]]:
+    """Vertical planes (normal, offset, support) in the camera frame, normals towards the camera,
+    from (N, 3) points ``q`` and their surface normals ``nrm`` (each standing for ``scale``
+    points of the cloud): the directions where many horizontal normals agree (peaks of their
+    azimuths), then, along each, the offsets where many of those points lie (peaks of a 2 cm
+    histogram). RANSAC on a random subsample misses a wall seen edge-on or far away (few points,
+    spread by depth noise); the normals of its points still agree."""
+    if len(q) == 0:
+        return []
+    horizontal = np.abs(nrm @ up) < np.sin(np.radians(WALL_NORMAL_TILT_DEG))
+    if horizontal.sum() < 3:
+        return []
+    a = _unit(np.cross(up, [1.0, 0.0, 0.0]) if abs(up[0]) < 0.9 else np.cross(up, [0.0, 0.0, 1.0]))
+    b = np.cross(up, a)
+    az = np.degrees(np.arctan2(nrm[horizontal] @ b, nrm[horizontal] @ a)) % 360.0
+    hist = np.bincount(np.floor(az).astype(np.int64) % 360, minlength=360).astype(np.float64)
+    smooth = np.convolve(np.concatenate([hist[-4:], hist, hist[:4]]), np.ones(9), mode="valid")
+    out = []
+    # Candidates only: the caller counts the plane's inliers among all points (within the depth
+    # noise, which spreads a far wall over many 2 cm bins) and decides.
+    min_voxels = CANDIDATE_SHARE * min_points / scale
+    for k in np.argsort(-smooth):
+        if smooth[k] < min_voxels:
+            break
+        if smooth[k] < smooth[(k - 1) % 360] or smooth[k] < smooth[(k + 1) % 360]:
+            continue
+        ang = np.radians(k + 0.5)
+        d = np.cos(ang) * a + np.sin(ang) * b
+        sel = horizontal & (nrm @ d > np.cos(np.radians(WALL_NORMAL_TILT_DEG)))
+        if sel.sum() < min_voxels:
+            continue
+        d = _unit(nrm[sel].sum(axis=0) - (nrm[sel].sum(axis=0) @ up) * up)
+        off = -(q[sel] @ d)  # plane d . p + off = 0; off > 0: the camera is on the normal's side
+        bins = np.arange(off.min() - 0.02, off.max() + 0.04, 0.02)
+        h, edges = np.histogram(off, bins=bins)
+        hs = np.convolve(h, [1, 2, 1], mode="same") / 2.0
+        for i in np.argsort(-hs):
+            if hs[i] < min_voxels:
+                break
+            if (i > 0 and hs[i - 1] > hs[i]) or (i + 1 < len(hs) and hs[i + 1] > hs[i]):
+                continue
+            o = float(0.5 * (edges[i] + edges[i + 1]))
+            if o > 0:
+                out.append((d, o, int(hs[i] * scale)))
+    return out
 
 
 def _manhattan_up(planes: list[tuple[np.ndarray, float, int]], image_up: np.ndarray, cos_max: float) -> np.ndarray | None:
@@ -329,13 +457,15 @@ def _world_walls(world_from_camera: np.ndarray, planes: list[CameraPlane]) -> tu
     return tuple(walls)
 
 
-def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0, up_hint: np.ndarray | None = None) -> RoomFrame:
+def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0, up_hint: np.ndarray | None = None, normals: str = "open3d") -> RoomFrame:
     """Find gravity, floor, walls and ceiling.
 
     points_cam: (H, W, 3) float64 camera-frame points (from ``CameraIntrinsics.unproject``).
     valid: (H, W) bool, pixels with usable depth.
     up_hint: (3,) up in the camera frame measured by the depth estimator (vanishing points), used
     when no floor is visible (before the vertical-planes and camera-prior fallbacks).
+    normals: "open3d" (:func:`open3d_normals`, the default) or "grid" (:func:`grid_normals`, the
+    measured alternative) for the wall candidates.
     """
     h, w = valid.shape
     idx = np.flatnonzero(valid.reshape(-1))
@@ -368,6 +498,7 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0, up_h
         cam_planes.append(CameraPlane(n, d, "floor", to_image(inl | below)))
         tilt = np.degrees(np.arccos(np.clip(up @ image_up, -1, 1)))
         gravity = BackendUse("gravity", "floor-plane", f"floor plane from RANSAC, {int(inl.sum())} inliers, camera {tilt:.1f} deg from upright, {height:.2f} m high")
+        floor = BackendUse("floor", "floor-plane", f"the floor seen, {height:.2f} m under the camera")
     else:
         verticals = [p for p in planes if abs(p[0] @ image_up) < np.sin(np.radians(FLOOR_MAX_TILT_DEG))]
         pair = next(
@@ -376,18 +507,18 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0, up_h
         )
         if up_hint is not None:
             up = _unit(np.asarray(up_hint, dtype=np.float64))
-            gravity = BackendUse("gravity", "vanishing-points", "no floor visible; up from the photo's vertical vanishing point, floor put under the lowest object point")
+            gravity = BackendUse("gravity", "vanishing-points", "no floor visible; up from the photo's vertical vanishing point")
         elif pair is not None:
             up = _unit(np.cross(pair[0][0], pair[1][0]))
             up = up if up @ image_up > 0 else -up
-            gravity = BackendUse("gravity", "vertical-planes", "no floor visible; up from the intersection of two vertical planes, floor put under the lowest object point")
+            gravity = BackendUse("gravity", "vertical-planes", "no floor visible; up from the intersection of two vertical planes")
         else:
             t = np.radians(TYPICAL_PITCH_DEG)
             up = np.array([0.0, -np.cos(t), -np.sin(t)])
             gravity = BackendUse(
-                "gravity", "camera-prior", f"no floor or vertical structure found; assumed the camera upright with a {TYPICAL_PITCH_DEG:.0f} deg downward pitch, floor under the lowest object point"
+                "gravity", "camera-prior", f"no floor or vertical structure found; assumed the camera upright with a {TYPICAL_PITCH_DEG:.0f} deg downward pitch"
             )
-        height = float(-np.quantile(pts @ up, 0.005))
+        height, floor = _floor_without_plane(float(-np.quantile(pts @ up, 0.005)))
 
     # Walls (vertical, little seen behind them) and the ceiling (horizontal, above the camera).
     # Without a floor in view a large vertical plane is as likely a cabinet front as a wall, and
@@ -396,7 +527,12 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0, up_h
     on_floor = (pts @ up + height) < thr  # on or under the floor
     rows, cols = idx // w, idx % w
     min_wall = max(200, int(_MIN_PLANE_FRACTION * len(pts)))
-    for n0, d0, _ in sorted(planes, key=lambda p: -p[2]) if floor_found else ():
+    min_partial = max(200, int(PARTIAL_WALL_MIN_FRACTION * len(pts)))
+    candidates = sorted(planes, key=lambda p: -p[2])
+    if floor_found:
+        gq, gn = grid_normals(points_cam, valid) if normals == "grid" else open3d_normals(pts)
+        candidates += vertical_plane_candidates(gq, gn, up, min_wall, len(pts) / max(len(gq), 1))
+    for n0, d0, _ in candidates if floor_found else ():
         if abs(n0 @ up) < sin_wall:
             n = _unit(n0 - (n0 @ up) * up)
             _, _, inl = _refine(pts, thr, n, d0, seed, iterations=1)
@@ -406,29 +542,37 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0, up_h
             n, d = _towards_camera(n, d)
             dist = pts @ n + d
             inl = (np.abs(dist) < thr) & ~on_floor
-            if inl.sum() < min_wall:
+            if inl.sum() < min_partial:
                 continue
             # Walls are big and run up past head height; a chair's back or a drawer front is not.
             lateral = pts[inl] @ np.cross(up, n)
             top_m = float(np.percentile(pts[inl] @ up + height, 98))
-            if np.subtract(*np.percentile(lateral, [98, 2])) < WALL_MIN_WIDTH_M or top_m < WALL_MIN_TOP_M:
+            width_m = float(np.subtract(*np.percentile(lateral, [98, 2])))
+            if width_m < PARTIAL_WALL_MIN_WIDTH_M or top_m < WALL_MIN_TOP_M:
                 continue
             if not _is_wall(pts @ np.cross(up, n), dist, thr, inl, rows, cols, h, w):
                 continue
-            if any(p.kind == "wall" and abs(p.normal @ n) > np.cos(np.radians(5.0)) and abs(p.offset_m - d) < 0.1 for p in cam_planes):
+            kind = "wall" if inl.sum() >= min_wall and width_m >= WALL_MIN_WIDTH_M else "partial-wall"
+            if any(p.kind == kind and abs(p.normal @ n) > np.cos(np.radians(5.0)) and abs(p.offset_m - d) < WALL_MERGE_M for p in cam_planes):
                 continue
-            cam_planes.append(CameraPlane(n, d, "wall", to_image(inl)))
+            cam_planes.append(CameraPlane(n, d, kind, to_image(inl)))
         elif -(n0 @ up) > cos_floor:
             # A horizontal plane whose normal (towards the camera) points down: the ceiling.
             n, d, inl = _refine(pts, thr, n0, d0, seed, iterations=1)
             above = (pts @ n + d) < -thr
             cam_planes.append(CameraPlane(n, d, "ceiling", to_image(inl | above)))
 
+    # A partial wall that is a wall found in full is that wall.
+    cam_planes = [
+        p for p in cam_planes
+        if p.kind != "partial-wall" or not any(q.kind == "wall" and abs(q.normal @ p.normal) > np.cos(np.radians(5.0)) and abs(q.offset_m - p.offset_m) < WALL_MERGE_M for q in cam_planes)
+    ]
     walls_cam = [p.normal for p in sorted((p for p in cam_planes if p.kind == "wall"), key=lambda p: -int(p.inliers.sum()))]
     world_from_camera = world_from_camera_for(up, height, walls_cam)
     background = np.zeros((h, w), dtype=bool)
     for p in cam_planes:
-        background |= p.inliers
+        if p.kind != "partial-wall":  # (a partial wall may be a tall cabinet's front: left to the segmenter)
+            background |= p.inliers
     return RoomFrame(
         world_from_camera=world_from_camera,
         up_cam=up,
@@ -437,11 +581,64 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0, up_h
         floor_found=floor_found,
         gravity=gravity,
         planes=tuple(cam_planes),
+        floor=floor,
+    )
+
+
+def _world_plane(frame: RoomFrame, p: CameraPlane) -> tuple[np.ndarray, float]:
+    rot, t = frame.world_from_camera[:3, :3], frame.world_from_camera[:3, 3]
+    n = rot @ p.normal
+    return n, float(p.offset_m - n @ t)
+
+
+def ceiling_plane(frame: RoomFrame) -> Plane | None:
+    """The ceiling found (if any) as a horizontal world plane, normal down (into the room), at the
+    height where the fitted plane passes over the camera."""
+    for p in frame.planes:
+        if p.kind != "ceiling":
+            continue
+        t = frame.world_from_camera[:3, 3]
+        n, off = _world_plane(frame, p)
+        if abs(n[2]) < 1e-6:
+            return None
+        z = -(off + n[0] * t[0] + n[1] * t[1]) / n[2]
+        if z <= t[2]:
+            return None
+        return Plane(np.array([0.0, 0.0, -1.0]), float(z), "ceiling", int(p.inliers.sum()))
+    return None
+
+
+def completion_planes(frame: RoomFrame) -> tuple[Plane, ...]:
+    """The room's planes beyond the floor and the walls, for completing its surface
+    (perception.background): the ceiling, and the partial walls (world frame, kind "wall",
+    normals horizontal, into the room)."""
+    out = _world_walls(frame.world_from_camera, [replace(p, kind="wall") for p in frame.planes if p.kind == "partial-wall"])
+    ceiling = ceiling_plane(frame)
+    return tuple(out) + ((ceiling,) if ceiling is not None else ())
+
+
+def _floor_without_plane(lowest_m: float) -> tuple[float, BackendUse]:
+    """The camera's height above a floor not seen, and how it was chosen: under everything seen
+    (``lowest_m``: the lowest observed point's depth below the camera) and at least
+    :data:`CAMERA_HEIGHT_PRIOR_M` under the camera. Measured on the 17 RGB-D frames with a floor
+    here, with everything seen below a given height removed (``python -m
+    scene_builder.bench.room_planes``): the lowest point alone misses the camera height by the
+    height of what is unseen (median 0.51 m with nothing seen below 0.5 m), the prior by a median
+    0.12 m whatever is unseen."""
+    if lowest_m >= CAMERA_HEIGHT_PRIOR_M:
+        return lowest_m, BackendUse("floor", "lowest-point", f"no floor visible; the floor put under the lowest point seen, {lowest_m:.2f} m under the camera")
+    return CAMERA_HEIGHT_PRIOR_M, BackendUse(
+        "floor", "camera-height-prior", f"no floor visible; the floor put {CAMERA_HEIGHT_PRIOR_M:.2f} m under the camera (a typical camera height; everything seen lies above it, the lowest point {lowest_m:.2f} m under the camera)"
     )
 
 
 def place_floor_under(frame: RoomFrame, lowest_z_m: float) -> RoomFrame:
-    """The same frame with the floor moved to ``lowest_z_m`` (world z of the lowest object point)."""
+    """The same frame with the floor lowered to ``lowest_z_m`` (world z of the lowest object
+    point) if that lies under it (the floor found without a plane is already under everything
+    seen and at least CAMERA_HEIGHT_PRIOR_M under the camera: it is never raised to an object)."""
+    if lowest_z_m >= 0.0:
+        return frame
     t = frame.world_from_camera.copy()
     t[2, 3] -= lowest_z_m
-    return replace(frame, world_from_camera=t, room=Room(walls=_world_walls(t, list(frame.planes))))
+    floor = BackendUse("floor", "lowest-point", f"no floor visible; the floor put under the lowest object point, {t[2, 3]:.2f} m under the camera")
+    return replace(frame, world_from_camera=t, room=Room(walls=_world_walls(t, list(frame.planes))), floor=floor)

@@ -197,9 +197,12 @@ def make_parser() -> argparse.ArgumentParser:
     d.add_argument("--viz", choices=("save", "spawn", "off"), default="save", help="rerun recording (default save)")
 
     be = sub.add_parser("bench", help="score the pipeline and a naive baseline against ground truth")
-    be.add_argument("--suite", choices=("synthetic", "real"), default="synthetic", help="procedural rooms or real RGB-D photos")
-    be.add_argument("--rooms", type=int, default=20, help="number of procedural rooms (synthetic suite)")
-    be.add_argument("--data", type=Path, help="folder of samples in the ../shared/data/real format (real suite)")
+    be.add_argument("--suite", choices=("synthetic", "real", "novel-view"), default="synthetic",
+                    help="procedural rooms, real RGB-D photos, or the twin seen from other cameras (real multi-view frames and "
+                         "procedural rooms from orbit cameras, beside the photo-on-a-box and everything-background controls)")
+    be.add_argument("--rooms", type=int, default=None, help="number of procedural rooms (default 20 for synthetic, 4 for novel-view)")
+    be.add_argument("--data", type=Path, help="folder of samples: the ../shared/data/real format (real suite), the ../shared/data/multiview "
+                                              "format (novel-view suite)")
     be.add_argument("--json", type=Path, default=Path("bench.json"), help="where to write the results (default bench.json)")
     be.add_argument("--seed", type=int, default=0, help="seed (default 0)")
 
@@ -214,8 +217,13 @@ def make_parser() -> argparse.ArgumentParser:
 
     v = sub.add_parser("view", help="open the rerun viewer on OUT/scene.rrd (or write its view to a PNG without a display)")
     v.add_argument("out", type=Path, help="an output folder (or a .rrd file)")
-    v.add_argument("--screenshot", type=Path, metavar="PNG",
-                   help="write the default view (photo beside the twin rendered from the photo's camera, 3D view, report) to PNG headless, instead of opening the viewer")
+    vm = v.add_mutually_exclusive_group()
+    vm.add_argument("--screenshot", type=Path, metavar="PNG",
+                    help="write the default view (photo beside the twin rendered from the photo's camera, 3D view, report) to PNG headless, instead of opening the viewer")
+    vm.add_argument("--orbit", type=Path, metavar="PNG",
+                    help="write a sheet of the twin rendered with MuJoCo (OUT/scene.xml): the photo, the photo's camera, orbits of "
+                         "-30 and +30 degrees about the objects, a view from above; below, the same views of the objects alone "
+                         "(PNG, or JPEG by the suffix)")
 
     m = sub.add_parser("models", help="list or fetch learned model weights")
     msub = m.add_subparsers(dest="models_command", metavar="ACTION", required=True)
@@ -412,9 +420,21 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
+    if args.suite == "novel-view":
+        import json
+
+        from scene_builder.bench.novel_view import DEFAULT_MULTIVIEW, markdown, run
+        from scene_builder.pipeline import stderr_console
+
+        rooms = 4 if args.rooms is None else args.rooms
+        doc = run(rooms=rooms, seed=args.seed, data_dir=args.data or DEFAULT_MULTIVIEW, console=stderr_console())
+        doc["command"] = f"scene-builder bench --suite novel-view --rooms {rooms} --seed {args.seed}" + (f" --data {args.data}" if args.data else "") + f" --json {args.json}"
+        args.json.write_text(json.dumps(doc, indent=1, default=str) + "\n")
+        print(markdown(doc))
+        return 0
     from scene_builder.bench.suites import run_bench
 
-    run_bench(args.suite, args.rooms, args.data, args.json, seed=args.seed)
+    run_bench(args.suite, 20 if args.rooms is None else args.rooms, args.data, args.json, seed=args.seed)
     return 0
 
 
@@ -501,6 +521,11 @@ def _cmd_view(args: argparse.Namespace) -> int:
 
     from scene_builder.errors import InputError
 
+    if args.orbit is not None:
+        from exporters.orbit import orbit_sheet
+
+        print(orbit_sheet(args.out, args.orbit))
+        return 0
     rrd = args.out if args.out.suffix == ".rrd" else args.out / "scene.rrd"
     if not rrd.is_file():
         raise InputError(f"no recording at {rrd}; build with --viz save (the default) first")

@@ -6,8 +6,9 @@ cd "$(dirname "$0")/.."
 
 # System libraries: MuJoCo's offscreen renderer needs EGL (Mesa llvmpipe);
 # rerun's headless screenshot needs Mesa's Vulkan driver; the SDF checker (scripts/sdf_check.cc)
-# is built against libsdformat (Debian has no `gz sdf` command line tool).
-pkgs=(libegl1 libgl1 libglx-mesa0 libegl-mesa0 libgles2 mesa-vulkan-drivers libvulkan1 libsdformat-dev g++ pkg-config)
+# is built against libsdformat (Debian has no `gz sdf` command line tool); open3d does not import
+# without libusb-1.0.so.0.
+pkgs=(libegl1 libgl1 libglx-mesa0 libegl-mesa0 libgles2 mesa-vulkan-drivers libvulkan1 libsdformat-dev g++ pkg-config libusb-1.0-0)
 missing=()
 for p in "${pkgs[@]}"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
 if [ ${#missing[@]} -gt 0 ]; then

@@ -62,6 +62,8 @@ def test_stage_benchmarks_run_in_their_own_process_and_are_pasted_with_their_com
         "scene_builder.bench.interaction",
         "scene_builder.bench.detectors",
         "scene_builder.bench.outdir",
+        "scene_builder.bench.novel_view",
         "scene_builder.bench.groundtruth",
+        "scene_builder.bench.room_planes",
         "scene_builder.bench.sweep",
     }

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -70,6 +71,9 @@ def test_under_ci_a_skip_for_want_of_shared_data_fails(tmp_path: Path):
     assert res.returncode != 0
     # a skipif marker skips in the set-up phase: failing there is reported as an error
     # an expected failure whose message names a path under ../shared stays an expected failure
-    assert res.stdout.strip().splitlines()[-1].startswith("1 failed, 1 xfailed, 1 error in"), res.stdout
+    # The outcome counts of pytest's last line (a plugin of an installed package, open3d's dash,
+    # may add warnings among them).
+    counts = dict((k, int(n)) for n, k in re.findall(r"(\d+) (failed|xfailed|errors?|passed|skipped)", res.stdout.strip().splitlines()[-1]))
+    assert counts == {"failed": 1, "xfailed": 1, "error": 1}, res.stdout
     assert "CI=true: shared data not present" in res.stdout
     assert "CI=true: skipped for want of shared data" in res.stdout

@@ -120,7 +120,8 @@ def test_urdf_and_gltf_carry_the_background_and_textures(exported):
     glb = trimesh.load(str(files.gltf), force="scene")
     surface = glb.geometry["background"]
     assert isinstance(surface.visual, trimesh.visual.TextureVisuals)
-    assert surface.visual.material.baseColorTexture.size == (tf.W, tf.H)
+    atlas = scene.room.background.surface.texture.image_rgb  # the photo and the completed planes' textures
+    assert surface.visual.material.baseColorTexture.size == (atlas.shape[1], atlas.shape[0])
 
 
 def test_sdf_carries_the_background_and_textures(exported):

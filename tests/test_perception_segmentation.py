@@ -105,7 +105,10 @@ def test_colour_split_labels_are_unchanged_on_a_real_sample(monkeypatch):
     loaded = load_input(InputSpec(d / "rgb.jpg", d / "depth.png"), cfg)
     depth, k, *_ = _resolve_depth(loaded, build_registries(cfg), cfg)
     frame = estimate_room(k.unproject(depth), depth > 0, 0)
-    new = sd.DepthClusterSegmenter().segment(loaded.rgb, depth, k, frame.background, up_cam=frame.up_cam)
+    # The floor alone is taken as background (not the walls found): what is compared is the split,
+    # on many clusters, whatever walls the room finds (a wall found over the furnace here left it 3).
+    floor = next(p.inliers for p in frame.planes if p.kind == "floor")
+    new = sd.DepthClusterSegmenter().segment(loaded.rgb, depth, k, floor, up_cam=frame.up_cam)
     calls = []
 
     def reference(points, samples, radius_m):
@@ -113,7 +116,7 @@ def test_colour_split_labels_are_unchanged_on_a_real_sample(monkeypatch):
         return _ball_query_reference(points, samples, radius_m)
 
     monkeypatch.setattr(sd, "_near_points", reference)
-    old = sd.DepthClusterSegmenter().segment(loaded.rgb, depth, k, frame.background, up_cam=frame.up_cam)
+    old = sd.DepthClusterSegmenter().segment(loaded.rgb, depth, k, floor, up_cam=frame.up_cam)
     assert len(calls) >= 5  # the split's neighbour search really ran on this photo
     assert new.labels.max() >= 10
     assert np.array_equal(new.labels, old.labels)

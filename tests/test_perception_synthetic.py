@@ -147,8 +147,14 @@ def test_close_up_without_floor_falls_back(tmp_path):
     p = perceive(_write(tmp_path, depth, "closeup"), CFG)
     gravity = [b for b in p.backends if b.task == "gravity"]
     assert gravity and gravity[0].backend in ("vertical-planes", "camera-prior")
-    lowest = min(float(np.quantile(o.points_world_m[:, 2], 0.01)) for o in p.objects)
-    assert lowest == pytest.approx(0.0, abs=1e-9)
+    # A floor all the same, and report.json says how: everything seen lies less than a typical
+    # camera height below the camera (0.8 m up here), so the floor is that prior's height under it.
+    from perception.room import CAMERA_HEIGHT_PRIOR_M
+
+    floor = [b for b in p.backends if b.task == "floor"]
+    assert [b.backend for b in floor] == ["camera-height-prior"]
+    assert p.camera.world_from_camera[2, 3] == pytest.approx(CAMERA_HEIGHT_PRIOR_M, abs=1e-9)
+    assert min(float(o.points_world_m[:, 2].min()) for o in p.objects) > 0.0
 
 
 def test_bleeding_image_masks_keep_only_the_object(tmp_path, monkeypatch):
@@ -272,3 +278,27 @@ def test_table_legs_hidden_under_the_top_join_the_table(tmp_path):
     assert len(p.objects) == 1
     z = p.objects[0].points_world_m[:, 2]
     assert np.percentile(z, 1) < 0.15 and np.percentile(z, 99) == pytest.approx(0.75, abs=0.02)
+
+
+def test_grid_normals_match_a_tilted_plane_and_face_the_camera():
+    """The depth grid's normals (what wall candidates are found from) are the plane's own normal
+    up to depth noise, oriented towards the camera, and holes in the depth give no normal."""
+    from perception.room import grid_normals
+
+    h, w, f = 120, 160, 150.0
+    n_true = np.array([0.5, -0.3, -1.0])
+    n_true /= np.linalg.norm(n_true)
+    v, u = np.mgrid[0:h, 0:w]
+    rays = np.stack([(u - w / 2) / f, (v - h / 2) / f, np.ones((h, w))], axis=-1)
+    t = -2.0 / (rays @ n_true)  # the plane n . p = -2, 2 m from the camera
+    pts = rays * t[..., None]
+    pts += np.random.default_rng(0).normal(0.0, 0.003, pts.shape)
+    valid = np.ones((h, w), dtype=bool)
+    valid[40:80, 60:100] = False
+    q, n = grid_normals(pts, valid)
+    assert len(q) > 2000
+    assert np.all(n @ n_true > np.cos(np.radians(5.0)))
+    assert np.all(np.einsum("ij,ij->i", n, q) < 0)  # towards the camera
+    # No normal stands for a pixel inside the hole.
+    f_u, f_v = q[:, 0] / q[:, 2] * f + w / 2, q[:, 1] / q[:, 2] * f + h / 2
+    assert not np.any((f_u > 63) & (f_u < 96) & (f_v > 43) & (f_v < 76))

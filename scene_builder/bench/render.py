@@ -14,8 +14,19 @@ import numpy as np
 
 from scene_builder import frames
 from scene_builder.bench.procedural import DENSITY_KG_M3, DepthNoise, Look, RoomSpec, make_room
+from scene_builder.model import Camera
 
-__all__ = ["RenderedRoom", "build_mjspec", "corrupt_depth", "ground_truth", "render_arrays", "render_room", "write_demo_input"]
+__all__ = [
+    "RenderedRoom",
+    "build_mjspec",
+    "corrupt_depth",
+    "ground_truth",
+    "orbit_cameras",
+    "render_arrays",
+    "render_room",
+    "render_views",
+    "write_demo_input",
+]
 
 # --------------------------------------------------------------------------------------------
 # MuJoCo scene
@@ -149,32 +160,79 @@ class RenderedRoom:
 
 def render_arrays(spec: RoomSpec) -> RenderedRoom:
     """Render the room from ``input_camera``: RGB, clean metric planar depth and instance ids."""
+    return render_views(spec, (spec.camera,))[0]
+
+
+def render_views(spec: RoomSpec, cameras) -> list[RenderedRoom]:
+    """Render the room from each :class:`~scene_builder.model.Camera` of ``cameras`` (world
+    frame of the room, OpenCV axes, their own intrinsics): RGB, clean metric planar depth and
+    instance ids, as :func:`render_arrays` does for the input camera."""
     import mujoco
 
-    model = build_mjspec(spec, free_bodies=False).compile()
+    ms = build_mjspec(spec, free_bodies=False)
+    for i, camera in enumerate(cameras):
+        k = camera.intrinsics
+        cam = frames.mujoco_camera(camera.world_from_camera, k)
+        c = ms.worldbody.add_camera(name=f"bench/view_{i}", pos=list(cam["pos"]), quat=list(cam["quat"]))
+        c.resolution = list(cam["resolution"])
+        c.focal_pixel = list(cam["focalpixel"])
+        c.principal_pixel = list(cam["principalpixel"])
+        c.sensor_size = list(cam["sensorsize"])
+        ms.visual.global_.offwidth = max(ms.visual.global_.offwidth, k.width_px)
+        ms.visual.global_.offheight = max(ms.visual.global_.offheight, k.height_px)
+    model = ms.compile()
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
-    k = spec.camera.intrinsics
     geom_to_id = np.zeros(model.ngeom + 1, dtype=np.uint16)  # index -1 (background) -> 0
     ids = {o.name: o.object_id for o in spec.objects}
     for g in range(model.ngeom):
         root = model.body_rootid[model.geom_bodyid[g]]
         geom_to_id[g] = ids.get(model.body(root).name, 0)
-    with mujoco.Renderer(model, k.height_px, k.width_px) as r:
-        r.update_scene(data, camera="input_camera")
-        rgb = r.render().copy()
-        r.enable_depth_rendering()
-        r.update_scene(data, camera="input_camera")
-        depth = r.render().astype(np.float32)
-        r.disable_depth_rendering()
-        r.enable_segmentation_rendering()
-        r.update_scene(data, camera="input_camera")
-        seg = r.render()
-    geom_ids = np.where(seg[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM), seg[..., 0], -1)
-    instances = geom_to_id[geom_ids]
     far = float(model.stat.extent * model.vis.map.zfar)
-    depth[depth >= 0.999 * far] = 0.0
-    return RenderedRoom(rgb, depth, instances.astype(np.uint16))
+    out = []
+    for i, camera in enumerate(cameras):
+        k = camera.intrinsics
+        with mujoco.Renderer(model, k.height_px, k.width_px) as r:
+            r.update_scene(data, camera=f"bench/view_{i}")
+            rgb = r.render().copy()
+            r.enable_depth_rendering()
+            r.update_scene(data, camera=f"bench/view_{i}")
+            depth = r.render().astype(np.float32)
+            r.disable_depth_rendering()
+            r.enable_segmentation_rendering()
+            r.update_scene(data, camera=f"bench/view_{i}")
+            seg = r.render()
+        geom_ids = np.where(seg[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM), seg[..., 0], -1)
+        depth[depth >= 0.999 * far] = 0.0
+        out.append(RenderedRoom(rgb, depth, geom_to_id[geom_ids].astype(np.uint16)))
+    return out
+
+
+def orbit_cameras(spec: RoomSpec, degrees=(-30.0, 30.0), clearance_m: float = 0.3) -> tuple[Camera, ...]:
+    """The input camera turned by each angle of ``degrees`` about the vertical axis through the
+    room's objects (the median of their box centres), still looking the same way at them: the
+    second and third viewpoints of the novel-view bench. Where the turned camera would leave the
+    room (``clearance_m`` from its rectangle) or stand within ``clearance_m`` of an object's
+    box, it is moved towards the pivot (down to half its distance) until it does not. Pure numpy."""
+    cam = spec.camera
+    pivot = np.median(np.array([o.position_m for o in spec.objects]), axis=0) if spec.objects else cam.position_m
+    lx, ly, _ = spec.room_size_m
+    out = []
+    for deg in degrees:
+        rot = frames.rot_z(np.radians(deg))
+        offset = rot[:2, :2] @ (cam.position_m[:2] - pivot[:2])
+        chosen = None
+        for scale in (1.0, 0.9, 0.8, 0.7, 0.6, 0.5):
+            xy = pivot[:2] + scale * offset
+            inside = clearance_m <= xy[0] <= lx - clearance_m and clearance_m <= xy[1] <= ly - clearance_m
+            clear = all(np.linalg.norm(xy - np.asarray(o.position_m[:2])) > np.hypot(o.size_m[0], o.size_m[1]) / 2 + clearance_m for o in spec.objects)
+            if inside and clear:
+                chosen = xy
+                break
+        xy = pivot[:2] + 0.5 * offset if chosen is None else chosen
+        t = frames.pose(rot @ cam.world_from_camera[:3, :3], [xy[0], xy[1], cam.position_m[2]])
+        out.append(Camera(cam.intrinsics, t))
+    return tuple(out)
 
 
 def corrupt_depth(depth_m: np.ndarray, noise: DepthNoise, seed: int) -> np.ndarray:

@@ -147,6 +147,21 @@ EXTRAS: tuple[Extra, ...] = (
         markdown=True,
     ),
     Extra(
+        "The twin from other viewpoints",
+        "The real multi-view frames of `../shared/data/multiview` (every verified pair: built from frame A, rendered at frame B's "
+        "pose) and procedural rooms rendered from two more cameras turned -30 / +30 degrees about the objects "
+        "(`scene_builder.bench.novel_view`): the share of the other view's valid true depth pixels within 10 %, median AbsRel, "
+        "coverage, PSNR / SSIM against its photo, split into pixels the input camera saw and did not see, beside the controls "
+        "'photo on a box' (the photo on the fitted floor, walls and ceiling) and 'everything background' (the build without its "
+        "objects); then the objects' shapes against the true primitives by the single-image 3D-FRONT protocol (CD-S, F-Score-S, "
+        "CD-O, F-Score-O, IoU-B, as MIDI's evaluation code computes them) beside the observed-shell control and the published "
+        "MIDI, CAST and Gen3DSR figures on 3D-FRONT. Writes bench_results/novel_view.json, from which the README's "
+        "novel-view block is generated.",
+        ("-m", "scene_builder.bench.novel_view", "--rooms", "4", "--json", "bench_results/novel_view.json"),
+        markdown=True,
+        timeout_s=3600.0,
+    ),
+    Extra(
         "The objects against ground truth",
         "The interactive objects of builds (movable, or fixed with joints) against annotations made by people "
         "(`scene_builder.bench.groundtruth`): SUN RGB-D 3D boxes with and without depth, COCO instance masks of plain photos "
@@ -157,6 +172,16 @@ EXTRAS: tuple[Extra, ...] = (
         ("-m", "scene_builder.bench.groundtruth", "--json", "bench_results/groundtruth.json", "--markdown"),
         markdown=True,
         timeout_s=5400.0,
+    ),
+    Extra(
+        "The room's planes: RANSAC, the floor not seen, walls",
+        "The RGB-D frames of `../shared/data/real` and `multiview` (`scene_builder.bench.room_planes`): the hand-written plane "
+        "RANSAC against open3d's `segment_plane` on the same subsample (milliseconds, inliers, repeatability); the camera's "
+        "height when nothing below h is seen, by the lowest point seen, by the prior `CAMERA_HEIGHT_PRIOR_M` (the median of "
+        "these same frames: in-sample) and by the larger of both, and how often a furniture top is taken for the floor; "
+        "walls found with the depth grid's normals or open3d's, with the normals' milliseconds.",
+        ("-m", "scene_builder.bench.room_planes"),
+        markdown=True,
     ),
     Extra(
         "Parser fuzzing",

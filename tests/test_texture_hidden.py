@@ -1,0 +1,78 @@
+"""Objects' unseen sides (generation.texture): textured from the object's own seen material, not
+by the photo smeared along the viewing rays."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from generation.texture import MATERIAL, SEEN, face_sources, photo_textured
+from scene_builder.bench.clutter import box_asset
+from scene_builder.frames import pose, rot_z
+from scene_builder.model import GeneratedAsset
+from tests import twin_fixtures as tf
+
+BLUE = (20, 40, 230)
+
+
+@pytest.fixture(scope="module")
+def textured():
+    """The fixture's red board as the front of a 0.4 m deep box, its silhouette outlined in blue
+    (piping, a dark frame: what an object's boundary pixels often are)."""
+    import dataclasses
+
+    obs, board = tf.observation()
+    rgb = obs.rgb.copy()
+    ring = board.mask & ~ndimage.binary_erosion(board.mask, iterations=2)
+    rgb[ring] = BLUE
+    obs = dataclasses.replace(obs, rgb=rgb)
+    board = dataclasses.replace(board, colors_rgb=rgb[board.mask])
+    cam = tf.camera()
+    centre = board.points_world_m.mean(axis=0)
+    # The board's size: 60 x 40 pixels at 2 m with a 120 px focal length (its plane leans 15 deg).
+    asset = box_asset("board_1", (0.4, 1.0, 0.68))
+    world_from_asset = pose(rot_z(0.0), [centre[0] + 0.2, centre[1], centre[2] - 0.34])
+    generated = GeneratedAsset(asset, world_from_asset, board.points_world_m)
+    return photo_textured(generated, board, obs, cam), generated, obs, board, cam
+
+
+def _texels_on_faces(visual, faces, n=25):
+    """Texture colours at n barycentric points of each given face."""
+    tex = visual.texture.image_rgb
+    rng = np.random.default_rng(0)
+    w = rng.dirichlet(np.ones(3), size=n)  # (n, 3)
+    uv = np.einsum("sk,fkc->fsc", w, visual.uv[visual.faces[faces]]).reshape(-1, 2)
+    px = np.clip(np.floor(uv * [tex.shape[1], tex.shape[0]]).astype(int), 0, [tex.shape[1] - 1, tex.shape[0] - 1])
+    return tex[px[:, 1], px[:, 0]].astype(int)
+
+
+def test_hidden_sides_carry_the_seen_material_not_the_outline(textured):
+    out, generated, obs, board, cam = textured
+    part = generated.asset.parts[0]
+    camera_from_asset = np.linalg.inv(cam.world_from_camera) @ generated.world_from_asset
+    source = face_sources(part.visual.vertices_m, part.visual.faces, camera_from_asset, cam.intrinsics, board.mask, obs.depth_m.astype(np.float64))
+    normals = np.cross(*(part.visual.vertices_m[part.visual.faces][:, k] - part.visual.vertices_m[part.visual.faces][:, 0] for k in (1, 2)))
+    front = normals[:, 0] < -0.5 * np.linalg.norm(normals, axis=1)  # facing -X, the camera
+    assert np.all(source[front] == SEEN) and np.all(source[~front] == MATERIAL)
+    # The textured mesh: the same surface, faces re-indexed; find the hidden ones by their normals.
+    vis = out.asset.parts[0].visual
+    tri = vis.vertices_m[vis.faces]
+    n2 = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    hidden = ~(n2[:, 0] < -0.5 * np.linalg.norm(n2, axis=1))
+    colours = _texels_on_faces(vis, np.flatnonzero(hidden))
+    blue = (colours[:, 2] > 150) & (colours[:, 0] < 100)
+    red = (colours[:, 0] > 150) & (colours[:, 2] < 100)
+    # The seen surface is red inside a blue outline; hidden sides are red like it, not streaks of
+    # the outline (the sides seen edge-on project onto the outline).
+    assert blue.mean() < 0.02 and red.mean() > 0.95
+    # The front keeps the photo: outline and all.
+    front_colours = _texels_on_faces(vis, np.flatnonzero(~hidden), n=200)
+    assert ((front_colours[:, 2] > 150) & (front_colours[:, 0] < 100)).any()
+
+
+def test_textured_mesh_keeps_the_geometry(textured):
+    out, generated, *_ = textured
+    a, b = generated.asset.parts[0].visual, out.asset.parts[0].visual
+    np.testing.assert_allclose(np.sort(a.vertices_m[a.faces].reshape(-1, 9), axis=0), np.sort(b.vertices_m[b.faces].reshape(-1, 9), axis=0))
+    assert b.uv.shape == (len(b.vertices_m), 2) and np.all((b.uv >= 0) & (b.uv <= 1))
