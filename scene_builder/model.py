@@ -556,7 +556,8 @@ class Part:
 
     parent: name of the parent part, None for the root part (exactly one per asset).
     joint: joint to the parent, None for the root.
-    visual: watertight visual mesh in the asset frame.
+    visual: watertight visual mesh in the asset frame (closed by position: a textured one is split
+      at its texture seams, one vertex per position and texture coordinate).
     collision: convex pieces (each a closed convex mesh, a solid ``MIN_PIECE_THICKNESS_M`` thick or
       more) in the asset frame; at least one.
     affordance_rank: 1..10, 1 = most likely to be touched or grasped (PhysX convention).
