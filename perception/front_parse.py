@@ -1,0 +1,230 @@
+"""Door and drawer fronts on one rectified face: the face image split into panels along its
+gaps and panel edges, each panel's handle found, and each panel told door, drawer or frame.
+
+Input is a *rectified* face: an image in which the face of a box-like piece of furniture is seen
+head-on, rows horizontal and columns vertical in the world (``perception.fronts`` warps the photo
+there with the face plane's homography), with its scale in metres per pixel (approximate: the
+rules below use it only for sizes that tolerate a factor of about 1.5).
+
+1. **Edges** (scikit-image Canny) split by orientation (Sobel): horizontal and vertical.
+2. **Recursive cuts** (an XY-cut, as document layout analysis splits a page): in the current
+   rectangle, each row (column) is scored by the share of the rectangle's width (height) along
+   which a horizontal (vertical) edge lies within a pixel of it, minus the same share a few pixels
+   away on both sides, so that dense texture (wood grain, cane, carving) does not cut. The best
+   row or column scoring at least ``CUT_MIN_SCORE`` that leaves both pieces at least
+   ``MIN_PANEL_M`` wide and that reaches both ends of the rectangle splits it; the pieces are cut
+   again until no such line is left. Inner panel frames of a door stop short of its edges and do
+   not cut it.
+3. **Handles**: small dark or bright features (morphological black / white top-hat with a 5 cm
+   square) that are compact (a knob) or a bar (a pull), 1-35 cm long and at most 5 cm thick, not
+   touching the panel's border: the strongest one in the panel.
+4. **Kind**: a panel is a front when it has a handle, or when it is at least 12 cm in both
+   directions and every side of it is a cut (not the face's border: the face's top, plinth and
+   side strips are carcass). A front whose handle is near its left or right edge is a door hinged
+   on the far side; one with a centred handle that is at least as wide as 0.8 of its height is a
+   drawer; without a handle, a panel wider than 1.3 x its height and under 40 cm high is a drawer,
+   else a door hinged on the side nearer to the face's border (the outer sides of a pair).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["CUT_MIN_SCORE", "MIN_PANEL_M", "Panel", "parse_face"]
+
+#: A line cuts when its edge share minus the share beside it is at least this.
+CUT_MIN_SCORE = 0.75
+#: A cut leaves both pieces at least this wide (m): thin strips (a gap, a frame rail) are cut
+#: off as pieces of their own, so that the lines beside them reach the ends of what is left.
+MIN_PANEL_M = 0.015
+#: A line must have edges within this share of each end of the rectangle (it reaches both ends).
+END_SHARE = 0.12
+#: Handle sizes (m): longest side, shortest side at most; smallest area.
+HANDLE_MAX_LONG_M = 0.35
+HANDLE_MAX_SHORT_M = 0.05
+HANDLE_MIN_LONG_M = 0.012
+#: A pull is at most this many times longer than thick (a gap between fronts is longer).
+HANDLE_MAX_ASPECT = 15.0
+#: Top-hat contrast (grey levels in [0, 1]) of a handle against its panel.
+HANDLE_CONTRAST = 0.12
+#: A panel without a handle is a front only when at least this big (m) in both directions.
+FRONT_MIN_M = 0.12
+
+
+@dataclass(frozen=True)
+class Panel:
+    """One leaf of the face's cuts, in face pixels (x right, y down).
+
+    box: (x0, y0, x1, y1) half-open pixel bounds. kind: ``"door"``, ``"drawer"`` or ``""`` (a
+    frame / carcass strip, not a front). hinge: ``"left"`` / ``"right"`` (seen from the front)
+    for a door, ``""`` otherwise. handle: (x, y) centre of its handle or None. cut_sides: which
+    sides are cuts (left, top, right, bottom) rather than the face's border."""
+
+    box: tuple[int, int, int, int]
+    kind: str
+    hinge: str
+    handle: tuple[float, float] | None
+    cut_sides: tuple[bool, bool, bool, bool]
+    handle_contrast: float = 0.0
+
+
+def _edges(gray: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
+    """(horizontal, vertical) edge maps, each (h, w) bool, thickened by one pixel across."""
+    from scipy import ndimage
+    from skimage.feature import canny
+
+    e = canny(gray, sigma=sigma, low_threshold=0.03, high_threshold=0.08)
+    gx = ndimage.sobel(ndimage.gaussian_filter(gray, sigma), axis=1)
+    gy = ndimage.sobel(ndimage.gaussian_filter(gray, sigma), axis=0)
+    horiz = e & (np.abs(gy) >= np.abs(gx))
+    vert = e & (np.abs(gx) > np.abs(gy))
+    horiz = ndimage.binary_dilation(horiz, structure=np.ones((3, 1), dtype=bool))
+    vert = ndimage.binary_dilation(vert, structure=np.ones((1, 3), dtype=bool))
+    return horiz, vert
+
+
+#: Slopes (rows per column) a line may have in the rectified face: a face rectified from an
+#: estimated plane is off by a degree or two.
+SLOPES = np.linspace(-0.035, 0.035, 9)
+
+
+def _best_cut(emap: np.ndarray, lo: int, hi: int, a0: int, a1: int, min_piece: int, forbidden=()) -> tuple[float, int]:
+    """Best cut line of ``emap`` rows lo..hi (exclusive ends) over columns a0..a1: (score, row).
+    ``emap`` is oriented so that the lines run along axis 1; each row is tried at every slope of
+    SLOPES (the row is where the line crosses the middle column). score: the share of columns with
+    an edge on the line, when the line has edges near both ends (else -1)."""
+    n = a1 - a0
+    if hi - lo < 2 * min_piece or n < 4:
+        return -1.0, -1
+    end = max(2, int(round(END_SHARE * n)))
+    cols = np.arange(n)
+    rows = np.arange(lo, hi)
+    best = np.full(len(rows), -1.0)
+    band_full = emap[:, a0:a1]
+    for slope in SLOPES:
+        shift = np.round(slope * (cols - 0.5 * (n - 1))).astype(np.int64)
+        r = np.clip(rows[:, None] + shift[None, :], lo, hi - 1)
+        band = band_full[r, cols[None, :]]
+        share = band.mean(axis=1)
+        reach = np.minimum(band[:, :end].mean(axis=1), band[:, -end:].mean(axis=1))
+        best = np.maximum(best, np.where(reach >= 0.5, share, -1.0))
+    ok = (rows - lo >= min_piece) & (hi - rows >= min_piece)
+    for f0, f1 in forbidden:  # a line through a handle is no gap
+        ok &= (rows < f0) | (rows >= f1)
+    if not ok.any():
+        return -1.0, -1
+    score = np.where(ok, best, -1.0)
+    i = int(np.argmax(score))
+    return float(score[i]), int(rows[i])
+
+
+def _cut(horiz: np.ndarray, vert: np.ndarray, box, min_piece: int, handles: list, out: list, sides, depth: int = 0) -> None:
+    """Split ``box`` recursively (see the module docstring); leaves go to ``out`` as (box, sides)."""
+    x0, y0, x1, y1 = box
+    pad = max(1, min_piece // 2)
+    rows = [(hb[1] - pad, hb[3] + pad) for hb in (hd.box for hd in handles) if hb[0] < x1 and hb[2] > x0]
+    cols = [(hb[0] - pad, hb[2] + pad) for hb in (hd.box for hd in handles) if hb[1] < y1 and hb[3] > y0]
+    sh, r = _best_cut(horiz, y0, y1, x0, x1, min_piece, rows)
+    sv, c = _best_cut(vert.T, x0, x1, y0, y1, min_piece, cols)
+    if max(sh, sv) < CUT_MIN_SCORE or depth > 24:
+        out.append((box, sides))
+        return
+    left, top, right, bottom = sides
+    if sh >= sv:
+        _cut(horiz, vert, (x0, y0, x1, r), min_piece, handles, out, (left, top, right, True), depth + 1)
+        _cut(horiz, vert, (x0, r, x1, y1), min_piece, handles, out, (left, True, right, bottom), depth + 1)
+    else:
+        _cut(horiz, vert, (x0, y0, c, y1), min_piece, handles, out, (left, top, True, bottom), depth + 1)
+        _cut(horiz, vert, (c, y0, x1, y1), min_piece, handles, out, (True, top, right, bottom), depth + 1)
+
+
+@dataclass(frozen=True)
+class _Handle:
+    box: tuple[int, int, int, int]  # x0, y0, x1, y1 in face pixels
+    centre: tuple[float, float]
+    score: float
+
+
+def _handles(gray: np.ndarray, m_per_px: float) -> list[_Handle]:
+    """Handle-like features of the whole face, strongest first. Candidates: components of the
+    black and white top-hats (a 5 cm square) above HANDLE_CONTRAST, of a handle's size, filling
+    their box (a knob or a bar, not a curved moulding), and not one of a repeated pattern (beads,
+    a lattice, carving: four or more components of about the same size and contrast within
+    three times their size (square root of the area) of each other; handles repeat too, but a
+    front's size apart)."""
+    from scipy import ndimage
+    from skimage.measure import label, regionprops
+
+    size = int(np.clip(round(0.05 / m_per_px), 5, 25))
+    out = []
+    black = ndimage.grey_closing(gray, size=(size, size)) - gray  # dark features smaller than the square
+    white = gray - ndimage.grey_opening(gray, size=(size, size))  # bright ones
+    for th in (black, white):
+        props = regionprops(label(th > HANDLE_CONTRAST), intensity_image=th)
+        feats = np.array([[rp.area, rp.intensity_max, *rp.centroid] for rp in props], dtype=np.float64).reshape(-1, 4)
+        for rp in props:
+            r0, c0, r1, c1 = rp.bbox
+            long_, short = max(r1 - r0, c1 - c0), min(r1 - r0, c1 - c0)
+            if long_ * m_per_px > HANDLE_MAX_LONG_M or short * m_per_px > HANDLE_MAX_SHORT_M or long_ * m_per_px < HANDLE_MIN_LONG_M:
+                continue
+            if rp.area < 0.4 * (r1 - r0) * (c1 - c0):  # a handle fills its box (not a curved line)
+                continue
+            if long_ > HANDLE_MAX_ASPECT * max(short, 1):  # a gap or a groove, not a pull
+                continue
+            a, c = float(rp.area), float(rp.intensity_max)
+            cy, cx = rp.centroid
+            near = np.hypot(feats[:, 2] - cy, feats[:, 3] - cx) < 3.0 * np.sqrt(rp.area)
+            similar = near & (feats[:, 0] > 0.5 * a) & (feats[:, 0] < 2.0 * a) & (feats[:, 1] > c / 1.5) & (feats[:, 1] < 1.5 * c)
+            if similar.sum() >= 4:  # one of a pattern (itself and three more close by)
+                continue
+            out.append(_Handle((int(c0), int(r0), int(c1), int(r1)), (float(cx), float(cy)), c * float(np.sqrt(a))))
+    out.sort(key=lambda hd: -hd.score)
+    return out
+
+
+def _handle_in(handles: list[_Handle], box, m_per_px: float) -> _Handle | None:
+    """The strongest handle inside ``box`` and off its border (1 cm), no longer than 0.7 of it."""
+    x0, y0, x1, y1 = box
+    margin = max(2, int(round(0.01 / m_per_px)))
+    for hd in handles:
+        a0, b0, a1, b1 = hd.box
+        if a0 >= x0 + margin and b0 >= y0 + margin and a1 <= x1 - margin and b1 <= y1 - margin:
+            if max(a1 - a0, b1 - b0) <= 0.7 * max(x1 - x0, y1 - y0):
+                return hd
+    return None
+
+
+def parse_face(face_rgb: np.ndarray, m_per_px: float) -> list[Panel]:
+    """The panels of a rectified face image ((h, w, 3) uint8) at ``m_per_px`` metres per pixel,
+    each told front (door / drawer, with hinge side and handle) or frame (see the module
+    docstring)."""
+    from skimage.color import rgb2gray
+
+    gray = rgb2gray(np.asarray(face_rgb)).astype(np.float64)
+    h, w = gray.shape
+    horiz, vert = _edges(gray, sigma=1.2)
+    handles = _handles(gray, m_per_px)
+    min_piece = max(3, int(round(MIN_PANEL_M / m_per_px)))
+    leaves: list = []
+    _cut(horiz, vert, (0, 0, w, h), min_piece, [], leaves, (False, False, False, False))
+    panels = []
+    for box, sides in leaves:
+        x0, y0, x1, y1 = box
+        pw, ph = (x1 - x0) * m_per_px, (y1 - y0) * m_per_px
+        hd = _handle_in(handles, box, m_per_px) if min(pw, ph) >= 0.06 else None
+        kind, hinge = "", ""
+        if hd is not None:
+            rel = (hd.centre[0] - x0) / max(1, x1 - x0)
+            if 0.3 <= rel <= 0.7:
+                kind = "drawer" if pw >= 0.8 * ph else "door"
+            else:
+                kind = "door"
+                hinge = "right" if rel < 0.3 else "left"
+        elif min(pw, ph) >= FRONT_MIN_M and all(sides):
+            kind = "drawer" if (pw > 1.3 * ph and ph < 0.4) else "door"
+        if kind == "door" and not hinge:
+            hinge = "left" if (x0 + x1) / 2 < w / 2 else "right"
+        panels.append(Panel(box, kind, hinge, None if hd is None else hd.centre, sides, 0.0 if hd is None else hd.score))
+    return panels
