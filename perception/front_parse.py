@@ -39,35 +39,44 @@ CUT_MIN_SCORE = 0.75
 #: A cut leaves both pieces at least this wide (m): thin strips (a gap, a frame rail) are cut
 #: off as pieces of their own, so that the lines beside them reach the ends of what is left.
 MIN_PANEL_M = 0.015
-#: A line must have edges within this share of each end of the rectangle (it reaches both ends).
+#: A line must have edges within this share of each end of the rectangle (it reaches both ends),
+#: or cover at least LONG_LINE_SHARE of it (a front column ending above the plinth or the legs).
 END_SHARE = 0.12
-#: Handle sizes (m): longest side, shortest side at most; smallest area.
+LONG_LINE_SHARE = 0.8
+#: Shears (pixels per pixel) tried when deskewing the face.
+MAX_SKEW = 0.04
+#: Handle sizes (m), contrast (grey levels in [0, 1]) and shape.
 HANDLE_MAX_LONG_M = 0.35
 HANDLE_MAX_SHORT_M = 0.05
 HANDLE_MIN_LONG_M = 0.012
-#: A pull is at most this many times longer than thick (a gap between fronts is longer).
 HANDLE_MAX_ASPECT = 15.0
-#: Top-hat contrast (grey levels in [0, 1]) of a handle against its panel.
 HANDLE_CONTRAST = 0.12
+HANDLE_LEVELS = (HANDLE_CONTRAST, 0.2, 0.3, 0.45)
+#: Handle pieces closer than this (m) are one handle.
+HANDLE_MERGE_M = 0.005
 #: A panel without a handle is a front only when at least this big (m) in both directions.
 FRONT_MIN_M = 0.12
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Panel:
-    """One leaf of the face's cuts, in face pixels (x right, y down).
+    """One front found on the face, in face pixels (x right, y down).
 
-    box: (x0, y0, x1, y1) half-open pixel bounds. kind: ``"door"``, ``"drawer"`` or ``""`` (a
-    frame / carcass strip, not a front). hinge: ``"left"`` / ``"right"`` (seen from the front)
-    for a door, ``""`` otherwise. handle: (x, y) centre of its handle or None. cut_sides: which
-    sides are cuts (left, top, right, bottom) rather than the face's border."""
+    corners: (4, 2) float64 corners (x, y) bottom-left, bottom-right, top-right, top-left.
+    kind: ``"door"`` or ``"drawer"``. hinge: ``"left"`` / ``"right"`` (seen from the front) for a
+    door, ``""`` for a drawer. handle: (x, y) centre of its handle or None. support: the share of
+    its sides that are cuts rather than the face's border (0..1)."""
 
-    box: tuple[int, int, int, int]
+    corners: np.ndarray
     kind: str
     hinge: str
     handle: tuple[float, float] | None
-    cut_sides: tuple[bool, bool, bool, bool]
-    handle_contrast: float = 0.0
+    support: float
+
+    @property
+    def box(self) -> tuple[float, float, float, float]:
+        lo, hi = self.corners.min(axis=0), self.corners.max(axis=0)
+        return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
 
 
 def _edges(gray: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
@@ -94,7 +103,8 @@ def _best_cut(emap: np.ndarray, lo: int, hi: int, a0: int, a1: int, min_piece: i
     """Best cut line of ``emap`` rows lo..hi (exclusive ends) over columns a0..a1: (score, row).
     ``emap`` is oriented so that the lines run along axis 1; each row is tried at every slope of
     SLOPES (the row is where the line crosses the middle column). score: the share of columns with
-    an edge on the line, when the line has edges near both ends (else -1)."""
+    an edge on the line, when the line has edges near both ends or covers LONG_LINE_SHARE of
+    them (else -1)."""
     n = a1 - a0
     if hi - lo < 2 * min_piece or n < 4:
         return -1.0, -1
@@ -109,7 +119,7 @@ def _best_cut(emap: np.ndarray, lo: int, hi: int, a0: int, a1: int, min_piece: i
         band = band_full[r, cols[None, :]]
         share = band.mean(axis=1)
         reach = np.minimum(band[:, :end].mean(axis=1), band[:, -end:].mean(axis=1))
-        best = np.maximum(best, np.where(reach >= 0.5, share, -1.0))
+        best = np.maximum(best, np.where((reach >= 0.5) | (share >= LONG_LINE_SHARE), share, -1.0))
     ok = (rows - lo >= min_piece) & (hi - rows >= min_piece)
     for f0, f1 in forbidden:  # a line through a handle is no gap
         ok &= (rows < f0) | (rows >= f1)
@@ -162,26 +172,54 @@ def _handles(gray: np.ndarray, m_per_px: float) -> list[_Handle]:
     black = ndimage.grey_closing(gray, size=(size, size)) - gray  # dark features smaller than the square
     white = gray - ndimage.grey_opening(gray, size=(size, size))  # bright ones
     for th in (black, white):
-        props = regionprops(label(th > HANDLE_CONTRAST), intensity_image=th)
-        feats = np.array([[rp.area, rp.intensity_max, *rp.centroid] for rp in props], dtype=np.float64).reshape(-1, 4)
-        for rp in props:
-            r0, c0, r1, c1 = rp.bbox
-            long_, short = max(r1 - r0, c1 - c0), min(r1 - r0, c1 - c0)
-            if long_ * m_per_px > HANDLE_MAX_LONG_M or short * m_per_px > HANDLE_MAX_SHORT_M or long_ * m_per_px < HANDLE_MIN_LONG_M:
-                continue
-            if rp.area < 0.4 * (r1 - r0) * (c1 - c0):  # a handle fills its box (not a curved line)
-                continue
-            if long_ > HANDLE_MAX_ASPECT * max(short, 1):  # a gap or a groove, not a pull
-                continue
-            a, c = float(rp.area), float(rp.intensity_max)
-            cy, cx = rp.centroid
-            near = np.hypot(feats[:, 2] - cy, feats[:, 3] - cx) < 3.0 * np.sqrt(rp.area)
-            similar = near & (feats[:, 0] > 0.5 * a) & (feats[:, 0] < 2.0 * a) & (feats[:, 1] > c / 1.5) & (feats[:, 1] < 1.5 * c)
-            if similar.sum() >= 4:  # one of a pattern (itself and three more close by)
-                continue
-            out.append(_Handle((int(c0), int(r0), int(c1), int(r1)), (float(cx), float(cy)), c * float(np.sqrt(a))))
+        # several levels, highest first: a dark knob joined to dark gaps at a low level stands alone
+        # at a higher one
+        for level in sorted(HANDLE_LEVELS, reverse=True):
+            props = regionprops(label(th > level), intensity_image=th)
+            feats = np.array([[rp.area, rp.intensity_max, *rp.centroid] for rp in props], dtype=np.float64).reshape(-1, 4)
+            for rp in props:
+                r0, c0, r1, c1 = rp.bbox
+                long_, short = max(r1 - r0, c1 - c0), min(r1 - r0, c1 - c0)
+                if long_ * m_per_px > HANDLE_MAX_LONG_M or short * m_per_px > HANDLE_MAX_SHORT_M or long_ * m_per_px < HANDLE_MIN_LONG_M:
+                    continue
+                if rp.area < 0.4 * (r1 - r0) * (c1 - c0):  # a handle fills its box (not a curved line)
+                    continue
+                if long_ > HANDLE_MAX_ASPECT * max(short, 1):  # a gap or a groove, not a pull
+                    continue
+                a, c = float(rp.area), float(rp.intensity_max)
+                cy, cx = rp.centroid
+                near = np.hypot(feats[:, 2] - cy, feats[:, 3] - cx) < 3.0 * np.sqrt(a)
+                similar = near & (feats[:, 0] > 0.5 * a) & (feats[:, 0] < 2.0 * a) & (feats[:, 1] > c / 1.5) & (feats[:, 1] < 1.5 * c)
+                if similar.sum() >= 4:  # one of a pattern (itself and three more close by)
+                    continue
+                if any(c0 <= hd.centre[0] <= c1 and r0 <= hd.centre[1] <= r1 for hd in out):
+                    continue  # its core was found at a higher level
+                out.append(_Handle((int(c0), int(r0), int(c1), int(r1)), (float(cx), float(cy)), c * float(np.sqrt(a))))
+    out = _merge_handles(out, max(1, int(round(HANDLE_MERGE_M / m_per_px))))
     out.sort(key=lambda hd: -hd.score)
     return out
+
+
+def _merge_handles(handles: list[_Handle], gap: int) -> list[_Handle]:
+    """Handles whose boxes lie within ``gap`` pixels of each other merged into one (a knob split
+    by its highlight, a bar by its reflection): the union box, the strongest's score."""
+    boxes = [list(hd.box) for hd in handles]
+    scores = [hd.score for hd in handles]
+    merged = True
+    while merged:
+        merged = False
+        for i in range(len(boxes)):
+            for j in range(i + 1, len(boxes)):
+                a, b = boxes[i], boxes[j]
+                if a[0] - gap <= b[2] and b[0] - gap <= a[2] and a[1] - gap <= b[3] and b[1] - gap <= a[3]:
+                    boxes[i] = [min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), max(a[3], b[3])]
+                    scores[i] = max(scores[i], scores[j])
+                    del boxes[j], scores[j]
+                    merged = True
+                    break
+            if merged:
+                break
+    return [_Handle(tuple(b), (0.5 * (b[0] + b[2]), 0.5 * (b[1] + b[3])), sc) for b, sc in zip(boxes, scores)]
 
 
 def _handle_in(handles: list[_Handle], box, m_per_px: float) -> _Handle | None:
@@ -196,15 +234,37 @@ def _handle_in(handles: list[_Handle], box, m_per_px: float) -> _Handle | None:
     return None
 
 
+def _skew(emap: np.ndarray) -> float:
+    """The shear s (rows per column) within MAX_SKEW whose sheared row profile of ``emap`` is
+    most peaked (sum of squared row counts)."""
+    ys, xs = np.nonzero(emap)
+    if len(ys) == 0:
+        return 0.0
+    cols = xs - 0.5 * (emap.shape[1] - 1)
+    best, best_s = -1.0, 0.0
+    for s in np.linspace(-MAX_SKEW, MAX_SKEW, 17):
+        r = np.round(ys - s * cols).astype(np.int64)
+        score = float(np.sum(np.bincount(r - r.min()).astype(np.float64) ** 2))
+        if score > best * 1.0001:
+            best, best_s = score, float(s)
+    return best_s
+
+
 def parse_face(face_rgb: np.ndarray, m_per_px: float) -> list[Panel]:
-    """The panels of a rectified face image ((h, w, 3) uint8) at ``m_per_px`` metres per pixel,
-    each told front (door / drawer, with hinge side and handle) or frame (see the module
-    docstring)."""
+    """The door and drawer fronts of a rectified face image ((h, w, 3) uint8) at ``m_per_px``
+    metres per pixel (see the module docstring)."""
+    import cv2
     from skimage.color import rgb2gray
 
     gray = rgb2gray(np.asarray(face_rgb)).astype(np.float64)
     h, w = gray.shape
     horiz, vert = _edges(gray, sigma=1.2)
+    sh, sv = _skew(horiz), _skew(vert.T)  # rows drift sh per column, columns sv per row
+    fwd = np.array([[1.0, -sv, sv * 0.5 * (h - 1)], [-sh, 1.0, sh * 0.5 * (w - 1)]])
+    if sh or sv:  # deskew: x' = x - sv (y - cy), y' = y - sh (x - cx)
+        gray = cv2.warpAffine(gray, fwd, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        horiz, vert = _edges(gray, sigma=1.2)
+    back = cv2.invertAffineTransform(fwd)
     handles = _handles(gray, m_per_px)
     min_piece = max(3, int(round(MIN_PANEL_M / m_per_px)))
     leaves: list = []
@@ -224,7 +284,11 @@ def parse_face(face_rgb: np.ndarray, m_per_px: float) -> list[Panel]:
                 hinge = "right" if rel < 0.3 else "left"
         elif min(pw, ph) >= FRONT_MIN_M and all(sides):
             kind = "drawer" if (pw > 1.3 * ph and ph < 0.4) else "door"
+        if not kind:
+            continue
         if kind == "door" and not hinge:
             hinge = "left" if (x0 + x1) / 2 < w / 2 else "right"
-        panels.append(Panel(box, kind, hinge, None if hd is None else hd.centre, sides, 0.0 if hd is None else hd.score))
+        corners = np.array([[x0, y1], [x1, y1], [x1, y0], [x0, y0]], dtype=np.float64) @ back[:, :2].T + back[:, 2]
+        handle = None if hd is None else tuple(float(v) for v in back[:, :2] @ np.array(hd.centre) + back[:, 2])
+        panels.append(Panel(corners, kind, hinge, handle, float(np.mean(sides))))
     return panels
