@@ -56,6 +56,10 @@ HANDLE_LEVELS = (HANDLE_CONTRAST, 0.2, 0.3, 0.45)
 HANDLE_MERGE_M = 0.005
 #: A panel without a handle is a front only when at least this big (m) in both directions.
 FRONT_MIN_M = 0.12
+#: A front grows over the strips around its handle up to this size (m).
+FRONT_MAX_M = 2.5
+#: Handles at least this share of the strongest one's score are credible.
+HANDLE_MIN_SHARE = 0.2
 
 
 @dataclass(frozen=True, eq=False)
@@ -99,7 +103,7 @@ def _edges(gray: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
 SLOPES = np.linspace(-0.035, 0.035, 9)
 
 
-def _best_cut(emap: np.ndarray, lo: int, hi: int, a0: int, a1: int, min_piece: int, forbidden=()) -> tuple[float, int]:
+def _best_cut(emap: np.ndarray, lo: int, hi: int, a0: int, a1: int, min_piece: int) -> tuple[float, int]:
     """Best cut line of ``emap`` rows lo..hi (exclusive ends) over columns a0..a1: (score, row).
     ``emap`` is oriented so that the lines run along axis 1; each row is tried at every slope of
     SLOPES (the row is where the line crosses the middle column). score: the share of columns with
@@ -121,8 +125,6 @@ def _best_cut(emap: np.ndarray, lo: int, hi: int, a0: int, a1: int, min_piece: i
         reach = np.minimum(band[:, :end].mean(axis=1), band[:, -end:].mean(axis=1))
         best = np.maximum(best, np.where((reach >= 0.5) | (share >= LONG_LINE_SHARE), share, -1.0))
     ok = (rows - lo >= min_piece) & (hi - rows >= min_piece)
-    for f0, f1 in forbidden:  # a line through a handle is no gap
-        ok &= (rows < f0) | (rows >= f1)
     if not ok.any():
         return -1.0, -1
     score = np.where(ok, best, -1.0)
@@ -130,24 +132,35 @@ def _best_cut(emap: np.ndarray, lo: int, hi: int, a0: int, a1: int, min_piece: i
     return float(score[i]), int(rows[i])
 
 
-def _cut(horiz: np.ndarray, vert: np.ndarray, box, min_piece: int, handles: list, out: list, sides, depth: int = 0) -> None:
-    """Split ``box`` recursively (see the module docstring); leaves go to ``out`` as (box, sides)."""
-    x0, y0, x1, y1 = box
-    pad = max(1, min_piece // 2)
-    rows = [(hb[1] - pad, hb[3] + pad) for hb in (hd.box for hd in handles) if hb[0] < x1 and hb[2] > x0]
-    cols = [(hb[0] - pad, hb[2] + pad) for hb in (hd.box for hd in handles) if hb[1] < y1 and hb[3] > y0]
-    sh, r = _best_cut(horiz, y0, y1, x0, x1, min_piece, rows)
-    sv, c = _best_cut(vert.T, x0, x1, y0, y1, min_piece, cols)
+@dataclass(eq=False)
+class _Node:
+    """A rectangle of the cut tree: (x0, y0, x1, y1) pixel bounds, which sides are cuts (left,
+    top, right, bottom) rather than the face's border, its parent and its two pieces (none for a
+    leaf)."""
+
+    box: tuple[int, int, int, int]
+    sides: tuple[bool, bool, bool, bool]
+    parent: "_Node | None" = None
+    children: tuple = ()
+
+    def leaves(self) -> list["_Node"]:
+        return [self] if not self.children else [leaf for c in self.children for leaf in c.leaves()]
+
+
+def _cut(horiz: np.ndarray, vert: np.ndarray, node: _Node, min_piece: int, depth: int = 0) -> None:
+    """Split ``node`` recursively along its best cut line (see the module docstring)."""
+    x0, y0, x1, y1 = node.box
+    sh, r = _best_cut(horiz, y0, y1, x0, x1, min_piece)
+    sv, c = _best_cut(vert.T, x0, x1, y0, y1, min_piece)
     if max(sh, sv) < CUT_MIN_SCORE or depth > 24:
-        out.append((box, sides))
         return
-    left, top, right, bottom = sides
+    left, top, right, bottom = node.sides
     if sh >= sv:
-        _cut(horiz, vert, (x0, y0, x1, r), min_piece, handles, out, (left, top, right, True), depth + 1)
-        _cut(horiz, vert, (x0, r, x1, y1), min_piece, handles, out, (left, True, right, bottom), depth + 1)
+        node.children = (_Node((x0, y0, x1, r), (left, top, right, True), node), _Node((x0, r, x1, y1), (left, True, right, bottom), node))
     else:
-        _cut(horiz, vert, (x0, y0, c, y1), min_piece, handles, out, (left, top, True, bottom), depth + 1)
-        _cut(horiz, vert, (c, y0, x1, y1), min_piece, handles, out, (True, top, right, bottom), depth + 1)
+        node.children = (_Node((x0, y0, c, y1), (left, top, True, bottom), node), _Node((c, y0, x1, y1), (True, top, right, bottom), node))
+    for child in node.children:
+        _cut(horiz, vert, child, min_piece, depth + 1)
 
 
 @dataclass(frozen=True)
@@ -195,14 +208,15 @@ def _handles(gray: np.ndarray, m_per_px: float) -> list[_Handle]:
                 if any(c0 <= hd.centre[0] <= c1 and r0 <= hd.centre[1] <= r1 for hd in out):
                     continue  # its core was found at a higher level
                 out.append(_Handle((int(c0), int(r0), int(c1), int(r1)), (float(cx), float(cy)), c * float(np.sqrt(a))))
-    out = _merge_handles(out, max(1, int(round(HANDLE_MERGE_M / m_per_px))))
+    out = _merge_handles(out, max(1, int(round(HANDLE_MERGE_M / m_per_px))), HANDLE_MAX_LONG_M / m_per_px, HANDLE_MAX_SHORT_M / m_per_px)
     out.sort(key=lambda hd: -hd.score)
     return out
 
 
-def _merge_handles(handles: list[_Handle], gap: int) -> list[_Handle]:
+def _merge_handles(handles: list[_Handle], gap: int, long_max: float, short_max: float) -> list[_Handle]:
     """Handles whose boxes lie within ``gap`` pixels of each other merged into one (a knob split
-    by its highlight, a bar by its reflection): the union box, the strongest's score."""
+    by its highlight, a bar by its reflection) when the union is still of a handle's size
+    (``long_max`` x ``short_max`` pixels): the union box, the strongest's score."""
     boxes = [list(hd.box) for hd in handles]
     scores = [hd.score for hd in handles]
     merged = True
@@ -212,7 +226,10 @@ def _merge_handles(handles: list[_Handle], gap: int) -> list[_Handle]:
             for j in range(i + 1, len(boxes)):
                 a, b = boxes[i], boxes[j]
                 if a[0] - gap <= b[2] and b[0] - gap <= a[2] and a[1] - gap <= b[3] and b[1] - gap <= a[3]:
-                    boxes[i] = [min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), max(a[3], b[3])]
+                    u = [min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), max(a[3], b[3])]
+                    if max(u[2] - u[0], u[3] - u[1]) > long_max or min(u[2] - u[0], u[3] - u[1]) > short_max:
+                        continue
+                    boxes[i] = u
                     scores[i] = max(scores[i], scores[j])
                     del boxes[j], scores[j]
                     merged = True
@@ -232,6 +249,56 @@ def _handle_in(handles: list[_Handle], box, m_per_px: float) -> _Handle | None:
             if max(a1 - a0, b1 - b0) <= 0.7 * max(x1 - x0, y1 - y0):
                 return hd
     return None
+
+
+def _fronts(root: _Node, handles: list[_Handle], m_per_px: float) -> list[tuple]:
+    """The fronts of a cut tree: [(box, sides, handle or None)].
+
+    A leaf holding a handle grows into its ancestors as long as what it takes in holds no handle
+    and no leaf that could be a front itself (FRONT_MIN_M in both directions, cut on every side):
+    the strips that plank seams, wood grain or a raised panel's mouldings cut a front into, and
+    the rails around it, are the front's. Leaves without a handle, FRONT_MIN_M in both directions
+    and cut on every side, are fronts as they are."""
+    min_px = FRONT_MIN_M / m_per_px
+
+    def has_handle(node: _Node) -> _Handle | None:
+        return _handle_in(handles, node.box, m_per_px)
+
+    def big(leaf: _Node) -> bool:
+        x0, y0, x1, y1 = leaf.box
+        return min(x1 - x0, y1 - y0) >= min_px and all(leaf.sides)
+
+    out, taken = [], set()
+    for leaf in root.leaves():
+        hd = has_handle(leaf)
+        if hd is None:
+            continue
+        node = leaf
+        while node.parent is not None:
+            sibling = next(c for c in node.parent.children if c is not node)
+            if any(_handle_in(handles, sl.box, m_per_px) is not None or big(sl) for sl in sibling.leaves()):
+                break
+            if any(_overlaps(hd2, sibling.box) for hd2 in handles):
+                break
+            px0, py0, px1, py1 = node.parent.box
+            if max(px1 - px0, py1 - py0) * m_per_px > FRONT_MAX_M:
+                break
+            node = node.parent
+        if id(node) in taken:
+            continue
+        taken.add(id(node))
+        taken.update(id(x) for x in node.leaves())
+        out.append((node.box, node.sides, hd))
+    for leaf in root.leaves():
+        if id(leaf) not in taken and big(leaf) and has_handle(leaf) is None:
+            out.append((leaf.box, leaf.sides, None))
+    return out
+
+
+def _overlaps(hd: _Handle, box) -> bool:
+    """Whether handle ``hd``'s centre lies in ``box``."""
+    x0, y0, x1, y1 = box
+    return x0 <= hd.centre[0] < x1 and y0 <= hd.centre[1] < y1
 
 
 def _skew(emap: np.ndarray) -> float:
@@ -257,6 +324,8 @@ def parse_face(face_rgb: np.ndarray, m_per_px: float) -> list[Panel]:
     from skimage.color import rgb2gray
 
     gray = rgb2gray(np.asarray(face_rgb)).astype(np.float64)
+    lo, hi = np.percentile(gray, [1.0, 99.0])
+    gray = np.clip((gray - lo) / max(hi - lo, 0.05), 0.0, 1.0)  # dark furniture: stretch its contrast
     h, w = gray.shape
     horiz, vert = _edges(gray, sigma=1.2)
     sh, sv = _skew(horiz), _skew(vert.T)  # rows drift sh per column, columns sv per row
@@ -266,14 +335,15 @@ def parse_face(face_rgb: np.ndarray, m_per_px: float) -> list[Panel]:
         horiz, vert = _edges(gray, sigma=1.2)
     back = cv2.invertAffineTransform(fwd)
     handles = _handles(gray, m_per_px)
+    if handles:  # credible handles: a fifth of the strongest at least
+        handles = [hd for hd in handles if hd.score >= HANDLE_MIN_SHARE * handles[0].score]
     min_piece = max(3, int(round(MIN_PANEL_M / m_per_px)))
-    leaves: list = []
-    _cut(horiz, vert, (0, 0, w, h), min_piece, [], leaves, (False, False, False, False))
+    root = _Node((0, 0, w, h), (False, False, False, False))
+    _cut(horiz, vert, root, min_piece)
+    fronts = _fronts(root, handles, m_per_px)
     panels = []
-    for box, sides in leaves:
-        x0, y0, x1, y1 = box
+    for (x0, y0, x1, y1), sides, hd in fronts:
         pw, ph = (x1 - x0) * m_per_px, (y1 - y0) * m_per_px
-        hd = _handle_in(handles, box, m_per_px) if min(pw, ph) >= 0.06 else None
         kind, hinge = "", ""
         if hd is not None:
             rel = (hd.centre[0] - x0) / max(1, x1 - x0)
