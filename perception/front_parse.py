@@ -52,6 +52,8 @@ HANDLE_MIN_LONG_M = 0.012
 HANDLE_MAX_ASPECT = 15.0
 HANDLE_CONTRAST = 0.12
 HANDLE_LEVELS = (HANDLE_CONTRAST, 0.2, 0.3, 0.45)
+#: At most this many handle candidates (the strongest) are kept.
+MAX_HANDLES = 400
 #: Handle pieces closer than this (m) are one handle.
 HANDLE_MERGE_M = 0.005
 #: A panel without a handle is a front only when at least this big (m) in both directions.
@@ -103,33 +105,40 @@ def _edges(gray: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
 SLOPES = np.linspace(-0.035, 0.035, 9)
 
 
-def _best_cut(emap: np.ndarray, lo: int, hi: int, a0: int, a1: int, min_piece: int) -> tuple[float, int]:
-    """Best cut line of ``emap`` rows lo..hi (exclusive ends) over columns a0..a1: (score, row).
-    ``emap`` is oriented so that the lines run along axis 1; each row is tried at every slope of
-    SLOPES (the row is where the line crosses the middle column). score: the share of columns with
-    an edge on the line, when the line has edges near both ends or covers LONG_LINE_SHARE of
-    them (else -1)."""
-    n = a1 - a0
-    if hi - lo < 2 * min_piece or n < 4:
-        return -1.0, -1
-    end = max(2, int(round(END_SHARE * n)))
-    cols = np.arange(n)
-    rows = np.arange(lo, hi)
-    best = np.full(len(rows), -1.0)
-    band_full = emap[:, a0:a1]
-    for slope in SLOPES:
-        shift = np.round(slope * (cols - 0.5 * (n - 1))).astype(np.int64)
-        r = np.clip(rows[:, None] + shift[None, :], lo, hi - 1)
-        band = band_full[r, cols[None, :]]
-        share = band.mean(axis=1)
-        reach = np.minimum(band[:, :end].mean(axis=1), band[:, -end:].mean(axis=1))
-        best = np.maximum(best, np.where((reach >= 0.5) | (share >= LONG_LINE_SHARE), share, -1.0))
-    ok = (rows - lo >= min_piece) & (hi - rows >= min_piece)
-    if not ok.any():
-        return -1.0, -1
-    score = np.where(ok, best, -1.0)
-    i = int(np.argmax(score))
-    return float(score[i]), int(rows[i])
+class _Lines:
+    """Prefix sums of an edge map (lines along axis 1) sheared by each slope of SLOPES, so that
+    the share of any row segment lying on edges is O(1) for every slope at once."""
+
+    def __init__(self, emap: np.ndarray) -> None:
+        h, w = emap.shape
+        cols = np.arange(w)
+        self.shifts = np.round(SLOPES[:, None] * (cols[None, :] - 0.5 * (w - 1))).astype(np.int64)  # (S, w)
+        r = np.clip(np.arange(h)[None, :, None] + self.shifts[:, None, :], 0, h - 1)  # (S, h, w)
+        sheared = emap[r, cols[None, None, :]].astype(np.float32)
+        self.cum = np.concatenate([np.zeros((len(SLOPES), h, 1), np.float32), np.cumsum(sheared, axis=2)], axis=2)
+        self.h = h
+
+    def best(self, lo: int, hi: int, a0: int, a1: int, min_piece: int) -> tuple[float, int]:
+        """Best cut line over rows lo..hi (exclusive) and columns a0..a1: (score, row where it
+        crosses the middle column). score: the share of the columns with an edge on the line,
+        when the line has edges near both ends or covers LONG_LINE_SHARE of them (else -1)."""
+        n = a1 - a0
+        if hi - lo < 2 * min_piece or n < 4:
+            return -1.0, -1
+        end = max(2, int(round(END_SHARE * n)))
+        mid = (a0 + a1) // 2
+        rows = np.arange(lo, hi)
+        idx = np.clip(rows[None, :] - self.shifts[:, mid][:, None], 0, self.h - 1)  # (S, R): sheared index of each row at mid
+        c = self.cum[np.arange(len(SLOPES))[:, None], idx]  # (S, R, w + 1)
+        share = (c[..., a1] - c[..., a0]) / n
+        reach = np.minimum(c[..., a0 + end] - c[..., a0], c[..., a1] - c[..., a1 - end]) / end
+        score = np.where((reach >= 0.5) | (share >= LONG_LINE_SHARE), share, -1.0).max(axis=0)
+        ok = (rows - lo >= min_piece) & (hi - rows >= min_piece)
+        if not ok.any():
+            return -1.0, -1
+        score = np.where(ok, score, -1.0)
+        i = int(np.argmax(score))
+        return float(score[i]), int(rows[i])
 
 
 @dataclass(eq=False)
@@ -147,11 +156,11 @@ class _Node:
         return [self] if not self.children else [leaf for c in self.children for leaf in c.leaves()]
 
 
-def _cut(horiz: np.ndarray, vert: np.ndarray, node: _Node, min_piece: int, depth: int = 0) -> None:
+def _cut(horiz: _Lines, vert: _Lines, node: _Node, min_piece: int, depth: int = 0) -> None:
     """Split ``node`` recursively along its best cut line (see the module docstring)."""
     x0, y0, x1, y1 = node.box
-    sh, r = _best_cut(horiz, y0, y1, x0, x1, min_piece)
-    sv, c = _best_cut(vert.T, x0, x1, y0, y1, min_piece)
+    sh, r = horiz.best(y0, y1, x0, x1, min_piece)
+    sv, c = vert.best(x0, x1, y0, y1, min_piece)
     if max(sh, sv) < CUT_MIN_SCORE or depth > 24:
         return
     left, top, right, bottom = node.sides
@@ -172,71 +181,91 @@ class _Handle:
 
 def _handles(gray: np.ndarray, m_per_px: float) -> list[_Handle]:
     """Handle-like features of the whole face, strongest first. Candidates: components of the
-    black and white top-hats (a 5 cm square) above HANDLE_CONTRAST, of a handle's size, filling
-    their box (a knob or a bar, not a curved moulding), and not one of a repeated pattern (beads,
-    a lattice, carving: four or more components of about the same size and contrast within
-    three times their size (square root of the area) of each other; handles repeat too, but a
-    front's size apart)."""
+    black and white top-hats (a 5 cm square) above each of HANDLE_LEVELS (highest first: a dark
+    knob joined to dark gaps at a low level stands alone at a higher one), of a handle's size,
+    filling their box (a knob or a bar, not a curved moulding), not a gap (HANDLE_MAX_ASPECT)
+    and not one of a repeated pattern (beads, a lattice, carving: four or more components of
+    about the same size and contrast within three times their size (square root of the area) of
+    each other; handles repeat too, but a front's size apart). Pieces of one handle are merged
+    (:func:`_merge_handles`)."""
     from scipy import ndimage
-    from skimage.measure import label, regionprops
 
     size = int(np.clip(round(0.05 / m_per_px), 5, 25))
-    out = []
+    boxes, scores = [], []
+    cores = np.zeros((0, 2))
     black = ndimage.grey_closing(gray, size=(size, size)) - gray  # dark features smaller than the square
     white = gray - ndimage.grey_opening(gray, size=(size, size))  # bright ones
+    rows_grid, cols_grid = np.indices(gray.shape)
     for th in (black, white):
-        # several levels, highest first: a dark knob joined to dark gaps at a low level stands alone
-        # at a higher one
         for level in sorted(HANDLE_LEVELS, reverse=True):
-            props = regionprops(label(th > level), intensity_image=th)
-            feats = np.array([[rp.area, rp.intensity_max, *rp.centroid] for rp in props], dtype=np.float64).reshape(-1, 4)
-            for rp in props:
-                r0, c0, r1, c1 = rp.bbox
-                long_, short = max(r1 - r0, c1 - c0), min(r1 - r0, c1 - c0)
-                if long_ * m_per_px > HANDLE_MAX_LONG_M or short * m_per_px > HANDLE_MAX_SHORT_M or long_ * m_per_px < HANDLE_MIN_LONG_M:
-                    continue
-                if rp.area < 0.4 * (r1 - r0) * (c1 - c0):  # a handle fills its box (not a curved line)
-                    continue
-                if long_ > HANDLE_MAX_ASPECT * max(short, 1):  # a gap or a groove, not a pull
-                    continue
-                a, c = float(rp.area), float(rp.intensity_max)
-                cy, cx = rp.centroid
-                near = np.hypot(feats[:, 2] - cy, feats[:, 3] - cx) < 3.0 * np.sqrt(a)
-                similar = near & (feats[:, 0] > 0.5 * a) & (feats[:, 0] < 2.0 * a) & (feats[:, 1] > c / 1.5) & (feats[:, 1] < 1.5 * c)
+            lab, n = ndimage.label(th > level)
+            if n == 0:
+                continue
+            sl = ndimage.find_objects(lab)
+            r0 = np.array([s_[0].start for s_ in sl], dtype=np.float64)
+            r1 = np.array([s_[0].stop for s_ in sl], dtype=np.float64)
+            c0 = np.array([s_[1].start for s_ in sl], dtype=np.float64)
+            c1 = np.array([s_[1].stop for s_ in sl], dtype=np.float64)
+            area = np.bincount(lab.ravel(), minlength=n + 1)[1:].astype(np.float64)
+            peak = np.zeros(n + 1)
+            on = lab.ravel() > 0
+            np.maximum.at(peak, lab.ravel()[on], th.ravel()[on])
+            peak = peak[1:]
+            cy = np.bincount(lab.ravel(), weights=rows_grid.ravel(), minlength=n + 1)[1:] / area
+            cx = np.bincount(lab.ravel(), weights=cols_grid.ravel(), minlength=n + 1)[1:] / area
+            long_, short = np.maximum(r1 - r0, c1 - c0), np.minimum(r1 - r0, c1 - c0)
+            ok = (long_ * m_per_px <= HANDLE_MAX_LONG_M) & (short * m_per_px <= HANDLE_MAX_SHORT_M) & (long_ * m_per_px >= HANDLE_MIN_LONG_M)
+            ok &= area >= 0.4 * (r1 - r0) * (c1 - c0)  # a handle fills its box (not a curved line)
+            ok &= long_ <= HANDLE_MAX_ASPECT * np.maximum(short, 1)  # a gap or a groove is longer
+            # the pattern test compares with components of at least half the smallest candidate's size
+            cand = np.flatnonzero(ok)
+            if len(cand) == 0:
+                continue
+            big = area >= 0.5 * area[cand].min()
+            cy_b, cx_b, area_b, peak_b = cy[big], cx[big], area[big], peak[big]
+            for i in cand:
+                near = np.hypot(cy_b - cy[i], cx_b - cx[i]) < 3.0 * np.sqrt(area[i])
+                similar = near & (area_b > 0.5 * area[i]) & (area_b < 2.0 * area[i]) & (peak_b > peak[i] / 1.5) & (peak_b < 1.5 * peak[i])
                 if similar.sum() >= 4:  # one of a pattern (itself and three more close by)
                     continue
-                if any(c0 <= hd.centre[0] <= c1 and r0 <= hd.centre[1] <= r1 for hd in out):
+                if len(cores) and np.any((cores[:, 0] >= c0[i]) & (cores[:, 0] <= c1[i]) & (cores[:, 1] >= r0[i]) & (cores[:, 1] <= r1[i])):
                     continue  # its core was found at a higher level
-                out.append(_Handle((int(c0), int(r0), int(c1), int(r1)), (float(cx), float(cy)), c * float(np.sqrt(a))))
-    out = _merge_handles(out, max(1, int(round(HANDLE_MERGE_M / m_per_px))), HANDLE_MAX_LONG_M / m_per_px, HANDLE_MAX_SHORT_M / m_per_px)
+                boxes.append((c0[i], r0[i], c1[i], r1[i]))
+                scores.append(float(peak[i] * np.sqrt(area[i])))
+                cores = np.vstack([cores, [[cx[i], cy[i]]]])
+    order = np.argsort(-np.array(scores), kind="stable")[:MAX_HANDLES]
+    out = _merge_handles(np.array(boxes, dtype=np.float64).reshape(-1, 4)[order], np.array(scores)[order],
+                         max(1, int(round(HANDLE_MERGE_M / m_per_px))), HANDLE_MAX_LONG_M / m_per_px, HANDLE_MAX_SHORT_M / m_per_px)
     out.sort(key=lambda hd: -hd.score)
     return out
 
 
-def _merge_handles(handles: list[_Handle], gap: int, long_max: float, short_max: float) -> list[_Handle]:
-    """Handles whose boxes lie within ``gap`` pixels of each other merged into one (a knob split
-    by its highlight, a bar by its reflection) when the union is still of a handle's size
-    (``long_max`` x ``short_max`` pixels): the union box, the strongest's score."""
-    boxes = [list(hd.box) for hd in handles]
-    scores = [hd.score for hd in handles]
-    merged = True
-    while merged:
-        merged = False
-        for i in range(len(boxes)):
-            for j in range(i + 1, len(boxes)):
-                a, b = boxes[i], boxes[j]
-                if a[0] - gap <= b[2] and b[0] - gap <= a[2] and a[1] - gap <= b[3] and b[1] - gap <= a[3]:
-                    u = [min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), max(a[3], b[3])]
-                    if max(u[2] - u[0], u[3] - u[1]) > long_max or min(u[2] - u[0], u[3] - u[1]) > short_max:
-                        continue
-                    boxes[i] = u
-                    scores[i] = max(scores[i], scores[j])
-                    del boxes[j], scores[j]
-                    merged = True
-                    break
-            if merged:
-                break
-    return [_Handle(tuple(b), (0.5 * (b[0] + b[2]), 0.5 * (b[1] + b[3])), sc) for b, sc in zip(boxes, scores)]
+def _merge_handles(boxes: np.ndarray, scores: np.ndarray, gap: int, long_max: float, short_max: float) -> list[_Handle]:
+    """Handles ((N, 4) boxes x0, y0, x1, y1 and (N,) scores) whose boxes lie within ``gap`` pixels
+    of each other, chained, merged into one (a knob split by its highlight, a bar by its
+    reflection) when the union is still of a handle's size (``long_max`` x ``short_max``
+    pixels): the union box, the strongest's score. A group too big for a handle stays apart."""
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = len(boxes)
+    if n == 0:
+        return []
+    b = boxes
+    close = ((b[:, None, 0] - gap <= b[None, :, 2]) & (b[None, :, 0] - gap <= b[:, None, 2])
+             & (b[:, None, 1] - gap <= b[None, :, 3]) & (b[None, :, 1] - gap <= b[:, None, 3]))
+    _, comp = connected_components(csr_matrix(close), directed=False)
+    out = []
+    for c in np.unique(comp):
+        idx = np.flatnonzero(comp == c)
+        u = np.array([b[idx, 0].min(), b[idx, 1].min(), b[idx, 2].max(), b[idx, 3].max()])
+        dims = (u[2] - u[0], u[3] - u[1])
+        groups = [idx] if (max(dims) <= long_max and min(dims) <= short_max) else [[i] for i in idx]
+        for g in groups:
+            g = np.asarray(g)
+            box = (int(b[g, 0].min()), int(b[g, 1].min()), int(b[g, 2].max()), int(b[g, 3].max()))
+            out.append(_Handle(box, (0.5 * (box[0] + box[2]), 0.5 * (box[1] + box[3])), float(scores[g].max())))
+    return out
 
 
 def _handle_in(handles: list[_Handle], box, m_per_px: float) -> _Handle | None:
@@ -339,7 +368,7 @@ def parse_face(face_rgb: np.ndarray, m_per_px: float) -> list[Panel]:
         handles = [hd for hd in handles if hd.score >= HANDLE_MIN_SHARE * handles[0].score]
     min_piece = max(3, int(round(MIN_PANEL_M / m_per_px)))
     root = _Node((0, 0, w, h), (False, False, False, False))
-    _cut(horiz, vert, root, min_piece)
+    _cut(_Lines(horiz), _Lines(vert.T), root, min_piece)
     fronts = _fronts(root, handles, m_per_px)
     panels = []
     for (x0, y0, x1, y1), sides, hd in fronts:

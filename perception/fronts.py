@@ -195,10 +195,14 @@ def fronts_and_built_ins(
 ) -> tuple[list[PerceivedObject], BackendUse]:
     """The perception stage's step for fronts: ``objects`` with the fronts seen on their faces
     (:func:`with_fronts`), and what was found, as a :class:`BackendUse` for report.json."""
+    from perception.built_in import built_in_runs
+
     out = list(with_fronts(objects, observation, camera, walls))
+    runs = built_in_runs(tuple(out), observation, camera, walls, removed)
+    out += runs
     n_obj = sum(1 for o in out if o.fronts)
     n_fronts = sum(len(o.fronts) for o in out)
     kinds = {k: sum(f.kind == k for o in out for f in o.fronts) for k in ("door", "drawer", "flap")}
     what = ", ".join(f"{v} {k}s" for k, v in kinds.items() if v) or "none"
-    use = BackendUse("fronts", "face-cuts", f"{n_fronts} fronts ({what}) on {n_obj} of {len(out)} objects")
+    use = BackendUse("fronts", "face-cuts", f"{n_fronts} fronts ({what}) on {n_obj} of {len(out)} objects, {len(runs)} of them built-in runs found from their fronts")
     return out, use
