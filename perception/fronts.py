@@ -37,6 +37,11 @@ SNAP_DEG = 12.0
 #: The face image: at most this many pixels on its long side, and no finer than MIN_M_PER_PX.
 FACE_MAX_PX = 360
 MIN_M_PER_PX = 0.002
+#: The face's yaw is searched this far (deg) either way, in steps of YAW_STEP_DEG, on a
+#: resampling YAW_PX pixels long.
+YAW_SEARCH_DEG = 20.0
+YAW_STEP_DEG = 2.5
+YAW_PX = 160
 #: Fronts smaller than this (m) in either direction are not kept (a sliver of a cut face).
 MIN_FRONT_M = 0.07
 
@@ -105,14 +110,56 @@ def face_of(points_world_m: np.ndarray, camera_position_m: np.ndarray, walls: tu
     return Face(origin, right, normal, float(a1 - a0), float(z1 - z0))
 
 
-def rectify(rgb: np.ndarray, camera: Camera, face: Face, mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+def _rotated(face: Face, points_world_m: np.ndarray, yaw_rad: float) -> Face:
+    """``face`` turned by ``yaw_rad`` about the vertical through its centre, its extent taken
+    again from the points (as :func:`face_of` does)."""
+    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    normal = rot @ face.normal
+    right = np.cross(np.array([0.0, 0.0, 1.0]), normal)
+    p = np.asarray(points_world_m, dtype=np.float64)
+    a = p @ right
+    a0, a1 = np.percentile(a, [1, 99])
+    offset = float(np.percentile(p @ normal, 95))
+    origin = normal * offset + right * a0 + np.array([0.0, 0.0, face.origin_m[2]])
+    return Face(origin, right, normal, float(a1 - a0), face.height_m)
+
+
+def refine_yaw(rgb: np.ndarray, camera: Camera, face: Face, points_world_m: np.ndarray) -> Face:
+    """``face`` turned about the vertical (within YAW_SEARCH_DEG) so that the horizontal edges of
+    the photo resampled onto it run most nearly along its rows: a face plane turned away from the
+    real face shows that face's horizontal edges (drawer gaps, rails, tops) sloping. Score: the
+    sum of squared counts of horizontal edge pixels per row over the squared total (peakedness),
+    on a coarse resampling (YAW_PX on the long side)."""
+    from perception.front_parse import _edges
+
+    best, best_face = -1.0, face
+    for deg in np.arange(-YAW_SEARCH_DEG, YAW_SEARCH_DEG + 1e-9, YAW_STEP_DEG):
+        f = _rotated(face, points_world_m, float(np.radians(deg))) if deg else face
+        if f.width_m <= 0.05:
+            continue
+        img, inside, m = rectify(rgb, camera, f, max_px=YAW_PX)
+        from skimage.color import rgb2gray
+
+        horiz, _ = _edges(rgb2gray(img), sigma=1.0)
+        horiz &= inside
+        total = float(horiz.sum())
+        if total < 20:
+            continue
+        score = float(np.sum(horiz.sum(axis=1).astype(np.float64) ** 2)) / total ** 2 * horiz.shape[0]
+        if score > best * 1.1 or (deg == 0 and score >= best / 1.1):
+            best, best_face = score, f
+    return best_face
+
+
+def rectify(rgb: np.ndarray, camera: Camera, face: Face, mask: np.ndarray | None = None, max_px: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
     """The photo seen head-on on ``face``: ((h, w, 3) uint8 face image, (h, w) bool where the
     face pixel projects into the photo (and into ``mask``, when given), metres per pixel). Row 0
     is the face's top; column 0 its left edge seen from the front. Bilinear resampling (OpenCV's
-    remap)."""
+    remap). ``max_px``: the long side in pixels (default FACE_MAX_PX)."""
     import cv2
 
-    m_per_px = max(MIN_M_PER_PX, max(face.width_m, face.height_m) / FACE_MAX_PX)
+    m_per_px = max(MIN_M_PER_PX, max(face.width_m, face.height_m) / (max_px or FACE_MAX_PX))
     w = max(4, int(round(face.width_m / m_per_px)))
     h = max(4, int(round(face.height_m / m_per_px)))
     a = (np.arange(w) + 0.5) * m_per_px
@@ -181,6 +228,7 @@ def with_fronts(objects: tuple[PerceivedObject, ...], observation: Observation, 
         if obj.label in FRONT_LABELS or obj.label in MAYBE_FRONT_LABELS:
             face = face_of(obj.points_world_m, camera.position_m, walls)
             if face.width_m > 0.1 and face.height_m > 0.1:
+                face = refine_yaw(observation.rgb, camera, face, obj.points_world_m)
                 fronts = fronts_on_face(observation.rgb, camera, face, obj.label, obj.mask)
                 if obj.label not in FRONT_LABELS and sum(f.handle_px is not None for f in fronts) < MIN_HANDLED_FRONTS:
                     fronts = ()
