@@ -24,6 +24,7 @@ bench: setup
 	SCENE_BUILDER_MODELS=../shared/models $(BIN)/scene-builder bench --suite real --json real_det.json
 	$(BIN)/python -m scene_builder.bench.report bench.json real.json real_det.json --extras > BENCHMARKS.md.tmp
 	mv BENCHMARKS.md.tmp BENCHMARKS.md
+	$(BIN)/python -m scene_builder.bench.readme --write
 
 clean:
 	rm -rf demo_scene .pytest_cache

@@ -70,6 +70,9 @@ STANDS_ON_LEGS = frozenset(
     {"chair", "stool", "bench", "table", "desk", "sofa", "bed", "cabinet", "drawer_unit", "shelf", "wardrobe", "lamp", "plant", "tv", "monitor"}
 )
 LEGS_MAX_DROP_M = 1.5
+# Legs longer than this many times the object's narrowest footprint width make a stilt it topples
+# from: what is not furniture on legs stands on a static column down to the floor instead.
+SLENDER_LEGS = 1.5
 # Anything else with its underside hidden stands on legs down to an object's top at most this
 # share of its own height below it (its hidden lower part).
 HIDDEN_LEGS_SHARE = 1.0
@@ -245,7 +248,9 @@ def build_support(
             options = search(LEGS_MAX_DROP_M, min_background_m=LEGS_MIN_BACKGROUND_M)
         if options:
             _, _, h, j, k = min(options)
-            if hidden_under and j in (FLOOR, BACKGROUND) and bottom - h > max(MAX_DROP_M, HIDDEN_OWN_SHARE * b.height_m):
+            narrow = float(np.min(np.ptp(foot, axis=0))) if len(foot) else 0.0
+            slender = b.asset.label not in STANDS_ON_LEGS and bottom - h > max(MAX_DROP_M, SLENDER_LEGS * narrow)
+            if j in (FLOOR, BACKGROUND) and (slender or (hidden_under and bottom - h > max(MAX_DROP_M, HIDDEN_OWN_SHARE * b.height_m))):
                 # Far above the floor or the background below, for its size: a static column
                 # from there up to its bottom stands in for the hidden support (it stays put when
                 # the object is picked up). Nearer (a bed's frame hidden by its own cover), or on

@@ -406,6 +406,9 @@ adopt_settled = settled_scene
 
 #: A movable object overlapping anything by more than this at t = 0 cannot stand where it was put.
 START_PENETRATION_LIMIT_M = 1e-3
+#: ... a soft body (a flex pillow on a bed: its contacts start inside their margin and it sags)
+#: by more than this.
+DEFORMABLE_START_PENETRATION_M = 0.01
 
 
 def unstable_objects(verdict: PhysicsVerdict, scene: Scene, config: LayoutConfig) -> dict[str, str]:
@@ -417,7 +420,8 @@ def unstable_objects(verdict: PhysicsVerdict, scene: Scene, config: LayoutConfig
         if v.fixed:
             continue
         o = scene.object(v.name)
-        if v.start_penetration_m > START_PENETRATION_LIMIT_M:
+        soft = o.asset.kind is AssetKind.DEFORMABLE
+        if v.start_penetration_m > (DEFORMABLE_START_PENETRATION_M if soft else START_PENETRATION_LIMIT_M):
             # Overlapping at t = 0 (with static geometry the solver could not move it clear of,
             # e.g. collision legs over an object left where seen): not physically standing there.
             out[v.name] = f"reached {v.start_penetration_m * 1000:.0f} mm into its neighbours at the start of the settle simulation"

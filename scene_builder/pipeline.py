@@ -51,6 +51,9 @@ from scene_builder.outdir import (  # noqa: F401 - MARKER, read_marker, add_to_m
 #: Rounds of turning objects that do not stay at rest into static background (what rested on
 #: them may in turn move).
 UNSTABLE_ROUNDS = 3
+#: An object is re-seated where it came to rest at most this many times (re-seating one object
+#: can leave its neighbour a millimetre inside it for the next round).
+RESEAT_TIMES = 2
 
 
 @dataclass(frozen=True)
@@ -66,6 +69,14 @@ class BuildResult:
     timings_s: tuple[tuple[str, float], ...]
     out_dir: Path
     report_path: Path
+    first_verdict: PhysicsVerdict | None = None  # the physics check before any object became background
+
+    @property
+    def fates(self) -> dict:
+        """What became of every perceived object (``scene_builder.report.object_fates``)."""
+        from scene_builder.report import object_fates
+
+        return object_fates(self.perception, self.layout, self.scene, self.first_verdict, self.verdict)
 
 
 def stderr_console():
@@ -204,7 +215,8 @@ def build(
         with log.live("physics check", lambda: _verdict_summary(verdict)) as step:
             step(f"{config.layout.settle_s:g} s of simulation, then render-and-compare")
             verdict, fidelity = verify_scene(mjcf_path, scene, config.layout, perceived)
-        reseated: set[str] = set()
+        first_verdict = verdict  # before any object became background in the settle rounds
+        reseated: dict[str, int] = {}  # how often each object was re-seated (at most RESEAT_TIMES)
         for round_ in range(UNSTABLE_ROUNDS):
             # An object that settled a little and came to rest is re-seated there (once); one
             # that does not stay at rest where it was seen (a thin frame toppling off a shelf)
@@ -213,12 +225,13 @@ def build(
             if not unstable:
                 break
             last = round_ == UNSTABLE_ROUNDS - 1  # the last round re-seats nothing: it must end at rest
-            reseat = {} if last else {n: r for n, r in reseatable(verdict, unstable).items() if n not in reseated}
+            reseat = {} if last else {n: r for n, r in reseatable(verdict, unstable).items() if reseated.get(n, 0) < RESEAT_TIMES}
             give_up = {n: r for n, r in unstable.items() if n not in reseat}
             with log.stage("unstable repaired", lambda: f"{len(reseat)} re-seated, {len(give_up)} to background; {_verdict_summary(verdict)}"):
                 if reseat:
                     layout = reseat_objects(layout, verdict, reseat)
-                    reseated |= set(reseat)
+                    for n in reseat:
+                        reseated[n] = reseated.get(n, 0) + 1
                 if give_up:
                     layout = make_background(layout, give_up)
                 scene = layout.scene
@@ -250,7 +263,7 @@ def build(
                 )
             files = dataclasses.replace(files, rerun=rrd)
         log.timings.append(("total", time.perf_counter() - total_start))
-        report = build_report(inputs, config, perceived, layout, scene, verdict, fidelity, tuple(log.timings), generated)
+        report = build_report(inputs, config, perceived, layout, scene, verdict, fidelity, tuple(log.timings), generated, first_verdict)
         write_report(staging, scene, report)
         shutil.rmtree(staging / ROBOT_WORK_DIR, ignore_errors=True)
         write_marker(staging, inputs)
@@ -266,7 +279,7 @@ def build(
     finally:
         _release_mujoco_assets()
     files = ExportedFiles(*[None if p is None else out_dir / p.name for p in dataclasses.astuple(files)])
-    return BuildResult(perceived, layout, scene, verdict, fidelity, files, tuple(log.timings), out_dir, out_dir / "report.json")
+    return BuildResult(perceived, layout, scene, verdict, fidelity, files, tuple(log.timings), out_dir, out_dir / "report.json", first_verdict)
 
 
 def _release_mujoco_assets() -> None:

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from scene_builder import __version__
-from scene_builder.config import BuildConfig, InputSpec
+from scene_builder.config import BuildConfig, InputSpec, LayoutConfig
 from scene_builder.frames import yaw_of
 from scene_builder.model import Fidelity, GeneratedAsset, LayoutResult, Perception, PhysicsVerdict, Scene
 from scene_builder.serialize import scene_to_json
@@ -32,6 +32,7 @@ def build_report(
     fidelity: Fidelity | None,
     timings_s: tuple[tuple[str, float], ...],
     generated: tuple[GeneratedAsset, ...] = (),
+    first_verdict: PhysicsVerdict | None = None,
 ) -> dict:
     """The report as JSON-ready data (the file format; not passed between stages).
 
@@ -122,6 +123,7 @@ def build_report(
         + ([{"task": "robot", "backend": scene.robot.model.source, "reason": scene.robot.model.detail}] if scene.robot else []),
         "generation_failures": failures,
         "timings_s": timings,
+        "object_fates": object_fates(perception, layout, scene, first_verdict, verdict, config.layout),
         "objects": objects,
         "layout": {
             "max_penetration_m": _r(verdict.max_penetration_m, 7),
@@ -156,6 +158,72 @@ def build_report(
         "robot": robot_report(scene),
         "machine": {"python": platform.python_version(), "platform": platform.platform()},
     }
+
+
+def _reason_class(reason: str) -> str:
+    """The kind of a background reason, for counting: its first clause without the numbers."""
+    import re
+
+    head = reason.split(":")[0].split(";")[0].strip()
+    head = re.sub(r"\(.*?\)", "", head)
+    head = re.sub(r"\d+(\.\d+)?", "N", head)
+    return re.sub(r"\s+", " ", head).strip()
+
+
+def object_fates(perception: Perception, layout: LayoutResult, scene: Scene, first_verdict: PhysicsVerdict | None = None,
+                 verdict: PhysicsVerdict | None = None, bounds: LayoutConfig = LayoutConfig()) -> dict:
+    """What became of every object perception found, with the denominators named: perceived =
+    movable + fixed_with_joints + fixed + background; interactive = movable + fixed_with_joints
+    (a robot can act on them); background_by_reason counts the reasons. ``first_verdict``: the
+    physics check before any object became background in the settle rounds (the layout may
+    already have kept some where seen); ``verdict``: the final one. Rest and penetration are
+    given over the perceived objects (an object that became background is not at rest: it is
+    not an object any more) and over the kept ones; at rest means within ``bounds``'
+    stable_drift_m and stable_rotation_deg."""
+    names = [o.name for o in perception.objects]
+    placed = {o.name: o for o in scene.objects}
+    movable = [n for n in names if n in placed and not placed[n].asset.is_fixed]
+    with_joints = [n for n in names if n in placed and placed[n].asset.is_fixed and any(p.joint is not None for p in placed[n].asset.parts)]
+    fixed = [n for n in names if n in placed and n not in movable and n not in with_joints]
+    background = [p for p in layout.placements if p.became_background]
+    by_reason: dict[str, int] = {}
+    for p in background:
+        k = _reason_class(p.reason)
+        by_reason[k] = by_reason.get(k, 0) + 1
+    out = {
+        "perceived": len(names),
+        "interactive": len(movable) + len(with_joints),
+        "movable": len(movable),
+        "fixed_with_joints": len(with_joints),
+        "fixed": len(fixed),
+        "background": len(background),
+        "background_by_reason": dict(sorted(by_reason.items(), key=lambda kv: (-kv[1], kv[0]))),
+        "interactive_share_of_perceived": _r(len(movable + with_joints) / len(names), 4) if names else None,
+    }
+    if verdict is not None:
+        at_rest = sum(1 for v in verdict.objects if not v.fixed and v.name in movable and v.drift_m <= bounds.stable_drift_m and v.rotation_deg <= bounds.stable_rotation_deg)
+        out["at_rest"] = at_rest
+        out["at_rest_share_of_perceived"] = _r(at_rest / len(names), 4) if names else None
+        out["at_rest_share_of_movable"] = _r(at_rest / len(movable), 4) if movable else None
+        out["max_penetration_m"] = _r(verdict.max_penetration_m, 7)
+    if first_verdict is not None:
+        fv = [v for v in first_verdict.objects if not v.fixed]
+        out["first_check"] = {
+            "simulated_objects": len(fv),
+            "at_rest": sum(1 for v in fv if v.drift_m <= bounds.stable_drift_m and v.rotation_deg <= bounds.stable_rotation_deg),
+            "max_penetration_m": _r(first_verdict.max_penetration_m, 7),
+            "max_start_penetration_m": _r(max((v.start_penetration_m for v in fv), default=0.0), 7),
+            "max_drift_m": _r(first_verdict.settle_max_drift_m, 7),
+            "max_rotation_deg": _r(first_verdict.settle_max_rotation_deg, 4),
+        }
+    return out
+
+
+def fates_line(f: dict) -> str:
+    """One line: ``9 perceived: 6 movable, 1 fixed with joints, 0 fixed, 2 background (hangs 1, ...)``."""
+    why = ", ".join(f"{k} {n}" for k, n in f["background_by_reason"].items())
+    return (f"{f['perceived']} perceived: {f['movable']} movable, {f['fixed_with_joints']} fixed with joints, {f['fixed']} fixed, "
+            f"{f['background']} background" + (f" ({why})" if why else ""))
 
 
 def _generation_use(backend: str, scene: Scene) -> dict:

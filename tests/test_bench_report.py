@@ -60,5 +60,7 @@ def test_stage_benchmarks_run_in_their_own_process_and_are_pasted_with_their_com
         "scene_builder.bench.batch",
         "scene_builder.bench.robot",
         "scene_builder.bench.interaction",
+        "scene_builder.bench.detectors",
         "scene_builder.bench.outdir",
+        "scene_builder.bench.groundtruth",
     }

@@ -277,6 +277,9 @@ def test_registries_offer_detections_only_with_a_detector(tmp_path, monkeypatch)
     seg, use = reg.segmentation.resolve()
     assert use.backend == "detections" and seg.accepts_gravity
     assert [d.name for d in seg.detectors] == ["centernet-mbv3-coco", "ssd-mobilenet-oid"]
+    # NanoDet is registered, its file is there, and it is off by default (BENCHMARKS.md).
+    nanodet = next(e for e in reg.detection.entries() if e.name == "nanodet-coco")
+    assert (MODELS / "nanodet_coco.onnx").is_file() and "off by default" in (nanodet.available() or "")
     assert seg.semantic is not None and seg.semantic.name == "deeplabv3-mnv2-pascal"
 
 

@@ -130,9 +130,9 @@ def _box_iou(a, b) -> float:
     return ix / ua if ua > 0 else 0.0
 
 
-def run(data: Path, inventory: Path, models_dir: Path | None, segmentation: str) -> dict:
-    """Perceive every photo of ``data``/photos and ``data``/real as a plain photo; returns the rows
-    and the pooled scores (see the module doc)."""
+def run(data: Path, inventory: Path, models_dir: Path | None, segmentation: str, roots: tuple[str, ...] = ("photos", "real"), quiet: bool = False) -> dict:
+    """Perceive every photo of the ``roots`` folders of ``data`` (photos and real) as a plain
+    photo; returns the rows and the pooled scores (see the module doc). quiet: no line per photo."""
     from perception import perceive
     from scene_builder.config import InputSpec, PerceptionConfig
     from scene_builder.errors import EmptySceneError
@@ -141,7 +141,7 @@ def run(data: Path, inventory: Path, models_dir: Path | None, segmentation: str)
     seen, groups = load_inventory(inventory)
     cfg = PerceptionConfig(models_dir=models_dir, segmentation_backend=segmentation)
     rows, scores = [], []
-    samples = sorted((data / "photos").iterdir()) + sorted((data / "real").iterdir())
+    samples = [d for root in roots for d in sorted((data / root).iterdir())]
     # One untimed run first: the imports and model loading (about 10 s) happen once per process.
     first = next((p for d in samples for p in (d / "rgb.jpg", d / "rgb.png") if p.exists()), None)
     if first is not None:
@@ -170,7 +170,7 @@ def run(data: Path, inventory: Path, models_dir: Path | None, segmentation: str)
             "movable": sum(1 for lab in labels if not category(lab).fixed),
             "labels": labels,
         }
-        if d.name in seen and d.parent.name == "photos":
+        if d.name in seen:
             s = score_inventory(labels, seen[d.name], groups)
             scores.append(s)
             row["inventory"] = s.__dict__
@@ -184,7 +184,8 @@ def run(data: Path, inventory: Path, models_dir: Path | None, segmentation: str)
                 hits.append({"truth": b["label"], "found": label, "iou": round(iou, 3), "named_right": label in SUN_TO_LABELS.get(b["label"], (b["label"],))})
             row["sun_boxes"] = hits
         rows.append(row)
-        print(f"{row['photo']:38s} {seconds:6.2f} s  {row['movable']:3d} movable  {seg:15s} {', '.join(labels)}", flush=True)
+        if not quiet:
+            print(f"{row['photo']:38s} {seconds:6.2f} s  {row['movable']:3d} movable  {seg:15s} {', '.join(labels)}", flush=True)
     summary = pooled(scores)
     slowest = max(rows, key=lambda r: r["seconds"]) if rows else None
     return {"rows": rows, "inventory_scores": summary, "slowest": slowest["photo"] if slowest else None}

@@ -491,6 +491,30 @@ def summarize(items: list[Item]) -> dict:
     return out
 
 
+def _meta(argv: list[str] | None) -> dict:
+    """When, where and with what the figures were measured."""
+    import datetime
+    import os
+    import subprocess
+    import sys
+
+    from scene_builder.bench.suites import machine_description
+
+    try:
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True, text=True, timeout=10).stdout.strip()
+    except OSError:
+        commit = ""
+    m = machine_description()
+    args = " ".join(sys.argv[1:] if argv is None else argv)
+    return {
+        "date": datetime.datetime.now(datetime.timezone.utc).date().isoformat(),
+        "commit": commit or "?",
+        "command": f"python -m scene_builder.bench.groundtruth {args}".strip(),
+        "machine": f"{m['cpu'].split()[0]} CPU, {m['cores']} cores, {m['memory_gb']} GB, no GPU",
+        "load": f"{os.getloadavg()[0]:.1f}",
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA, help="the shared data folder (default ../shared/data)")
@@ -500,6 +524,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--keep", type=Path, default=None, help="build into this folder and keep the builds")
     parser.add_argument("--only", default="", help="only samples whose name contains this")
     parser.add_argument("--json", type=Path, default=None, help="write the items and the summary here")
+    parser.add_argument("--markdown", action="store_true", help="print the summary as the README's Markdown table on stdout")
     args = parser.parse_args(argv)
     import tempfile
 
@@ -531,8 +556,13 @@ def main(argv: list[str] | None = None) -> int:
     summary = summarize(items)
     for set_name, s in summary.items():
         console.print(f"[bold]{set_name}[/bold] " + ", ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}" for k, v in s.items()))
+    doc = {"meta": _meta(argv), "summary": summary, "items": [dataclasses.asdict(i) for i in items]}
     if args.json:
-        args.json.write_text(json.dumps({"summary": summary, "items": [dataclasses.asdict(i) for i in items]}, indent=1, default=str))
+        args.json.write_text(json.dumps(doc, indent=1, default=str))
+    if args.markdown:
+        from scene_builder.bench.readme import BLOCKS
+
+        print(BLOCKS["objects"][1](json.loads(json.dumps(doc, default=str))))
     return 0
 
 

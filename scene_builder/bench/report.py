@@ -97,6 +97,26 @@ EXTRAS: tuple[Extra, ...] = (
         ("-m", "scene_builder.bench.detect"),
     ),
     Extra(
+        "Offline detectors",
+        "CenterNet, NanoDet and the SSD alone and merged (`scene_builder.bench.detectors`): box recall and precision at IoU "
+        "0.5 against the COCO boxes of `../shared/data/photos_gt` (COCO train photos: flattering for both COCO detectors), "
+        "instance and category recall / precision against the hand-made inventory of `../shared/data/photos`, per threshold "
+        "on the merged scale; scores of true and of certainly false detections; each accept_score varied; CPU seconds per "
+        "photo; NanoDet's decoding against one wrong choice at a time.",
+        ("-m", "scene_builder.bench.detectors"),
+        markdown=True,
+    ),
+    Extra(
+        "Offline detectors in the pipeline",
+        "`perceive` with the `detections` segmenter on the 15 inventory photos (`scene_builder.bench.detectors --pipeline`) "
+        "per detector setting: NanoDet added (off by default), `FLOOR_SCORE` and each detector's accept_score varied; "
+        "instance and category recall / precision against the inventory and the labels gained and lost per photo; then the "
+        "real RGB-D photos used as plain photos against `tests/data/real_inventory.json`, with and without NanoDet.",
+        ("-m", "scene_builder.bench.detectors", "--pipeline", "both"),
+        markdown=True,
+        timeout_s=5400.0,
+    ),
+    Extra(
         "Batch throughput: many photos on one machine and on Ray",
         "`scene-builder batch` over 20 real RGB-D photos downscaled to 320 px wide (`scene_builder.bench.batch`) with 1 and "
         "2 local workers and on a local Ray cluster: scenes per minute, overhead per item, worker warm-up, peak memory per "
@@ -125,6 +145,18 @@ EXTRAS: tuple[Extra, ...] = (
         "beside reading them without hashing.",
         ("-m", "scene_builder.bench.outdir"),
         markdown=True,
+    ),
+    Extra(
+        "The objects against ground truth",
+        "The interactive objects of builds (movable, or fixed with joints) against annotations made by people "
+        "(`scene_builder.bench.groundtruth`): SUN RGB-D 3D boxes with and without depth, COCO instance masks of plain photos "
+        "(silhouettes rendered from input_camera), the hand-made inventory of the real RGB-D photos; each beside the control "
+        "'everything background' (the same build with no object), which scores 0; then what became of every perceived "
+        "object (interactive, fixed, background) and build seconds. Writes bench_results/groundtruth.json, from which the "
+        "README's table is generated. About 40 minutes on 2 cores.",
+        ("-m", "scene_builder.bench.groundtruth", "--json", "bench_results/groundtruth.json", "--markdown"),
+        markdown=True,
+        timeout_s=5400.0,
     ),
     Extra(
         "Parser fuzzing",

@@ -1,0 +1,110 @@
+"""README figures from the bench JSON: the README's measured figures are generated, never typed.
+
+Each figure block of README.md sits between ``<!-- bench:NAME -->`` and ``<!-- /bench:NAME -->``
+and is rendered from a JSON file the bench wrote into ``bench_results/`` (committed with the code
+it measured). ``tests/test_readme_figures.py`` renders every block again and fails when the README
+and the JSON drift apart.
+
+    .venv/bin/python -m scene_builder.bench.groundtruth --json bench_results/groundtruth.json
+    .venv/bin/python -m scene_builder.bench.readme --write     # rewrite the blocks of README.md
+    .venv/bin/python -m scene_builder.bench.readme --check     # exit 1 when a block is stale
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+from pathlib import Path
+
+__all__ = ["BLOCKS", "RESULTS", "blocks_in", "render", "rewrite"]
+
+REPO = Path(__file__).resolve().parents[2]
+RESULTS = REPO / "bench_results"
+README = REPO / "README.md"
+_BLOCK = re.compile(r"(<!-- bench:(?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- /bench:(?P=name) -->)", re.S)
+
+
+def _f(x, digits: int = 2) -> str:
+    return "-" if x is None else f"{x:.{digits}f}"
+
+
+def _objects(data: dict) -> str:
+    """The interactive objects against ground truth (bench.groundtruth), each beside the
+    everything-background control."""
+    s = data["summary"]
+    rows = ["| what is measured (denominator) | interactive objects | control: everything background |", "|---|---:|---:|"]
+    sun = s.get("sun-rgbd")
+    if sun:
+        rows.append(f"| SUN RGB-D with depth: 3D box recall at IoU >= 0.25 (of {sun['true_boxes']} annotated boxes in {sun['inputs']} photos) | {_f(sun['box_recall_iou25'])} | {_f(sun['control_box_recall_iou25'])} |")
+        rows.append(f"| ... and the label right | {_f(sun['box_recall_iou25_label'])} | {_f(sun['control_box_recall_iou25_label'])} |")
+    plain = s.get("sun-plain")
+    if plain:
+        rows.append(f"| the same photos without depth: 3D box recall at IoU >= 0.25 (of {plain['true_boxes']}) | {_f(plain['box_recall_iou25'])} | {_f(plain['control_box_recall_iou25'])} |")
+        rows.append(f"| ... and the label right | {_f(plain['box_recall_iou25_label'])} | {_f(plain['control_box_recall_iou25_label'])} |")
+    coco = s.get("coco")
+    if coco:
+        rows.append(f"| COCO photos (no depth): instance recall at mask IoU >= 0.5, furniture-like classes (of {coco['true_instances']} instances in {coco['inputs']} photos) | {_f(coco['mask_recall_iou50'])} | {_f(coco['control_mask_recall_iou50'])} |")
+        rows.append(f"| ... large furniture and appliances (of {coco['true_large_instances']}) | {_f(coco['mask_recall_iou50_large'])} | {_f(coco['control_mask_recall_iou50_large'])} |")
+        rows.append(f"| ... precision: interactive objects matching an instance at IoU >= 0.25 (of {coco['interactive_objects']} interactive objects) | {_f(coco['mask_precision_iou25'])} | - |")
+    real = s.get("real")
+    if real:
+        rows.append(f"| real RGB-D suite: things a person lists that are interactive objects (of {real.get('inventory_seen', '-')} listed in {real['built']} photos) | {_f(real.get('inventory_instance_recall'))} | 0.00 |")
+        rows.append(f"| ... interactive objects that are listed things (precision) | {_f(real.get('inventory_instance_precision'))} | - |")
+    lines = ["\n".join(rows), ""]
+    fates = ["| set | inputs (built / refused / crashed) | perceived objects | interactive | fixed | background | interactive share of perceived | build seconds, median |",
+             "|---|---|---:|---:|---:|---:|---:|---:|"]
+    for name in ("sun-rgbd", "sun-plain", "coco", "real"):
+        v = s.get(name)
+        if not v:
+            continue
+        fates.append(f"| {name} | {v['inputs']} ({v['built']} / {v['refused']} / {v['crashed']}) | {v['perceived_objects']} | {v['interactive_objects']} | "
+                     f"{v['fixed_objects']} | {v['background_objects']} | {_f(v['interactive_share_of_perceived'])} | {_f(v['build_s_median'], 1)} |")
+    lines.append("\n".join(fates))
+    meta = data.get("meta", {})
+    if meta:
+        lines.append("")
+        lines.append(f"Measured {meta.get('date', '?')} at commit {meta.get('commit', '?')} with `{meta.get('command', '?')}` "
+                     f"({meta.get('machine', '?')}; load average {meta.get('load', '?')} at the end).")
+    return "\n".join(lines) + "\n"
+
+
+#: block name -> (JSON file under bench_results/, renderer)
+BLOCKS = {"objects": ("groundtruth.json", _objects)}
+
+
+def render(name: str, results: Path = RESULTS) -> str:
+    """The Markdown of block ``name`` from its JSON file."""
+    file, fn = BLOCKS[name]
+    return fn(json.loads((results / file).read_text()))
+
+
+def blocks_in(text: str) -> dict[str, str]:
+    """name -> body of every figure block of a README text."""
+    return {m.group("name"): m.group("body") for m in _BLOCK.finditer(text)}
+
+
+def rewrite(text: str, results: Path = RESULTS) -> str:
+    """``text`` with every figure block rendered again."""
+    return _BLOCK.sub(lambda m: m.group(1) + render(m.group("name"), results) + m.group(4), text)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    mode = parser.add_mutually_exclusive_group(required=True)
+    mode.add_argument("--write", action="store_true", help="rewrite the figure blocks of README.md")
+    mode.add_argument("--check", action="store_true", help="exit 1 when a block differs from its JSON")
+    args = parser.parse_args(argv)
+    text = README.read_text()
+    new = rewrite(text)
+    if args.write:
+        README.write_text(new)
+        return 0
+    stale = [n for n, body in blocks_in(text).items() if body != render(n)]
+    for n in stale:
+        print(f"README block '{n}' differs from bench_results/{BLOCKS[n][0]}: run python -m scene_builder.bench.readme --write")
+    return 1 if stale else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
