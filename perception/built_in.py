@@ -21,6 +21,9 @@ detector names (COCO has no cabinet) and that depth alone leaves on the backgrou
 5. Each run becomes a :class:`~scene_builder.model.PerceivedObject` labelled ``cabinet``,
    named ``built_in_K``, ``built_in=True`` (welded to the room), with its fronts, its mask the
    run's quad in the photo less other objects' pixels, its points the face plane under the mask.
+
+:func:`fronts_and_built_ins` is the perception stage's step: fronts on the objects' own faces
+(:func:`perception.fronts.with_fronts`), then the runs found on what they leave unexplained.
 """
 
 from __future__ import annotations
@@ -29,11 +32,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from perception.fronts import Face, rectify
+from perception.fronts import Face, rectify, with_fronts
 from scene_builder.frames import transform_points
-from scene_builder.model import Camera, Front, Observation, PerceivedObject, Plane
+from scene_builder.model import BackendUse, Camera, Front, Observation, PerceivedObject, Plane
 
-__all__ = ["BASE_DEPTH_M", "WALL_DEPTH_M", "built_in_runs"]
+__all__ = ["BASE_DEPTH_M", "WALL_DEPTH_M", "built_in_runs", "fronts_and_built_ins"]
 
 MAX_VIEW_DEG = 70.0
 VIEW_DISTANCE_M = 2.0
@@ -292,3 +295,19 @@ def _face_points(mask: np.ndarray, quad: np.ndarray, camera: Camera, observation
     t = ((quad[0] - c) @ n) / (rays @ n)
     pts = c + rays * t[:, None]
     return pts, observation.rgb[vs, us]
+
+
+def fronts_and_built_ins(
+    objects: tuple[PerceivedObject, ...], observation: Observation, camera: Camera, walls: tuple[Plane, ...] = (), removed: np.ndarray | None = None
+) -> tuple[list[PerceivedObject], BackendUse]:
+    """The perception stage's step for fronts: ``objects`` with the fronts seen on their faces
+    (:func:`perception.fronts.with_fronts`) and the built-in runs found from them (:func:`built_in_runs`), and what was found, as a :class:`BackendUse` for report.json."""
+    out = list(with_fronts(objects, observation, camera, walls))
+    runs = built_in_runs(tuple(out), observation, camera, walls, removed)
+    out += runs
+    n_obj = sum(1 for o in out if o.fronts)
+    n_fronts = sum(len(o.fronts) for o in out)
+    kinds = {k: sum(f.kind == k for o in out for f in o.fronts) for k in ("door", "drawer", "flap")}
+    what = ", ".join(f"{v} {k}s" for k, v in kinds.items() if v) or "none"
+    use = BackendUse("fronts", "face-cuts", f"{n_fronts} fronts ({what}) on {n_obj} of {len(out)} objects, {len(runs)} of them built-in runs found from their fronts")
+    return out, use

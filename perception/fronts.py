@@ -22,9 +22,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from scene_builder.frames import transform_points
-from scene_builder.model import BackendUse, Camera, Front, Observation, PerceivedObject, Plane
+from scene_builder.model import Camera, Front, Observation, PerceivedObject, Plane
 
-__all__ = ["FRONT_LABELS", "MAYBE_FRONT_LABELS", "Face", "face_of", "fronts_and_built_ins", "fronts_on_face", "rectify", "with_fronts"]
+__all__ = ["FRONT_LABELS", "MAYBE_FRONT_LABELS", "Face", "face_of", "fronts_on_face", "rectify", "with_fronts"]
 
 #: Categories made of fronts: every front found counts.
 FRONT_LABELS = frozenset({"cabinet", "wardrobe", "drawer_unit", "refrigerator", "oven", "dishwasher", "microwave"})
@@ -237,20 +237,3 @@ def with_fronts(objects: tuple[PerceivedObject, ...], observation: Observation, 
         out.append(obj)
     return tuple(out)
 
-
-def fronts_and_built_ins(
-    objects: tuple[PerceivedObject, ...], observation: Observation, camera: Camera, walls: tuple[Plane, ...] = (), removed: np.ndarray | None = None
-) -> tuple[list[PerceivedObject], BackendUse]:
-    """The perception stage's step for fronts: ``objects`` with the fronts seen on their faces
-    (:func:`with_fronts`), and what was found, as a :class:`BackendUse` for report.json."""
-    from perception.built_in import built_in_runs
-
-    out = list(with_fronts(objects, observation, camera, walls))
-    runs = built_in_runs(tuple(out), observation, camera, walls, removed)
-    out += runs
-    n_obj = sum(1 for o in out if o.fronts)
-    n_fronts = sum(len(o.fronts) for o in out)
-    kinds = {k: sum(f.kind == k for o in out for f in o.fronts) for k in ("door", "drawer", "flap")}
-    what = ", ".join(f"{v} {k}s" for k, v in kinds.items() if v) or "none"
-    use = BackendUse("fronts", "face-cuts", f"{n_fronts} fronts ({what}) on {n_obj} of {len(out)} objects, {len(runs)} of them built-in runs found from their fronts")
-    return out, use

@@ -367,7 +367,7 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     camera = Camera(k, frame.world_from_camera)
     room = frame.room
     if config.fronts:  # door and drawer fronts on the furniture's faces; built-in runs found from their fronts
-        from perception.fronts import fronts_and_built_ins
+        from perception.built_in import fronts_and_built_ins
 
         objects, front_use = fronts_and_built_ins(tuple(objects), observation, camera, room.walls, removed)
         backends.append(front_use)
