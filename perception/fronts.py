@@ -196,8 +196,10 @@ def fronts_on_face(rgb: np.ndarray, camera: Camera, face: Face, label: str = "",
         x0, y0, x1, y1 = p.box
         if min(x1 - x0, y1 - y0) * m < MIN_FRONT_M:
             continue
-        iy0, iy1, ix0, ix1 = int(y0), int(np.ceil(y1)), int(x0), int(np.ceil(x1))
-        if inside[iy0:iy1, ix0:ix1].mean() < 0.5:  # mostly off the photo or hidden by something else
+        # (a panel may reach a pixel past the rectified image: an empty window's mean was NaN,
+        # which kept a front lying off the photo)
+        window = inside[max(0, int(y0)):int(np.ceil(y1)), max(0, int(x0)):int(np.ceil(x1))]
+        if window.size == 0 or window.mean() < 0.5:  # mostly off the photo or hidden by something else
             continue
         a = p.corners[:, 0] * m
         b = (h - p.corners[:, 1]) * m
