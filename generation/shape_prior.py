@@ -174,7 +174,16 @@ class ShapePriorGenerator:
         description = f"{label} fitted to measured extents {size[0]:.2f} x {size[1]:.2f} x {size[2]:.2f} m (depth x width x height)"
         cfg = config
 
-        if label in ARTICULATED_LABELS:
+        rects = []
+        if obj.fronts:  # doors and drawers where the photo showed them (generation.front_parts)
+            from generation.front_parts import front_parts, front_rectangles
+
+            size = np.maximum(size, 0.3 * np.asarray(category("cabinet").typical_size_m))
+            rects = front_rectangles(obj.fronts, box_from_world, size)
+        if rects:
+            specs = front_parts(label, size, rects, rgba)
+            description += f"; {len(rects)} fronts seen in the photo"
+        elif label in ARTICULATED_LABELS:
             size = np.maximum(size, 0.3 * np.asarray(cat.typical_size_m))  # templates need room for panels
             specs = articulated_parts(label, size, rgba)
             description += "; articulation template"
@@ -207,7 +216,7 @@ class ShapePriorGenerator:
 
         def assemble(specs, kind, soft, description, cfg, snap=None):
             asset, shift = assemble_asset_with_offset(
-                obj.name, label, specs, config=cfg, seed=seed, kind=kind, is_fixed=cat.fixed, deformable=soft,
+                obj.name, label, specs, config=cfg, seed=seed, kind=kind, is_fixed=cat.fixed or obj.built_in, deformable=soft,
                 description=description, backend=BACKEND_NAME, observed_points_m=pts, observed_colors_rgb=obj.colors_rgb,
                 surface_snap=snap,
             )
@@ -220,9 +229,11 @@ class ShapePriorGenerator:
             samples = transform_points(generated.world_from_asset, surface_samples([q.visual for q in generated.asset.parts], VIOLATION_SAMPLES, seed))
             share = space.violation(samples)
             behind = max([0.0] + [float(-np.min(w.signed_distance_m(samples))) for w in perception.room.walls])
-            if share <= MAX_FREE_SPACE_SHARE and behind <= MAX_BEHIND_WALL_M:
+            if (share <= MAX_FREE_SPACE_SHARE or obj.built_in) and behind <= MAX_BEHIND_WALL_M:
+                # (a built-in run stands where its fronts put it, in front of depth that an
+                # estimate painted onto the wall behind it: that depth's free space is no evidence)
                 return generated
-            what = "articulation template" if label in ARTICULATED_LABELS else "shape prior"
+            what = "front layout" if rects else "articulation template" if label in ARTICULATED_LABELS else "shape prior"
             why = f"filled {share:.0%} seen free space" if share > MAX_FREE_SPACE_SHARE else f"reached {behind * 100:.0f} cm into a wall"
             description = f"{label}: the {what} {why}; " + description.split("; ")[0]
             structure_mass_kg = generated.asset.mass_kg

@@ -32,8 +32,8 @@ from scene_builder.errors import InputError
 from scene_builder.model import JointProbe, PushPlan, PushResult
 
 __all__ = [
-    "MIN_CLEARANCE_M", "PRE_SETTLE_S", "PUSHER", "PUSHER_FORCE_N", "PUSH_MOVE_M", "PUSH_SPEED_M_S", "PUSH_TRAVEL_M",
-    "interaction_problems", "joint_names", "load_probe_model", "open_joint", "plan_push", "probe_lines", "probe_scene",
+    "FULL_OPEN_FRACTION", "MIN_CLEARANCE_M", "PRE_SETTLE_S", "PUSHER", "PUSHER_FORCE_N", "PUSH_MOVE_M", "PUSH_SPEED_M_S", "PUSH_TRAVEL_M",
+    "fixed_objects", "interaction_problems", "joint_summary", "opens_fully", "joint_names", "load_probe_model", "open_joint", "plan_push", "probe_lines", "probe_scene",
     "push_failures", "push_object",
 ]
 
@@ -46,6 +46,9 @@ OPEN_MIN_FRACTION = 0.5
 LIMIT_TOLERANCE = {"hinge": np.radians(2.0), "slide": 0.005}
 BACKTRACK_TOLERANCE = {"hinge": np.radians(1.0), "slide": 0.002}
 CARCASS_MAX_M = 0.01
+#: A door or drawer opens *fully* when it travels this share of its range (within LIMIT_TOLERANCE
+#: of its limits, its carcass still): the measure of issue 24's probe over every built front.
+FULL_OPEN_FRACTION = 0.9
 
 
 def joint_names(model) -> tuple[str, ...]:
@@ -204,6 +207,32 @@ def interaction_problems(pushes: tuple[PushResult, ...] = (), joints: tuple[Join
     return tuple(out)
 
 
+def opens_fully(j: JointProbe) -> bool:
+    """Whether a pulled door or drawer opened fully: FULL_OPEN_FRACTION of its range, without
+    backtracking, within its limits (LIMIT_TOLERANCE) and with its carcass still (CARCASS_MAX_M)."""
+    return (j.open_fraction >= FULL_OPEN_FRACTION and j.backtrack <= BACKTRACK_TOLERANCE[j.kind]
+            and j.limit_violation <= LIMIT_TOLERANCE[j.kind] and j.body_displacement_m < CARCASS_MAX_M)
+
+
+def fixed_objects(model) -> tuple[str, ...]:
+    """Names of the objects of a scene model welded to the room (root body ``NAME`` of the world
+    with no ``NAME/free`` joint: built-in runs and fixed furniture), sorted."""
+    import mujoco
+
+    m = as_model(model, False)
+    free = {m.joint(j).name for j in range(m.njnt) if int(m.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_FREE)}
+    names = {m.body(b).name for b in range(1, m.nbody) if int(m.body_parentid[b]) == 0}
+    return tuple(sorted(n for n in names if n and "/" not in n and f"{n}/free" not in free))
+
+
+def joint_summary(joints: tuple[JointProbe, ...], fixed: tuple[str, ...] = ()) -> dict[str, int]:
+    """How many of the pulled doors and drawers opened fully (:func:`opens_fully`), over all and
+    over those of ``fixed`` objects (built-ins)."""
+    on_fixed = [j for j in joints if j.object in set(fixed)]
+    return {"joints": len(joints), "opened_fully": sum(opens_fully(j) for j in joints),
+            "fixed_joints": len(on_fixed), "fixed_opened_fully": sum(opens_fully(j) for j in on_fixed)}
+
+
 def probe_scene(mjcf_path: Path, force_n: float = PUSHER_FORCE_N) -> tuple[tuple[PushPlan, ...], tuple[PushResult, ...], tuple[JointProbe, ...]]:
     """Every probe of a scene: the push plan of each free object and a push of each with at
     most ``force_n`` (in the planned direction, whether the planner found a good side or not),
@@ -218,8 +247,10 @@ def _joint_unit(kind: str, v: float) -> str:
     return f"{np.degrees(v):.1f} deg" if kind == "hinge" else f"{v * 100:.1f} cm"
 
 
-def probe_lines(plans: tuple[PushPlan, ...], pushes: tuple[PushResult, ...], joints: tuple[JointProbe, ...]) -> tuple[str, ...]:
-    """One human-readable line per probe (what ``scene-builder check --interact`` prints)."""
+def probe_lines(plans: tuple[PushPlan, ...], pushes: tuple[PushResult, ...], joints: tuple[JointProbe, ...], fixed: tuple[str, ...] = ()) -> tuple[str, ...]:
+    """One human-readable line per probe (what ``scene-builder check --interact`` prints), and a
+    last line with the share of doors and drawers that opened fully (:func:`joint_summary`;
+    ``fixed``: the objects welded to the room, whose joints are counted apart)."""
     out = []
     plan = {p.name: p for p in plans}
     for r in pushes:
@@ -241,4 +272,11 @@ def probe_lines(plans: tuple[PushPlan, ...], pushes: tuple[PushResult, ...], joi
             f"({j.open_fraction:.0%}) under {j.force_n:.0f} N, {_joint_unit(j.kind, j.limit_violation)} beyond its range, "
             f"{j.object} moved {j.body_displacement_m * 1000:.1f} mm"
         )
+    if joints:
+        s = joint_summary(joints, fixed)
+        line = (f"doors and drawers: {s['opened_fully']} of {s['joints']} open fully ({FULL_OPEN_FRACTION:.0%} of their range or more) "
+                f"within their limits with the carcass still")
+        if s["fixed_joints"]:
+            line += f"; on built-in and fixed furniture {s['fixed_opened_fully']} of {s['fixed_joints']}"
+        out.append(line)
     return tuple(out)

@@ -368,6 +368,11 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
         backends.append(BackendUse("naming", "geometric-prior", f"named {named_by_prior} of {len(objects)} objects that '{name_use.backend}' left as 'object'"))
     camera = Camera(k, frame.world_from_camera)
     room = frame.room
+    if config.fronts:  # door and drawer fronts on the furniture's faces; built-in runs found from their fronts
+        from perception.built_in import fronts_and_built_ins
+
+        objects, front_use = fronts_and_built_ins(tuple(objects), observation, camera, room.walls, removed)
+        backends.append(front_use)
     if config.background:
         from perception.background import observed_background
         from perception.room import completion_planes

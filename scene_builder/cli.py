@@ -483,11 +483,12 @@ def _interact(out: Path) -> tuple[str, ...]:
     import dataclasses
     import json
 
-    from layout.interaction import interaction_problems, probe_lines, probe_scene, push_failures
+    from layout.interaction import fixed_objects, interaction_problems, joint_summary, load_probe_model, probe_lines, probe_scene, push_failures
     from scene_builder.outdir import add_to_marker, replace_file
 
     plans, pushes, joints = probe_scene(out / "scene.xml")
-    for line in probe_lines(plans, pushes, joints):
+    fixed = fixed_objects(load_probe_model(out / "scene.xml"))
+    for line in probe_lines(plans, pushes, joints, fixed):
         print(line)
     problems = interaction_problems(pushes, joints)
     failures = {r.name: list(push_failures(r)) for r in pushes}
@@ -497,6 +498,7 @@ def _interact(out: Path) -> tuple[str, ...]:
         "push_plans": [dataclasses.asdict(p) for p in plans],
         "pushes": [{**dataclasses.asdict(r), "ok": not failures[r.name], "failures": failures[r.name]} for r in pushes],
         "joints": [{f.name: getattr(j, f.name) for f in dataclasses.fields(j) if f.name not in ("times_s", "positions")} for j in joints],
+        "joint_summary": joint_summary(joints, fixed),
         "problems": list(problems),
     }
     _check_interaction_writable(out)  # again: the probes took a while

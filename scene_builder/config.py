@@ -70,6 +70,8 @@ class PerceptionConfig:
     segmentation_backend, naming_backend: registry names or "auto". models_dir: where learned
     model weights are looked up first (also $SCENE_BUILDER_MODELS). sam2: SAM 2 settings.
     background: build the static textured background from every pixel no movable object explains.
+    fronts: find door and drawer fronts on furniture faces and built-in runs from them
+    (``perception.fronts``); off, articulated furniture gets its category template's layout.
     """
 
     default_fov_deg: float = 60.0
@@ -82,6 +84,7 @@ class PerceptionConfig:
     models_dir: Path | None = None
     sam2: Sam2Settings = field(default_factory=Sam2Settings)
     background: bool = True
+    fronts: bool = True
 
 
 @dataclass(frozen=True)

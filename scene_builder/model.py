@@ -46,6 +46,7 @@ __all__ = [
     "DeformableSettings",
     "ExportedFiles",
     "Fidelity",
+    "Front",
     "GeneratedAsset",
     "Inertial",
     "Joint",
@@ -79,6 +80,7 @@ __all__ = [
 
 from scene_builder.arrays import MIN_PIECE_THICKNESS_M, _check_rigid, _freeze, as_array, inertia_problem, thickness_m  # noqa: E402  (as_array is public)
 from scene_builder.robot import RobotModel, RobotPlacement  # noqa: E402  (re-exported)
+from scene_builder.fronts import Front  # noqa: E402  (re-exported)
 
 
 # --------------------------------------------------------------------------------------------
@@ -391,6 +393,10 @@ class PerceivedObject:
     mask: (H, W) bool, True on the object's pixels; no pixel belongs to two objects.
     points_world_m: (N, 3) float64 observed surface points in the world frame (N >= 1).
     colors_rgb: (N, 3) uint8 colour of each point.
+    fronts: the door and drawer fronts seen on its face (``perception.fronts``); generation
+      makes each a moving part instead of a category template's (empty: none seen).
+    built_in: fitted furniture (a kitchen run, a fitted wardrobe) found from its fronts rather
+      than detected: welded to the room (``ObjectAsset.is_fixed``) whatever its label's default.
     """
 
     object_id: int
@@ -400,6 +406,8 @@ class PerceivedObject:
     mask: np.ndarray
     points_world_m: np.ndarray
     colors_rgb: np.ndarray
+    fronts: tuple[Front, ...] = ()
+    built_in: bool = False
 
     def __post_init__(self) -> None:
         _freeze(self, "mask", np.bool_, (None, None))

@@ -1,0 +1,241 @@
+"""Door and drawer fronts on the faces of furniture seen in the photo.
+
+For each object that can have fronts (:data:`FRONT_LABELS`), its **face** is the vertical
+rectangle of its observed points that looks most toward the camera: the gravity-aligned
+smallest-area rectangle of its points in plan gives its axes (snapped to the room's walls when
+within ``SNAP_DEG``), the side whose normal points most toward the camera is the face, set at the
+front-most observed points, as wide and as high as the points. The photo is resampled onto that
+plane (``rectify``: every face pixel is a world point on the plane projected into the photo), so
+that the face is seen head-on with rows horizontal and columns vertical; ``perception.front_parse``
+splits it into panels and tells doors, drawers and frame apart. Each front goes back into the
+photo and the world through the same plane (:class:`scene_builder.model.Front`).
+
+An object of a category that may hold drawers without being made of them (a table that is a
+night stand, a desk) keeps its fronts only when at least ``MIN_HANDLED_FRONTS`` of them show a
+handle; ovens and dishwashers get their largest front as a flap hinged at the bottom.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from scene_builder.frames import transform_points
+from scene_builder.model import Camera, Front, Observation, PerceivedObject, Plane
+
+__all__ = ["FRONT_LABELS", "MAYBE_FRONT_LABELS", "Face", "face_of", "fronts_on_face", "rectify", "with_fronts"]
+
+#: Categories made of fronts: every front found counts.
+FRONT_LABELS = frozenset({"cabinet", "wardrobe", "drawer_unit", "refrigerator", "oven", "dishwasher", "microwave"})
+#: Categories that may hold drawers (a night stand named a table, a desk, a low shelf unit):
+#: their fronts count when at least MIN_HANDLED_FRONTS of them show a handle.
+MAYBE_FRONT_LABELS = frozenset({"table", "desk", "shelf", "box"})
+MIN_HANDLED_FRONTS = 2
+#: A face's axes snap to the walls' directions within this angle.
+SNAP_DEG = 12.0
+#: The face image: at most this many pixels on its long side, and no finer than MIN_M_PER_PX.
+FACE_MAX_PX = 360
+MIN_M_PER_PX = 0.002
+#: The face's yaw is searched this far (deg) either way, in steps of YAW_STEP_DEG, on a
+#: resampling YAW_PX pixels long.
+YAW_SEARCH_DEG = 20.0
+YAW_STEP_DEG = 2.5
+YAW_PX = 160
+#: Fronts smaller than this (m) in either direction are not kept (a sliver of a cut face).
+MIN_FRONT_M = 0.07
+
+
+@dataclass(frozen=True, eq=False)
+class Face:
+    """A vertical rectangle in the world: ``origin_m`` its bottom-left corner seen from the front,
+    ``right`` (3,) the horizontal unit vector to the viewer's right along it, ``normal`` (3,) the
+    horizontal unit vector out of it (toward the camera); ``width_m`` along ``right``,
+    ``height_m`` up (+Z)."""
+
+    origin_m: np.ndarray
+    right: np.ndarray
+    normal: np.ndarray
+    width_m: float
+    height_m: float
+
+    def points(self, a_m: np.ndarray, b_m: np.ndarray) -> np.ndarray:
+        """(..., 3) world points at ``a_m`` along ``right`` and ``b_m`` up from the origin."""
+        a, b = np.asarray(a_m, dtype=np.float64), np.asarray(b_m, dtype=np.float64)
+        return self.origin_m + a[..., None] * self.right + b[..., None] * np.array([0.0, 0.0, 1.0])
+
+
+def _plan_axes(xy: np.ndarray, walls: tuple[Plane, ...]) -> np.ndarray:
+    """(2, 2) rows: the two horizontal axes of the smallest-area rectangle around ``xy`` (N, 2)
+    (1 deg steps), snapped to the walls' directions within SNAP_DEG."""
+    c = xy - np.median(xy, axis=0)
+    if len(c) > 3000:
+        c = c[:: len(c) // 3000 + 1]
+    best = (np.inf, 0.0)
+    for a in np.radians(np.arange(0.0, 90.0, 1.0)):
+        u = c @ [np.cos(a), np.sin(a)]
+        v = c @ [-np.sin(a), np.cos(a)]
+        area = float(np.subtract(*np.percentile(u, [98, 2])) * np.subtract(*np.percentile(v, [98, 2])))
+        if area < best[0]:
+            best = (area, float(a))
+    angle = best[1]
+    for wall in walls:
+        wa = float(np.arctan2(wall.normal[1], wall.normal[0])) % (np.pi / 2)
+        diff = (angle - wa + np.pi / 4) % (np.pi / 2) - np.pi / 4
+        if abs(diff) < np.radians(SNAP_DEG):
+            angle = wa
+            break
+    return np.array([[np.cos(angle), np.sin(angle)], [-np.sin(angle), np.cos(angle)]])
+
+
+def face_of(points_world_m: np.ndarray, camera_position_m: np.ndarray, walls: tuple[Plane, ...] = ()) -> Face:
+    """The face of an object's observed points (N, 3) that looks most toward the camera (see the
+    module docstring). Its plane lies at the 95th percentile of the points along its normal (the
+    front-most, robust to stray depth); its extent is the 1st-99th percentile of the points."""
+    p = np.asarray(points_world_m, dtype=np.float64)
+    axes = _plan_axes(p[:, :2], walls)
+    centre = np.median(p[:, :2], axis=0)
+    to_cam = np.asarray(camera_position_m, dtype=np.float64)[:2] - centre
+    normals = np.vstack([axes, -axes])
+    n2 = normals[int(np.argmax(normals @ to_cam))]
+    normal = np.array([n2[0], n2[1], 0.0])
+    right = np.cross(np.array([0.0, 0.0, 1.0]), normal)  # the viewer's right, looking along -normal: (-normal) x up
+    a = p @ right
+    d = p @ normal
+    a0, a1 = np.percentile(a, [1, 99])
+    z0, z1 = np.percentile(p[:, 2], [1, 99])
+    z0 = 0.0 if z0 < 0.05 else float(z0)
+    offset = float(np.percentile(d, 95))
+    origin = normal * offset + right * a0 + np.array([0.0, 0.0, z0])
+    return Face(origin, right, normal, float(a1 - a0), float(z1 - z0))
+
+
+def _rotated(face: Face, points_world_m: np.ndarray, yaw_rad: float) -> Face:
+    """``face`` turned by ``yaw_rad`` about the vertical through its centre, its extent taken
+    again from the points (as :func:`face_of` does)."""
+    c, s = np.cos(yaw_rad), np.sin(yaw_rad)
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    normal = rot @ face.normal
+    right = np.cross(np.array([0.0, 0.0, 1.0]), normal)
+    p = np.asarray(points_world_m, dtype=np.float64)
+    a = p @ right
+    a0, a1 = np.percentile(a, [1, 99])
+    offset = float(np.percentile(p @ normal, 95))
+    origin = normal * offset + right * a0 + np.array([0.0, 0.0, face.origin_m[2]])
+    return Face(origin, right, normal, float(a1 - a0), face.height_m)
+
+
+def refine_yaw(rgb: np.ndarray, camera: Camera, face: Face, points_world_m: np.ndarray) -> Face:
+    """``face`` turned about the vertical (within YAW_SEARCH_DEG) so that the horizontal edges of
+    the photo resampled onto it run most nearly along its rows: a face plane turned away from the
+    real face shows that face's horizontal edges (drawer gaps, rails, tops) sloping. Score: the
+    sum of squared counts of horizontal edge pixels per row over the squared total (peakedness),
+    on a coarse resampling (YAW_PX on the long side)."""
+    from perception.front_parse import _edges
+
+    best, best_face = -1.0, face
+    for deg in np.arange(-YAW_SEARCH_DEG, YAW_SEARCH_DEG + 1e-9, YAW_STEP_DEG):
+        f = _rotated(face, points_world_m, float(np.radians(deg))) if deg else face
+        if f.width_m <= 0.05:
+            continue
+        img, inside, m = rectify(rgb, camera, f, max_px=YAW_PX)
+        from skimage.color import rgb2gray
+
+        horiz, _ = _edges(rgb2gray(img), sigma=1.0)
+        horiz &= inside
+        total = float(horiz.sum())
+        if total < 20:
+            continue
+        score = float(np.sum(horiz.sum(axis=1).astype(np.float64) ** 2)) / total ** 2 * horiz.shape[0]
+        if score > best * 1.1 or (deg == 0 and score >= best / 1.1):
+            best, best_face = score, f
+    return best_face
+
+
+def rectify(rgb: np.ndarray, camera: Camera, face: Face, mask: np.ndarray | None = None, max_px: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
+    """The photo seen head-on on ``face``: ((h, w, 3) uint8 face image, (h, w) bool where the
+    face pixel projects into the photo (and into ``mask``, when given), metres per pixel). Row 0
+    is the face's top; column 0 its left edge seen from the front. Bilinear resampling (OpenCV's
+    remap). ``max_px``: the long side in pixels (default FACE_MAX_PX)."""
+    import cv2
+
+    m_per_px = max(MIN_M_PER_PX, max(face.width_m, face.height_m) / (max_px or FACE_MAX_PX))
+    w = max(4, int(round(face.width_m / m_per_px)))
+    h = max(4, int(round(face.height_m / m_per_px)))
+    a = (np.arange(w) + 0.5) * m_per_px
+    b = face.height_m - (np.arange(h) + 0.5) * m_per_px
+    world = face.points(a[None, :].repeat(h, 0), b[:, None].repeat(w, 1))
+    cam = transform_points(np.linalg.inv(camera.world_from_camera), world.reshape(-1, 3))
+    k = camera.intrinsics
+    z = np.maximum(cam[:, 2], 1e-6)
+    u = (k.fx_px * cam[:, 0] / z + k.cx_px).reshape(h, w).astype(np.float32)
+    v = (k.fy_px * cam[:, 1] / z + k.cy_px).reshape(h, w).astype(np.float32)
+    img = cv2.remap(np.ascontiguousarray(rgb), u, v, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    H, W = rgb.shape[:2]
+    inside = (cam[:, 2].reshape(h, w) > 0) & (u >= 0) & (u <= W - 1) & (v >= 0) & (v <= H - 1)
+    if mask is not None:
+        ui = np.clip(np.round(u).astype(np.int64), 0, W - 1)
+        vi = np.clip(np.round(v).astype(np.int64), 0, H - 1)
+        inside &= mask[vi, ui]
+    return img, inside, m_per_px
+
+
+def fronts_on_face(rgb: np.ndarray, camera: Camera, face: Face, label: str = "", mask: np.ndarray | None = None) -> tuple[Front, ...]:
+    """The door and drawer fronts on ``face`` of the photo ``rgb`` (the analysis image), left to
+    right then top to bottom. ``label``: the object's category (ovens and dishwashers: the largest
+    front is a flap hinged at its bottom)."""
+    from perception.front_parse import parse_face
+
+    img, inside, m = rectify(rgb, camera, face, mask)
+    panels = parse_face(img, m)
+    h = img.shape[0]
+    k = camera.intrinsics
+    camera_from_world = np.linalg.inv(camera.world_from_camera)
+    out = []
+    for p in panels:
+        x0, y0, x1, y1 = p.box
+        if min(x1 - x0, y1 - y0) * m < MIN_FRONT_M:
+            continue
+        # (a panel may reach a pixel past the rectified image: an empty window's mean was NaN,
+        # which kept a front lying off the photo)
+        window = inside[max(0, int(y0)):int(np.ceil(y1)), max(0, int(x0)):int(np.ceil(x1))]
+        if window.size == 0 or window.mean() < 0.5:  # mostly off the photo or hidden by something else
+            continue
+        a = p.corners[:, 0] * m
+        b = (h - p.corners[:, 1]) * m
+        world = face.points(a, b)
+        px = k.project(transform_points(camera_from_world, world))
+        handle = None
+        if p.handle is not None:
+            hw = face.points(np.array(p.handle[0] * m), np.array((h - p.handle[1]) * m))
+            handle = k.project(transform_points(camera_from_world, hw[None]))[0]
+        score = 0.5 * float(p.handle is not None) + 0.5 * p.support
+        out.append(Front(p.kind, p.hinge, px, world, handle, float(np.clip(score, 0.0, 1.0))))
+    if label in ("oven", "dishwasher") and out:
+        big = max(range(len(out)), key=lambda i: _area(out[i]))
+        out[big] = replace(out[big], kind="flap", hinge="bottom")
+    return tuple(out)
+
+
+def _area(f: Front) -> float:
+    c = f.corners_world_m
+    return float(np.linalg.norm(c[1] - c[0]) * np.linalg.norm(c[3] - c[0]))
+
+
+def with_fronts(objects: tuple[PerceivedObject, ...], observation: Observation, camera: Camera, walls: tuple[Plane, ...] = ()) -> tuple[PerceivedObject, ...]:
+    """``objects`` with the fronts seen on the face of each that can have them (see the module
+    docstring); the others unchanged."""
+    out = []
+    for obj in objects:
+        if obj.label in FRONT_LABELS or obj.label in MAYBE_FRONT_LABELS:
+            face = face_of(obj.points_world_m, camera.position_m, walls)
+            if face.width_m > 0.1 and face.height_m > 0.1:
+                face = refine_yaw(observation.rgb, camera, face, obj.points_world_m)
+                fronts = fronts_on_face(observation.rgb, camera, face, obj.label, obj.mask)
+                if obj.label not in FRONT_LABELS and sum(f.handle_px is not None for f in fronts) < MIN_HANDLED_FRONTS:
+                    fronts = ()
+                if fronts:
+                    obj = replace(obj, fronts=fronts)
+        out.append(obj)
+    return tuple(out)
+

@@ -1,0 +1,108 @@
+"""Door and drawer fronts (issue 24): the face parser on a drawn cabinet face, fronts turned into
+moving parts, and the bench's matching and the probe's 'opens fully' rule."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from generation.front_parts import front_parts, front_rectangles
+from perception.front_parse import parse_face
+from scene_builder.bench.fronts import iou, match_count
+from scene_builder.model import Front, JointProbe, JointType
+
+M_PER_PX = 0.005  # 5 mm per pixel
+
+
+def _cabinet_face() -> np.ndarray:
+    """A 1.0 m x 0.8 m cabinet face at 5 mm/px: a drawer across the top (0.2 m) with a centred
+    bar pull, two doors below, each with a vertical bar pull near the gap between them, dark
+    1 cm gaps between fronts and a 2 cm carcass border."""
+    h, w = 160, 200
+    img = np.full((h, w, 3), 215, np.uint8)
+    img[:4, :] = img[-4:, :] = 170  # carcass border
+    img[:, :4] = img[:, -4:] = 170
+    img[42:44, 4:-4] = 40  # gap under the drawer
+    img[44:-4, 99:101] = 40  # gap between the doors
+    img[20:24, 80:120] = 30  # drawer pull (20 cm bar)
+    img[80:110, 88:91] = 30  # left door's pull, near its right edge
+    img[80:110, 109:112] = 30  # right door's pull, near its left edge
+    return img
+
+
+def test_parse_face_finds_the_drawer_and_both_doors_hinged_outward():
+    panels = sorted(parse_face(_cabinet_face(), M_PER_PX), key=lambda p: (round(p.box[1] / 10), p.box[0]))  # rows, then left to right
+    kinds = [(p.kind, p.hinge) for p in panels]
+    assert kinds == [("drawer", ""), ("door", "left"), ("door", "right")]
+    truth = [(4, 4, 196, 42), (4, 44, 99, 156), (101, 44, 196, 156)]
+    for p, t in zip(panels, truth):
+        assert iou(p.box, t) > 0.8, (p.box, t)
+        assert p.handle is not None
+
+
+def test_parse_face_finds_no_front_on_a_blank_face():
+    assert parse_face(np.full((160, 200, 3), 200, np.uint8), M_PER_PX) == []
+
+
+def _front(kind, hinge, y0, y1, z0, z1, x=0.3):
+    """A front on the face x = ``x`` of a box whose frame is the world's, its corners bottom-left,
+    bottom-right, top-right, top-left as seen from its side (y0 < y1: seen from +X)."""
+    c = np.array([[x, y0, z0], [x, y1, z0], [x, y1, z1], [x, y0, z1]], float)
+    return Front(kind, hinge, np.zeros((4, 2)), c)
+
+
+def test_front_parts_make_a_joint_per_front_where_it_was_seen():
+    size = (0.6, 1.0, 0.8)  # depth, width, height: its front face at x = 0.3
+    fronts = (
+        _front("drawer", "", -0.48, 0.48, 0.58, 0.78),
+        _front("door", "left", -0.48, 0.005, 0.02, 0.57),  # overlaps its neighbour by 1 cm
+        _front("door", "right", -0.005, 0.48, 0.02, 0.57),
+        _front("door", "left", 0.48, -0.48, 0.02, 0.78, x=-0.3),  # on the back face (its normal -X): left out
+    )
+    rects = front_rectangles(fronts, np.eye(4), size)
+    assert [r[:2] for r in rects] == [("drawer", ""), ("door", "left"), ("door", "right")]
+    left, right = rects[1], rects[2]
+    assert left[3] < right[2]  # the overlap was split with a gap between the doors
+    parts = front_parts("cabinet", size, rects)
+    moving = {p.name: p.joint for p in parts if p.joint is not None}
+    assert moving["drawer_1"].type == JointType.PRISMATIC
+    assert np.allclose(np.abs(moving["drawer_1"].axis), (1, 0, 0))
+    assert moving["door_1"].type == JointType.REVOLUTE and moving["door_2"].type == JointType.REVOLUTE
+    # each door's hinge is on the side away from its handle: the left door's axis at its left edge
+    hinges = sorted(float(moving[n].anchor_m[1]) for n in ("door_1", "door_2"))
+    assert hinges[0] < -0.4 and hinges[1] > 0.4
+    assert parts[0].name == "body" and parts[0].joint is None
+
+
+def test_match_count_is_one_to_one_at_iou_half():
+    truth = [(0, 0, 10, 10), (10, 0, 20, 10)]
+    assert match_count([(0, 0, 10, 10)], truth) == 1
+    assert match_count([(0, 0, 21, 10)], truth) == 0  # one box over two fronts: IoU under 0.5 with each
+    assert match_count([(0, 0, 20, 10)], truth) == 1  # IoU exactly 0.5 with each, matched to one
+    assert match_count([(0, 0, 10, 10), (1, 0, 10, 10)], truth) == 1  # two over one front count once
+    assert match_count([(0, 0, 10, 10), (10, 0, 20, 11)], truth) == 2
+    assert match_count([], truth) == 0
+
+
+def _probe(fraction, displacement=0.0, violation=0.0, obj="built_in_1"):
+    return JointProbe(f"{obj}/door_1/joint", obj, "hinge", (0.0, 1.7), 0.0, 1.0, 20.0, 1.7 * fraction, fraction,
+                      0.0, violation, 1.7 * fraction, displacement, np.zeros(2), np.zeros(2))
+
+
+def test_opens_fully_needs_most_of_the_range_within_limits_with_the_carcass_still():
+    from layout.interaction import joint_summary, opens_fully, probe_lines
+
+    assert opens_fully(_probe(0.95))
+    assert not opens_fully(_probe(0.6))
+    assert not opens_fully(_probe(0.95, displacement=0.05))
+    assert not opens_fully(_probe(0.95, violation=0.2))
+    joints = (_probe(0.95), _probe(0.2), _probe(0.99, obj="dresser_2"))
+    s = joint_summary(joints, ("built_in_1",))
+    assert s == {"joints": 3, "opened_fully": 2, "fixed_joints": 2, "fixed_opened_fully": 1}
+    assert probe_lines((), (), joints, ("built_in_1",))[-1].startswith("doors and drawers: 2 of 3 open fully")
+
+
+@pytest.mark.parametrize("kind,hinge", [("drawer", "left"), ("door", ""), ("shelf", "")])
+def test_front_rejects_a_hinge_that_does_not_fit_its_kind(kind, hinge):
+    with pytest.raises(ValueError):
+        Front(kind, hinge, np.zeros((4, 2)), np.zeros((4, 3)))
