@@ -58,6 +58,9 @@ FLOOR_SCORE = 0.2
 _CLUSTER_INSIDE = 0.6
 #: ... and it covers this share of the box.
 _CLUSTER_COVER = 0.12
+#: ... or, a cluster reaching out of the box (several touching things that depth joined: a
+#: wardrobe, the cabinet beside it and the wall behind), when it fills this share of the box.
+_CLUSTER_FILLS = 0.5
 #: The semantic map confirms a box when its family covers this share of the box.
 _SEMANTIC_COVER = 0.15
 #: A box's depth hints are used only when depth leaves this share of its pixels with depth off
@@ -73,6 +76,8 @@ _WHOLE_CUT_SHARE = 0.2
 _PEOPLE_SEEN = 0.15
 #: A depth cluster that instances cover less than this share of is unexplained.
 _UNEXPLAINED = 0.3
+#: ... and of a cluster explained in part up to this share, the rest splits into its 3D pieces.
+_REST_SPLIT_MAX = 0.8
 #: Boxes of any class down to this (rescaled) score are object proposals for the classifier ...
 _PROPOSAL_SCORE = 0.12
 #: ... between these shares of the image's area ...
@@ -266,7 +271,7 @@ class DetectionSegmenter:
         labels, kept = self._paint(cands, depth_m, valid, h, w)
         self._check_names(rgb, kept, labels)
         n_det = len(kept)
-        extras = self._extras(rgb, clusters, cluster_sizes, labels, kept, sem_labels, points, depth_m, valid, background, up_cam, h, w, removed)
+        extras = self._extras(rgb, clusters, cluster_sizes, labels, kept, sem_labels, points, depth_m, valid, background, up_cam, h, w, removed, focal)
         for c in extras:
             free = c.mask & (labels == 0) & ~removed
             if free.sum() >= self.min_points:
@@ -319,6 +324,9 @@ class DetectionSegmenter:
             share_inside = inside / np.maximum(free_sizes, 1)
             ok = (share_inside >= _CLUSTER_INSIDE) & (inside >= _CLUSTER_COVER * area) & (free_sizes >= self.min_points)
             cluster = int(np.argmax(np.where(ok, inside, 0))) if ok.any() else 0
+            fills = (inside >= _CLUSTER_FILLS * area) & (free_sizes >= self.min_points)
+            if cluster == 0 and fills.any():
+                cluster = int(np.argmax(np.where(fills, inside, 0)))
             fam = family(label)
             sem_cover = 0.0
             if sem_labels is not None:
@@ -643,10 +651,15 @@ class DetectionSegmenter:
             out.append((best, p) if best and p >= _CLASSIFIER_SURE else ("", 0.0))
         return out
 
-    def _extras(self, rgb, clusters, cluster_sizes, labels, kept, sem_labels, points, depth_m, valid, background, up_cam, h: int, w: int, removed) -> list[_Candidate]:
+    def _extras(self, rgb, clusters, cluster_sizes, labels, kept, sem_labels, points, depth_m, valid, background, up_cam, h: int, w: int, removed,
+                focal: float) -> list[_Candidate]:
         """Depth clusters and semantic regions no detection explains, when they are clear objects
-        (people and animals, ``removed``, explain what they cover)."""
+        (people and animals, ``removed``, explain what they cover). Of a cluster a detection
+        explains in part (depth joined a wardrobe, the cabinet beside it and the box in front),
+        the rest falls into its own 3D pieces, each an extra when clear."""
         import cv2
+
+        from perception.segment_depth import cluster_points
 
         out = []
         unclear: list[tuple[int, np.ndarray]] = []
@@ -659,13 +672,23 @@ class DetectionSegmenter:
                 cache.append(point_normals(points))
             return cache[0]
 
+        pieces: list[tuple[int, np.ndarray]] = []
         for c in np.flatnonzero(cluster_sizes >= self.min_points):
             if c == 0:
                 continue
             m = clusters == c
-            if (m & claimed).sum() >= _UNEXPLAINED * cluster_sizes[c]:
-                continue
+            share = (m & claimed).sum() / cluster_sizes[c]
             m = m & ~claimed
+            if share < _UNEXPLAINED:
+                pieces.append((int(c), m))
+            elif share < _REST_SPLIT_MAX and m.sum() >= self.min_points:
+                lab = cluster_points(points[m], focal)
+                for k in np.unique(lab):
+                    sub = np.zeros_like(m)
+                    sub[m] = lab == k
+                    if sub.sum() >= self.min_points:
+                        pieces.append((int(c), sub))
+        for c, m in pieces:
             if not is_clear(m, points, valid & ~background, up, depth_m, valid, self.min_points, normals):
                 unclear.append((int(c), m))
                 continue
