@@ -242,10 +242,11 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     backends.append(seg_use)
     step(f"segmenting objects ({seg_use.backend})")
     geometric = bool(getattr(segmenter, "accepts_gravity", False))
+    extra = {"depth_measured": depth_source == "sensor"} if getattr(segmenter, "accepts_depth_source", False) else {}
     if geometric:
-        masks: InstanceMasks = segmenter.segment(loaded.rgb, depth_m, k, frame.background, up_cam=frame.up_cam)
+        masks: InstanceMasks = segmenter.segment(loaded.rgb, depth_m, k, frame.background, up_cam=frame.up_cam, **extra)
     else:
-        masks = segmenter.segment(loaded.rgb, depth_m, k, frame.background)
+        masks = segmenter.segment(loaded.rgb, depth_m, k, frame.background, **extra)
     labels = np.asarray(masks.labels)
     if labels.shape != depth_m.shape:
         raise InputError(f"segmentation backend '{seg_use.backend}' returned masks of shape {labels.shape} for a {depth_m.shape} image; choose another --segmentation-backend")

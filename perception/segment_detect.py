@@ -59,7 +59,9 @@ _CLUSTER_INSIDE = 0.6
 #: ... and it covers this share of the box.
 _CLUSTER_COVER = 0.12
 #: ... or, a cluster reaching out of the box (several touching things that depth joined: a
-#: wardrobe, the cabinet beside it and the wall behind), when it fills this share of the box.
+#: wardrobe, the cabinet beside it and the wall behind), when it fills this share of the box and
+#: the depth is a sensor's (on COCO photos with estimated depth it confirmed 48 more weak boxes,
+#: mask precision 0.47 -> 0.22).
 _CLUSTER_FILLS = 0.5
 #: The semantic map confirms a box when its family covers this share of the box.
 _SEMANTIC_COVER = 0.15
@@ -189,6 +191,7 @@ class DetectionSegmenter:
     """
 
     accepts_gravity = True
+    accepts_depth_source = True  # segment() takes depth_measured
 
     def __init__(
         self,
@@ -229,10 +232,13 @@ class DetectionSegmenter:
         intrinsics: CameraIntrinsics,
         background: np.ndarray,
         up_cam: np.ndarray | None = None,
+        depth_measured: bool = True,
     ) -> InstanceMasks:
         """rgb: (H, W, 3) uint8; depth_m: (H, W) float32 (0 = invalid); background: (H, W) bool
-        room pixels; up_cam: (3,) up in the camera frame or None. Returns the instances with
-        their detector names (``""`` for extras without a semantic class)."""
+        room pixels; up_cam: (3,) up in the camera frame or None; depth_measured: the depth is a
+        sensor's (estimated depth joins too much into one cluster for a cluster reaching out of a
+        box to witness it). Returns the instances with their detector names (``""`` for extras
+        without a semantic class)."""
         h, w = depth_m.shape
         valid = (depth_m > 0) & (depth_m < self.max_depth_m)
         dets = self.detect(rgb)
@@ -258,7 +264,7 @@ class DetectionSegmenter:
             if stage == "classifier":
                 batch = self._classified(rgb, dets, cands, claimed, h, w)
             else:
-                batch = self._confirm(dets, stage == "strong", clusters, sem_labels, claimed, h, w)
+                batch = self._confirm(dets, stage == "strong", clusters, sem_labels, claimed, h, w, depth_measured)
             self._outline(rgb, batch, depth_m, valid, background, clusters, sem_labels, points, focal, claimed)
             for c in batch:
                 if c.mask is not None:
@@ -307,9 +313,10 @@ class DetectionSegmenter:
                 masks.append(c.mask)
         return removal_mask(masks, (h, w)), len(masks)
 
-    def _confirm(self, dets: Detections, strong: bool, clusters, sem_labels, claimed, h: int, w: int) -> list[_Candidate]:
+    def _confirm(self, dets: Detections, strong: bool, clusters, sem_labels, claimed, h: int, w: int, depth_measured: bool = True) -> list[_Candidate]:
         """The detections of one pass (``strong``: at CONFIDENT or more; else the weak ones with
-        a witness among the pixels not ``claimed`` yet)."""
+        a witness among the pixels not ``claimed`` yet; a cluster filling a box but reaching out
+        of it is a witness only where the depth is ``depth_measured``)."""
         free_clusters = np.where(claimed, 0, clusters)
         free_sizes = np.bincount(free_clusters.ravel())
         out = []
@@ -325,7 +332,7 @@ class DetectionSegmenter:
             ok = (share_inside >= _CLUSTER_INSIDE) & (inside >= _CLUSTER_COVER * area) & (free_sizes >= self.min_points)
             cluster = int(np.argmax(np.where(ok, inside, 0))) if ok.any() else 0
             fills = (inside >= _CLUSTER_FILLS * area) & (free_sizes >= self.min_points)
-            if cluster == 0 and fills.any():
+            if cluster == 0 and depth_measured and fills.any():
                 cluster = int(np.argmax(np.where(fills, inside, 0)))
             fam = family(label)
             sem_cover = 0.0

@@ -299,3 +299,32 @@ def test_sam2_answers_box_prompts_when_its_weights_are_there(tiny_sam, tmp_path)
     masks = seg.segment_boxes(rgb, np.array([[5.0, 5.0, 40.0, 30.0], [0.0, 0.0, 86.0, 60.0]]))
     assert masks.shape == (2, 61, 87) and masks.dtype == bool
     assert seg.segment_boxes(rgb, np.zeros((0, 4))).shape == (0, 61, 87)
+
+
+def test_a_cluster_filling_a_weak_box_witnesses_it_only_with_measured_depth():
+    """Depth joined a wardrobe, the cabinet beside it and the wall behind into one cluster that
+    reaches far out of the wardrobe's weak box (nyuv2_metric3d_00000): the cluster filling the
+    box witnesses it where the depth is a sensor's, not where it was estimated (one photo's
+    estimated depth joins whole rooms); a cluster lying inside the box witnesses it either way."""
+    from types import SimpleNamespace
+
+    from perception.protocols import Detections
+    from perception.segment_detect import DetectionSegmenter
+
+    h, w = 100, 200
+    clusters = np.zeros((h, w), dtype=np.int64)
+    clusters[10:90, 20:180] = 1  # one cluster, three times the box's width
+    box = np.array([[70.0, 10.0, 130.0, 90.0]])
+    dets = Detections(box, np.array([0.3], np.float32), ("wardrobe",), ("refrigerator",))
+    me = SimpleNamespace(min_points=50)
+    claimed = np.zeros((h, w), dtype=bool)
+
+    def confirm(measured):
+        return DetectionSegmenter._confirm(me, dets, False, clusters, None, claimed, h, w, measured)
+
+    (c,) = confirm(True)
+    assert c.witness == "depth" and c.cluster == 1
+    assert confirm(False) == []
+    clusters[:] = 0
+    clusters[20:80, 80:120] = 2  # inside the box
+    assert [c.cluster for c in confirm(False)] == [2]
