@@ -94,7 +94,9 @@ def built_fronts(scene, photo_size: tuple[int, int]) -> list[tuple[str, str, tup
     return out
 
 
-def _inputs(src: Path):
+def sample_inputs(src: Path):
+    """The InputSpec of a shared sample folder: ``rgb.jpg`` / ``rgb.png``, with ``depth.png``
+    (millimetres) and ``camera.json`` (fx, fy, cx, cy) when it has them."""
     from scene_builder.config import InputSpec
 
     rgb = next(p for p in (src / "rgb.jpg", src / "rgb.png") if p.exists())
@@ -118,7 +120,7 @@ def _build(src: Path, out: Path, fronts: bool):
     cfg = replace(cfg, perception=replace(cfg.perception, fronts=fronts))
     r0 = resource.getrusage(resource.RUSAGE_SELF)
     t0 = time.perf_counter()
-    result = build(_inputs(src), out, cfg)
+    result = build(sample_inputs(src), out, cfg)
     r1 = resource.getrusage(resource.RUSAGE_SELF)
     return result, time.perf_counter() - t0, (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
 

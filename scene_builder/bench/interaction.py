@@ -61,20 +61,11 @@ def failure_kind(reason: str) -> str:
 
 
 def _build(src: Path, out: Path) -> Path:
-    import json
-
-    from scene_builder.config import BuildConfig, ExportConfig, InputSpec
+    from scene_builder.bench.fronts import sample_inputs
+    from scene_builder.config import BuildConfig, ExportConfig
     from scene_builder.pipeline import build
 
-    rgb = next(p for p in (src / "rgb.jpg", src / "rgb.png") if p.exists())
-    if (src / "depth.png").exists():
-        k = None
-        if (src / "camera.json").exists():
-            cam = json.loads((src / "camera.json").read_text())
-            k = (cam["fx"], cam["fy"], cam["cx"], cam["cy"])
-        inputs = InputSpec(rgb, src / "depth.png", 0.001, k)
-    else:
-        inputs = InputSpec(rgb)
+    inputs = sample_inputs(src)
     build(inputs, out, BuildConfig(export=ExportConfig(usd=False, urdf=False, gltf=False, viz="off")))
     return out
 

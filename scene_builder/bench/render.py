@@ -163,6 +163,19 @@ def render_arrays(spec: RoomSpec) -> RenderedRoom:
     return render_views(spec, (spec.camera,))[0]
 
 
+def add_camera(spec, name: str, world_from_camera: np.ndarray, k) -> None:
+    """Add an OpenCV pinhole camera (``world_from_camera`` (4, 4), intrinsics ``k``) to the
+    MjSpec ``spec`` under ``name``, and make its offscreen buffer large enough for it."""
+    cam = frames.mujoco_camera(np.asarray(world_from_camera, dtype=np.float64), k)
+    c = spec.worldbody.add_camera(name=name, pos=list(cam["pos"]), quat=list(cam["quat"]))
+    c.resolution = list(cam["resolution"])
+    c.focal_pixel = list(cam["focalpixel"])
+    c.principal_pixel = list(cam["principalpixel"])
+    c.sensor_size = list(cam["sensorsize"])
+    spec.visual.global_.offwidth = max(spec.visual.global_.offwidth, k.width_px)
+    spec.visual.global_.offheight = max(spec.visual.global_.offheight, k.height_px)
+
+
 def render_views(spec: RoomSpec, cameras) -> list[RenderedRoom]:
     """Render the room from each :class:`~scene_builder.model.Camera` of ``cameras`` (world
     frame of the room, OpenCV axes, their own intrinsics): RGB, clean metric planar depth and
@@ -171,15 +184,7 @@ def render_views(spec: RoomSpec, cameras) -> list[RenderedRoom]:
 
     ms = build_mjspec(spec, free_bodies=False)
     for i, camera in enumerate(cameras):
-        k = camera.intrinsics
-        cam = frames.mujoco_camera(camera.world_from_camera, k)
-        c = ms.worldbody.add_camera(name=f"bench/view_{i}", pos=list(cam["pos"]), quat=list(cam["quat"]))
-        c.resolution = list(cam["resolution"])
-        c.focal_pixel = list(cam["focalpixel"])
-        c.principal_pixel = list(cam["principalpixel"])
-        c.sensor_size = list(cam["sensorsize"])
-        ms.visual.global_.offwidth = max(ms.visual.global_.offwidth, k.width_px)
-        ms.visual.global_.offheight = max(ms.visual.global_.offheight, k.height_px)
+        add_camera(ms, f"bench/view_{i}", camera.world_from_camera, camera.intrinsics)
     model = ms.compile()
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)

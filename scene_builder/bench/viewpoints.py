@@ -85,15 +85,10 @@ def render_mjcf(mjcf_path: Path, cameras, objects_only: bool = False) -> list[Vi
     import mujoco
 
     spec = mujoco.MjSpec.from_file(str(mjcf_path))
+    from scene_builder.bench.render import add_camera
+
     for i, (world_from_camera, k) in enumerate(cameras):
-        cam = frames.mujoco_camera(np.asarray(world_from_camera, dtype=np.float64), k)
-        c = spec.worldbody.add_camera(name=f"bench/view_{i}", pos=list(cam["pos"]), quat=list(cam["quat"]))
-        c.resolution = list(cam["resolution"])
-        c.focal_pixel = list(cam["focalpixel"])
-        c.principal_pixel = list(cam["principalpixel"])
-        c.sensor_size = list(cam["sensorsize"])
-        spec.visual.global_.offwidth = max(spec.visual.global_.offwidth, k.width_px)
-        spec.visual.global_.offheight = max(spec.visual.global_.offheight, k.height_px)
+        add_camera(spec, f"bench/view_{i}", world_from_camera, k)
     model = spec.compile()
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
