@@ -55,6 +55,12 @@ __all__ = [
 
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT_DATA = REPO.parent / "shared" / "data"
+
+
+def repo_relative(text: str) -> str:
+    """``text`` with the absolute paths under the repository's parent folder written relative to
+    the repository (``../shared/data/...``): the results committed with it name no machine's folders."""
+    return text.replace(str(REPO.parent) + "/", "../")
 BOX_IOU = 0.25
 MASK_IOU = 0.5
 MASK_IOU_LOOSE = 0.25
@@ -371,7 +377,7 @@ def run_item(set_name: str, sample: Path, out_dir: Path, config, with_depth: boo
     try:
         result = build(inputs, out_dir, config, progress=False, overwrite=True)
     except SceneBuilderError as err:
-        return Item(set_name, sample.name, "refused", time.perf_counter() - start, str(err).splitlines()[0])
+        return Item(set_name, sample.name, "refused", time.perf_counter() - start, repo_relative(str(err).splitlines()[0]))
     except Exception:  # noqa: BLE001 - the bench counts crashes (any other exception is a bug) and goes on
         import traceback
 

@@ -478,7 +478,9 @@ def run(sets=("multiview", "procedural"), rooms: int = 4, seed: int = 0, data_di
     if "procedural" in sets and rooms < 1:
         raise InputError(f"--rooms must be at least 1, got {rooms}")
     # the commit when the run starts: the code imported is the code measured
-    doc: dict = {"sets": list(sets), "seed": seed, "n_objects": n_objects, "multiview_data": str(data_dir), "commit": _commit()}
+    from scene_builder.bench.groundtruth import repo_relative
+
+    doc: dict = {"sets": list(sets), "seed": seed, "n_objects": n_objects, "multiview_data": repo_relative(str(Path(data_dir).resolve())), "commit": _commit()}
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="sb-novel-view-") as tmp:
         root = Path(keep) if keep is not None else Path(tmp)
