@@ -401,6 +401,8 @@ def swept_part_boxes(asset, world_from_asset: np.ndarray) -> tuple[np.ndarray, n
     revolute or prismatic joint (with the parts attached to it), over SWEEP_STEPS positions of its
     range: the room a door needs to swing and a drawer to slide out. Only a part's own joint is
     swept (a handle rides on its door; nested moving joints take their parent's rest pose)."""
+    from scipy.spatial.transform import Rotation
+
     from scene_builder.model import JointType
 
     parts = {p.name: p for p in asset.parts}
@@ -429,9 +431,7 @@ def swept_part_boxes(asset, world_from_asset: np.ndarray) -> tuple[np.ndarray, n
             if j.type is JointType.PRISMATIC:
                 moved = verts + q * j.axis
             else:
-                x, y, z = j.axis
-                k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-                r = np.eye(3) + np.sin(q) * k + (1.0 - np.cos(q)) * (k @ k)  # Rodrigues
+                r = Rotation.from_rotvec(q * j.axis).as_matrix()
                 moved = (verts - j.anchor_m) @ r.T + j.anchor_m
             swept.append(moved @ rot.T + trans)
         pts = np.concatenate(swept)

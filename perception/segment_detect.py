@@ -73,6 +73,7 @@ _BEHIND_M = 0.6
 #: A depth cluster that an object's cut reaches into and that lies this much inside its box is
 #: part of it (:meth:`DetectionSegmenter._whole_cluster`).
 _WHOLE_INSIDE = 0.8
+#: ... and that holds at least this share of its in-box pixels in the cut.
 _WHOLE_CUT_SHARE = 0.2
 #: A person's box where the semantic map's people pixels fill this share is outlined by them.
 _PEOPLE_SEEN = 0.15
@@ -331,9 +332,9 @@ class DetectionSegmenter:
             share_inside = inside / np.maximum(free_sizes, 1)
             ok = (share_inside >= _CLUSTER_INSIDE) & (inside >= _CLUSTER_COVER * area) & (free_sizes >= self.min_points)
             cluster = int(np.argmax(np.where(ok, inside, 0))) if ok.any() else 0
-            fills = (inside >= _CLUSTER_FILLS * area) & (free_sizes >= self.min_points)
-            if cluster == 0 and depth_measured and fills.any():
-                cluster = int(np.argmax(np.where(fills, inside, 0)))
+            if cluster == 0 and depth_measured:
+                fills = (inside >= _CLUSTER_FILLS * area) & (free_sizes >= self.min_points)
+                cluster = int(np.argmax(np.where(fills, inside, 0))) if fills.any() else 0
             fam = family(label)
             sem_cover = 0.0
             if sem_labels is not None:
