@@ -11,6 +11,11 @@ Each visual-mesh face, placed at the pose where the object was seen
   ``y = 0``: the asset's front is +X, so this swaps its left and right sides; furniture is
   built symmetric about it) is seen: it takes the photo where its mirror image was seen (the
   hidden flank of a bed shows the seen flank).
+* **near-seen**: hidden or seen edge-on (a grazing top, the jittered faces of a shell made from
+  sensor depth), but a seen (or mirrored) face of the same part within :data:`DONOR_RADIUS_M`
+  turns the same way (normals within :data:`DONOR_MAX_DEG`): it takes the photo's colour at the
+  centre of the nearest such face, one texel for the whole face (no stretching), so the hidden
+  half of a mattress's top stays the mattress's white instead of the swatch of the dark frame.
 * **material**: the rest (backs, undersides, faces seen edge-on, whose projection would smear
   the silhouette's boundary pixels along them: the "streaked flank"). They carry a swatch of the
   object's own texture: the largest square seen inside the mask, scaled to its size in metres
@@ -32,7 +37,7 @@ import numpy as np
 from scene_builder.frames import transform_points
 from scene_builder.model import Camera, GeneratedAsset, Observation, PerceivedObject, Texture
 
-__all__ = ["CROP_MARGIN_PX", "MAX_VIEW_DEG", "SWATCH_PX", "face_sources", "material_swatch", "object_texture", "photo_textured"]
+__all__ = ["CROP_MARGIN_PX", "MAX_VIEW_DEG", "SWATCH_PX", "face_sources", "material_swatch", "near_seen_donors", "object_texture", "photo_textured"]
 
 #: The crop reaches this many pixels past the mask's bounding box (texture filtering reads a
 #: little around each texel).
@@ -54,6 +59,11 @@ SEEN, MIRRORED, MATERIAL = 0, 1, 2
 #: visibility decides the face's texture source; a face is seen where SEEN_SHARE of them are.
 SAMPLE_WEIGHTS = np.array([[1 / 3, 1 / 3, 1 / 3], [0.7, 0.15, 0.15], [0.15, 0.7, 0.15], [0.15, 0.15, 0.7]])
 SEEN_SHARE = 0.75
+#: A face the photo does not texture takes the colour of the nearest seen face within this
+#: distance (asset frame, between face centres) whose normal is within DONOR_MAX_DEG of its own.
+DONOR_RADIUS_M = 0.5
+DONOR_MAX_DEG = 40.0
+DONOR_NEIGHBOURS = 16
 
 
 def object_texture(rgb: np.ndarray, mask: np.ndarray, name: str) -> tuple[Texture, tuple[int, int]]:
@@ -162,6 +172,32 @@ def _box_uv(tri_asset: np.ndarray, lo: np.ndarray, extent_m: float) -> np.ndarra
     return np.clip(uv, 0.0, 1.0)
 
 
+def near_seen_donors(corners: np.ndarray, source: np.ndarray) -> np.ndarray:
+    """(F,) index of the face whose photo colour each MATERIAL face of ``corners`` ((F, 3, 3),
+    asset frame) takes (see the module docstring), -1 where none qualifies (and for faces the
+    photo textures)."""
+    from scipy.spatial import cKDTree
+
+    out = np.full(len(corners), -1, dtype=np.int64)
+    donors = np.flatnonzero(source != MATERIAL)
+    takers = np.flatnonzero(source == MATERIAL)
+    if len(donors) == 0 or len(takers) == 0:
+        return out
+    centre = corners.mean(axis=1)
+    n = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    k = min(DONOR_NEIGHBOURS, len(donors))
+    dist, idx = cKDTree(centre[donors]).query(centre[takers], k=k, distance_upper_bound=DONOR_RADIUS_M)
+    dist, idx = dist.reshape(len(takers), k), idx.reshape(len(takers), k)
+    found = np.isfinite(dist)
+    cand = donors[np.where(found, idx, 0)]  # (T, k) face indices (0 where no neighbour)
+    agree = found & (np.einsum("tc,tkc->tk", n[takers], n[cand]) > np.cos(np.radians(DONOR_MAX_DEG)))
+    first = np.argmax(agree, axis=1)  # neighbours come nearest first
+    ok = agree[np.arange(len(takers)), first]
+    out[takers[ok]] = cand[np.arange(len(takers)), first][ok]
+    return out
+
+
 def photo_textured(generated: GeneratedAsset, obj: PerceivedObject, observation: Observation, camera: Camera) -> GeneratedAsset:
     """``generated`` with every visual mesh of its asset textured (see the module docstring).
     Deformables keep their colours (a MuJoCo flex carries no texture). Faces get their own
@@ -207,7 +243,11 @@ def photo_textured(generated: GeneratedAsset, obj: PerceivedObject, observation:
         uv_photo = np.stack([(x - c0 + 0.5) / width, (y - r0 + 0.5) / height], axis=1).reshape(-1, 3, 2)
         sw = _box_uv(corners, lo, extent)
         uv_swatch = np.stack([(tw + GAP_PX + sw[..., 0] * s) / width, (sw[..., 1] * s) / height], axis=-1)
-        uv = np.where((source == MATERIAL)[:, None, None], uv_swatch, uv_photo).reshape(-1, 2)
+        uv = np.where((source == MATERIAL)[:, None, None], uv_swatch, uv_photo)
+        donor = near_seen_donors(corners, source)
+        takes = donor >= 0
+        uv[takes] = uv_photo[donor[takes]].mean(axis=1, keepdims=True)
+        uv = uv.reshape(-1, 2)
         # One corner per (vertex, texture coordinate) pair.
         key = np.concatenate([f.reshape(-1, 1).astype(np.float64), np.round(uv * 1e7)], axis=1)
         _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)

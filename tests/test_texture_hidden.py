@@ -76,3 +76,25 @@ def test_textured_mesh_keeps_the_geometry(textured):
     a, b = generated.asset.parts[0].visual, out.asset.parts[0].visual
     np.testing.assert_allclose(np.sort(a.vertices_m[a.faces].reshape(-1, 9), axis=0), np.sort(b.vertices_m[b.faces].reshape(-1, 9), axis=0))
     assert b.uv.shape == (len(b.vertices_m), 2) and np.all((b.uv >= 0) & (b.uv <= 1))
+
+
+def test_hidden_faces_take_the_colour_of_the_nearest_seen_face_turned_the_same_way():
+    """A mattress's top seen only at its front: its hidden back half takes the seen top's colour,
+    while the underside (turned away) and a face beyond DONOR_RADIUS_M keep the material swatch."""
+    from generation.texture import DONOR_RADIUS_M, near_seen_donors
+
+    def quad(x0, y0, size, z=0.0, up=True):
+        a, b, c, d = (np.array(p, dtype=float) for p in ((x0, y0, z), (x0 + size, y0, z), (x0 + size, y0 + size, z), (x0, y0 + size, z)))
+        return [(a, b, c), (a, c, d)] if up else [(a, c, b), (a, d, c)]
+
+    top = [t for i in range(6) for t in quad(0.1 * i, 0.0, 0.1)]  # a strip 0.6 m long, facing +Z
+    under = quad(0.0, 0.0, 0.1, z=-0.2, up=False)  # facing -Z, right under the seen faces
+    far = quad(0.6 + DONOR_RADIUS_M + 0.1, 0.0, 0.1)  # facing +Z, past the radius
+    corners = np.array(top + under + far)
+    source = np.full(len(corners), MATERIAL)
+    source[:4] = SEEN  # the first 0.2 m of the top
+    donor = near_seen_donors(corners, source)
+    assert np.all(donor[:4] == -1)  # the photo textures these
+    # Every hidden top face takes a seen top face, the nearest one (faces 2-3 are at x 0.1-0.2).
+    assert np.all(np.isin(donor[4:12], [2, 3]))
+    assert np.all(donor[12:14] == -1) and np.all(donor[14:] == -1)
