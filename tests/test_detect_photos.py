@@ -39,8 +39,8 @@ def test_inventory_covers_every_photo_in_vocabulary_labels():
 
 
 @pytest.fixture(scope="module")
-def perceived():
-    """Labels of the objects perceived in every photo of ../shared/data/photos (no depth map)."""
+def perceptions():
+    """The perception of every photo of ../shared/data/photos (no depth map), by folder name."""
     from perception import perceive
 
     require(MODELS)
@@ -52,11 +52,18 @@ def perceived():
         seg = next(b for b in p.backends if b.task == "segmentation")
         assert seg.backend == "detections"
         assert any(b.task == "detection" and b.backend.startswith("centernet-mbv3-coco") for b in p.backends)
-        out[d.name] = [o.label for o in p.objects]
+        out[d.name] = p
     return out
 
 
+@pytest.fixture(scope="module")
+def perceived(perceptions):
+    """Labels of the objects perceived in every photo of ../shared/data/photos."""
+    return {name: [o.label for o in p.objects] for name, p in perceptions.items()}
+
+
 @pytest.mark.slow
+@pytest.mark.xdist_group("photos")  # one worker perceives the photos once for the three
 def test_demo_photos_yield_three_movable_objects_named_as_in_the_photo(perceived):
     seen, groups = load_inventory(DEFAULT_INVENTORY)
     for name in sorted(n for n in perceived if n.startswith("sunrgbd_total3d_demo_")):
@@ -66,6 +73,7 @@ def test_demo_photos_yield_three_movable_objects_named_as_in_the_photo(perceived
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("photos")  # one worker perceives the photos once for the three
 def test_photos_match_the_inventory(perceived):
     seen, groups = load_inventory(DEFAULT_INVENTORY)
     scores = pooled([score_inventory(perceived[n], seen[n], groups) for n in sorted(perceived)])
@@ -74,14 +82,16 @@ def test_photos_match_the_inventory(perceived):
 
 
 @pytest.mark.slow
-def test_detection_driven_perception_is_deterministic():
+@pytest.mark.xdist_group("photos")  # one worker perceives the photos once for the three
+def test_detection_driven_perception_is_deterministic(perceptions):
+    """The photo perceived again (in the same process, after 14 others) gives the same objects."""
     import numpy as np
 
     from perception import perceive
 
     require(MODELS)
     spec, cfg = InputSpec(require(PHOTOS / "sunrgbd_total3d_demo_3") / "rgb.jpg"), PerceptionConfig(models_dir=MODELS)
-    a, b = perceive(spec, cfg), perceive(spec, cfg)
+    a, b = perceptions["sunrgbd_total3d_demo_3"], perceive(spec, cfg)
     assert [o.name for o in a.objects] == [o.name for o in b.objects] and len(a.objects) >= 3
     for x, y in zip(a.objects, b.objects):
         assert np.array_equal(x.mask, y.mask) and np.array_equal(x.points_world_m, y.points_world_m)
