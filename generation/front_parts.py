@@ -29,12 +29,14 @@ from generation.assembly import PartSpec
 from scene_builder.frames import transform_points
 from scene_builder.model import Front
 
-__all__ = ["MIN_FRONT_M", "front_parts", "front_rectangles"]
+__all__ = ["MIN_FRONT_M", "front_parts", "front_rectangles", "fronts_clear_of_walls"]
 
 #: A front narrower or lower than this (m) in the box's frame is left out.
 MIN_FRONT_M = 0.05
 #: A front's normal must be within this angle of the box's +X.
 MAX_FACE_ANGLE_DEG = 30.0
+#: Moving parts keep this far in front of the walls beside them (fronts_clear_of_walls).
+WALL_CLEARANCE_M = 0.005
 
 
 def front_rectangles(fronts: tuple[Front, ...], box_from_world: np.ndarray, size_m) -> list[tuple[str, str, float, float, float, float]]:
@@ -75,6 +77,35 @@ def front_rectangles(fronts: tuple[Front, ...], box_from_world: np.ndarray, size
                 mid = 0.5 * (lo[5] + hi[4])
                 lo[5], hi[4] = mid - GAP_M / 2, mid + GAP_M / 2
     return [tuple(r) for r in out if r[3] - r[2] >= MIN_FRONT_M and r[5] - r[4] >= MIN_FRONT_M]
+
+
+def fronts_clear_of_walls(rects: list[tuple[str, str, float, float, float, float]], world_from_box: np.ndarray, size_m, walls, clearance_m: float = WALL_CLEARANCE_M) -> list[tuple[str, str, float, float, float, float]]:
+    """``rects`` (:func:`front_rectangles`) narrowed so that each moving part, which spans the
+    box's whole depth (a drawer's tray), keeps ``clearance_m`` in front of every wall beside it
+    (a plane of ``walls`` across the box's width: its normal within 60 degrees of the box's y
+    axis). A run fitted into a corner reaches a few millimetres into the side wall, and a drawer
+    pressed against the wall by that overlap does not slide (coco128_000000000164's built-in
+    drawer opened 1 %). Fronts left narrower than MIN_FRONT_M are dropped; the carcass, welded
+    to the room with the wall, is not changed."""
+    d = float(size_m[0])
+    rot, t = world_from_box[:3, :3], world_from_box[:3, 3]
+    out = []
+    for kind, hinge, y0, y1, z0, z1 in rects:
+        for wall in walls:
+            n = rot.T @ wall.normal  # the wall's normal in the box frame
+            if abs(n[1]) < 0.5:
+                continue
+            c = float(wall.normal @ t + wall.offset_m)  # signed distance of the box origin
+            # distance(p) = n . p + c >= clearance at the rectangle's corners, x = +-d/2, z = z0, z1
+            rest = max(-(n[0] * x + n[2] * z) for x in (-d / 2, d / 2) for z in (z0, z1))
+            bound = (clearance_m - c + rest) / n[1]
+            if n[1] > 0:
+                y0 = max(y0, bound)
+            else:
+                y1 = min(y1, bound)
+        if y1 - y0 >= MIN_FRONT_M:
+            out.append((kind, hinge, y0, y1, z0, z1))
+    return out
 
 
 def front_parts(label: str, size_m, rects: list[tuple[str, str, float, float, float, float]], rgba=None) -> list[PartSpec]:

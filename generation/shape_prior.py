@@ -176,10 +176,10 @@ class ShapePriorGenerator:
 
         rects = []
         if obj.fronts:  # doors and drawers where the photo showed them (generation.front_parts)
-            from generation.front_parts import front_parts, front_rectangles
+            from generation.front_parts import front_parts, front_rectangles, fronts_clear_of_walls
 
             size = np.maximum(size, 0.3 * np.asarray(category("cabinet").typical_size_m))
-            rects = front_rectangles(obj.fronts, box_from_world, size)
+            rects = fronts_clear_of_walls(front_rectangles(obj.fronts, box_from_world, size), fit.world_from_box, size, perception.room.walls)
         if rects:
             specs = front_parts(label, size, rects, rgba)
             description += f"; {len(rects)} fronts seen in the photo"

@@ -106,3 +106,29 @@ def test_opens_fully_needs_most_of_the_range_within_limits_with_the_carcass_stil
 def test_front_rejects_a_hinge_that_does_not_fit_its_kind(kind, hinge):
     with pytest.raises(ValueError):
         Front(kind, hinge, np.zeros((4, 2)), np.zeros((4, 3)))
+
+
+def test_fronts_keep_clear_of_a_side_wall_the_run_reaches_into():
+    """A run 1.2 m wide (box frame: +X its face, +Y to the viewer's right) whose right end reaches
+    3 mm into a side wall: the drawer there is narrowed to keep WALL_CLEARANCE_M off the wall
+    (its tray runs the carcass's whole depth), the one on the left is unchanged, and a front
+    wholly in the wall is dropped. A wall behind the run (across its depth) narrows nothing."""
+    from generation.front_parts import WALL_CLEARANCE_M, fronts_clear_of_walls
+    from scene_builder.frames import pose
+    from scene_builder.model import Plane
+
+    size = np.array([0.6, 1.2, 0.9])
+    yaw = np.radians(30.0)
+    world_from_box = pose(np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]]), [1.0, 2.0, 0.0])
+    y_dir, x_dir = world_from_box[:3, 1], world_from_box[:3, 0]
+    wall_point = world_from_box[:3, 3] + (0.6 - 0.003) * y_dir  # 3 mm inside the run's right end
+    side = Plane(-y_dir, float(y_dir @ wall_point), "wall")  # normal into the room (towards -Y)
+    back = Plane(x_dir, float(-x_dir @ (world_from_box[:3, 3] - 0.3 * x_dir)), "wall")
+    rects = [("drawer", "", -0.6, 0.0, 0.7, 0.85), ("drawer", "", 0.0, 0.6, 0.7, 0.85), ("door", "left", 0.597, 0.6, 0.0, 0.6)]
+    out = fronts_clear_of_walls(rects, world_from_box, size, (side, back))
+    assert out[0] == rects[0] and len(out) == 2
+    kind, _, y0, y1, z0, z1 = out[1]
+    assert (kind, y0, z0, z1) == ("drawer", 0.0, 0.7, 0.85)
+    assert y1 == pytest.approx(0.6 - 0.003 - WALL_CLEARANCE_M, abs=1e-9)
+    corners = np.array([[x, y1, z] for x in (-0.3, 0.3) for z in (z0, z1)]) @ world_from_box[:3, :3].T + world_from_box[:3, 3]
+    assert side.signed_distance_m(corners).min() == pytest.approx(WALL_CLEARANCE_M, abs=1e-9)
