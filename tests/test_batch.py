@@ -221,7 +221,7 @@ def test_batch_killed_with_sigkill_then_resumed_builds_every_good_item_exactly_o
     import psutil
 
     src, out = tmp_path / "in", tmp_path / "out"
-    good = _good_inputs(src, 8)
+    good = _good_inputs(src, 6)
     bad = _bad_inputs(src)
     proc = subprocess.Popen(_cli(str(src), "-o", str(out), "--workers", "2"), env=_env(), stderr=subprocess.PIPE, text=True)
     _wait_for(out, proc, done=3)

@@ -278,10 +278,12 @@ def _check_built(out: Path, movable: set[str]) -> tuple[int, int]:
 
 @pytest.mark.slow
 @pytest.mark.skipif(not SAMPLES, reason="no real RGB-D samples with intrinsics in ../shared/data/real")
-@pytest.mark.parametrize("sample", real_sample_params(with_intrinsics=True))
+@pytest.mark.parametrize("sample", real_sample_params(with_intrinsics=True)[1::2])
 def test_real_sample_push_and_open(sample, built_real_sample):
-    """Each real sample (built once per session, shared with test_end_to_end): every movable
-    object pushed, every door and drawer pulled open."""
+    """Every other real sample (the ones test_robot does not build with the Panda; built once per
+    session, shared with test_end_to_end): every movable object pushed, every door and drawer
+    pulled open. The probes take 35-150 s a sample on the CI machine; the interaction bench of
+    BENCHMARKS.md probes all of them."""
     built = built_real_sample(sample)
     movable = {o.name for o in built.scene.objects if not o.asset.is_fixed}
     if not movable:
