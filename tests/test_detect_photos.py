@@ -38,9 +38,11 @@ def test_inventory_covers_every_photo_in_vocabulary_labels():
     assert all(set(g) <= set(LABELS) for g in groups)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def perceptions():
-    """The perception of every photo of ../shared/data/photos (no depth map), by folder name."""
+    """The perception of every photo of ../shared/data/photos (no depth map), by folder name.
+    Session-scoped: a module-scoped one is torn down whenever the worker runs another module's
+    test in between, and was computed twice (95 s each) in one CI run."""
     from perception import perceive
 
     require(MODELS)
@@ -56,7 +58,7 @@ def perceptions():
     return out
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def perceived(perceptions):
     """Labels of the objects perceived in every photo of ../shared/data/photos."""
     return {name: [o.label for o in p.objects] for name, p in perceptions.items()}
