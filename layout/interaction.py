@@ -144,11 +144,11 @@ def open_joint(model, joint: str, force_n: float | None = None, pull_s: float | 
     sign = 1.0 if hi - q0 >= q0 - lo else -1.0
     local = _handle_local(m, d, objects, jid, body, kind)
     p0 = d.xpos[body] + d.xmat[body].reshape(3, 3) @ local
-    span_q = abs((hi if sign > 0 else lo) - q0)
-    force = float(force_n) if force_n is not None else _pull_force(m, d, jid, body, kind, p0, span_q)
-    if pull_s is None:
-        pull_s = max(PULL_S, PULL_TIME_MARGIN * span_q / PULL_SPEED[kind])
+    span = abs((hi if sign > 0 else lo) - q0)  # travel to the far limit
+    force = float(force_n) if force_n is not None else _pull_force(m, d, jid, body, kind, p0, span)
     vcap = PULL_SPEED[kind]
+    if pull_s is None:
+        pull_s = max(PULL_S, PULL_TIME_MARGIN * span / vcap)
     base = d.xpos[root].copy()
     times, qs, carcass = [float(d.time)], [q0], [0.0]
 
@@ -180,8 +180,6 @@ def open_joint(model, joint: str, force_n: float | None = None, pull_s: float | 
     settle(m, d, release_s, record)
     q = np.array(qs)
     s = sign * q[:n_pull]
-    far = hi if sign > 0 else lo
-    span = abs(far - q0)
     travel = float(s[-1] - sign * q0)
     return JointProbe(
         joint=joint,
