@@ -55,6 +55,9 @@ class Body:
     trimmed_with: set[str] = field(default_factory=set)
     # Static only: movable bodies its collision caged, cut back out of their outlines (layout.cage).
     cut_for: list[str] = field(default_factory=list)
+    # Welded to the room where seen: "wall" (a wall-mountable thing against a wall with nothing
+    # under it) or "room" (a fixed-category thing with nothing under it); "" = not mounted.
+    mounted: str = ""
 
     @property
     def bottom_m(self) -> float:
@@ -115,6 +118,7 @@ def rebuilt(b: Body, asset: ObjectAsset) -> Body:
     new.unsupported_reason, new.legs_m, new.hidden_support, new.pad_bottom_m = b.unsupported_reason, b.legs_m, b.hidden_support, b.pad_bottom_m
     new.pad_rect_m = b.pad_rect_m
     new.trimmed_with = set(b.trimmed_with)
+    new.mounted = b.mounted
     return new
 
 

@@ -138,6 +138,10 @@ def _placement(g: GeneratedAsset, b: Body, support: str, absorbed: bool) -> Plac
         reasons.append(f"{b.unsupported_reason or 'nothing seen under it to rest on'}: kept where seen as static background")
         if b.cut_for:
             reasons.append(f"its collision cut back out of the outline of {', '.join(b.cut_for)}, which it held caged")
+    if b.mounted == "wall" and not absorbed:
+        reasons.append("mounted on the wall where seen (welded: nothing under it, against the wall)")
+    elif b.mounted and not absorbed:
+        reasons.append(f"welded where seen (a {b.asset.label} is fixed to the room; nothing under it)")
     if b.pad_bottom_m is not None and not absorbed:
         reasons.append(f"rests where seen on a static {(b.bottom_m - b.pad_bottom_m) * 100:.0f} cm column standing in for the support hidden under it")
     if b.legs_m > 0.0 and not absorbed:

@@ -52,6 +52,12 @@ SUPPORT_CLASH_TOL_M = 0.01
 DEFORMABLE_MIN_FACE_AREA = 0.5
 # Fixed (built-in) furniture this close to a wall and off the floor hangs on the wall.
 WALL_CONTACT_M = 0.05
+# Things made to hang on a wall (a wall-mounted television, an over-the-range microwave, a wall
+# cabinet or shelf, a clock, a sconce): seen within WALL_CONTACT_M of a wall with nothing under
+# them, they are mounted on it, welded where seen (``ObjectAsset.is_fixed``), not left hanging as
+# static background (an over-the-range microwave hangs above the hob). A bottle or a book
+# against a wall with nothing under it is not mounted: it stays background, counted.
+WALL_MOUNTED = frozenset({"tv", "monitor", "microwave", "cabinet", "shelf", "clock", "lamp"})
 # A support more than this far below an object's observed bottom is not what it rests on: the
 # object would drop further than its observed bottom can be wrong (legs hidden behind a nearer
 # object are extended to the floor by generation, ``generation.pose.floor_snap_height_m``).
@@ -101,6 +107,16 @@ def _near_wall(b: Body, walls: tuple[Plane, ...], reach_m: float = WALL_CONTACT_
         return False
     v = b.world_vertices()
     return any(float(np.min(w.signed_distance_m(v))) < reach_m for w in walls)
+
+
+def _mount(b: Body, where: str) -> None:
+    """Weld ``b`` to the room where it was seen (parent WALL): its asset becomes fixed."""
+    import dataclasses
+
+    b.parent, b.mounted = WALL, where
+    if not b.fixed:
+        b.fixed = True
+        b.asset = dataclasses.replace(b.asset, is_fixed=True)
 
 
 def pad_box(b: Body, height_m: float) -> tuple[np.ndarray, np.ndarray, float]:
@@ -261,10 +277,16 @@ def build_support(
             if j >= 0:
                 bodies[j].children.append(i)
             parent_name = bodies[j].name if j >= 0 else ("background" if j == BACKGROUND else "floor")
-        elif b.fixed and _near_wall(b, walls):
-            b.parent = WALL
+        elif (b.fixed or b.asset.label in WALL_MOUNTED) and _near_wall(b, walls):
+            _mount(b, "wall")
             h = bottom
             parent_name = "wall"
+        elif b.fixed:
+            # Welded to the room by its category (a sink set in a counter the photo keeps as
+            # background, an oven under a hob): it stays where seen, as it is.
+            _mount(b, "room")
+            h = bottom
+            parent_name = "room"
         else:
             b.parent = UNSUPPORTED
             b.unsupported_reason = "hangs: the camera saw empty space under it" if seen_under else "nothing seen under it to rest on"

@@ -62,6 +62,11 @@ __all__ = [
 #: more, and whose time then stays bounded for any photo size); the full-resolution photo is kept
 #: as ``LoadedInput.rgb_full`` (and ``Observation.rgb_full``) for textures.
 MAX_SIDE_PX = 1280
+#: A depth map smaller than the photo with its aspect ratio and at least this many rows is
+#: upsampled to it (ARKit's scene depth is 256x192); a smaller one is refused.
+MIN_UPSAMPLED_DEPTH_PX = 96
+#: ... bilinear where its 3x3 neighbourhood spans less than this share of the depth.
+UPSAMPLE_SMOOTH = 0.03
 #: Largest image (and depth map) read, in pixels: 100 MP is above any phone's default mode
 #: (48-108 MP sensors); a larger file is refused from its header, before it is decoded.
 MAX_IMAGE_PIXELS = 100_000_000
@@ -114,6 +119,10 @@ class LoadedInput:
     intrinsics: CameraIntrinsics
     scale: float = 1.0
     rgb_full: np.ndarray | None = None
+    #: (width, height) of the depth map as given when it was smaller than the photo with the
+    #: same aspect ratio and was upsampled to it (a phone's LiDAR depth, 256x192 beside a
+    #: 1920x1440 photo), else None.
+    depth_upsampled_from: tuple[int, int] | None = None
 
 
 def _open_checked(path: Path, what: str, hint: str):
@@ -531,19 +540,49 @@ def load_input(inputs: InputSpec, config: PerceptionConfig) -> LoadedInput:
     rgb, exif, stored_size = load_rgb(Path(inputs.image_path))
     h, w = rgb.shape[:2]
     depth = None
+    upsampled_from = None
     if inputs.depth_path is not None:
         depth = load_depth(Path(inputs.depth_path), inputs.depth_scale)
         if depth.shape != (h, w):
             same_aspect = abs(depth.shape[1] * h - depth.shape[0] * w) <= 0.01 * w * h / max(depth.shape)
             if (depth.shape[1], depth.shape[0]) == tuple(stored_size) and (w, h) != tuple(stored_size):
                 hint = "it matches the image as stored, before its EXIF orientation is applied: rotate the depth map the same way"
+            elif same_aspect and depth.shape[0] < h and depth.shape[0] >= MIN_UPSAMPLED_DEPTH_PX:
+                hint = ""
             elif same_aspect:
                 hint = f"it has the photo's aspect ratio: if it covers the same field of view, resize it to {w}x{h} with nearest-neighbour first"
             else:
                 hint = "pass a depth map registered to the photo at the same size"
-            raise InputError(f"depth map {inputs.depth_path} is {depth.shape[1]}x{depth.shape[0]} px but the image is {w}x{h} px; {hint}")
+            if hint:
+                raise InputError(f"depth map {inputs.depth_path} is {depth.shape[1]}x{depth.shape[0]} px but the image is {w}x{h} px; {hint}")
+            depth, upsampled_from = _upsample_depth(depth, w, h), (depth.shape[1], depth.shape[0])
+            warnings.warn(
+                f"depth map {inputs.depth_path} is {upsampled_from[0]}x{upsampled_from[1]} px beside a {w}x{h} px photo of the same aspect ratio: "
+                "taken to cover the same field of view (a phone's LiDAR depth does) and upsampled to it; pass a registered full-size map if it does not",
+                InputWarning,
+                stacklevel=2,
+            )
         check_depth(depth, f"depth map {inputs.depth_path}")
     k = resolve_intrinsics(inputs, config, w, h, exif, stored_size)
     full = rgb
     rgb, depth, k, scale = _downscale(rgb, depth, k)
-    return LoadedInput(Path(inputs.image_path), rgb, depth, k, scale, None if scale == 1.0 else full)
+    return LoadedInput(Path(inputs.image_path), rgb, depth, k, scale, None if scale == 1.0 else full, upsampled_from)
+
+
+def _upsample_depth(depth_m: np.ndarray, w: int, h: int) -> np.ndarray:
+    """``depth_m`` (h', w') float32 resized to (h, w): bilinear where the input is smooth (its
+    3x3 neighbourhood spans under :data:`UPSAMPLE_SMOOTH` of the depth and holds no invalid
+    pixel: floors and walls without 7.5-pixel stairs), nearest neighbour elsewhere. Interpolating
+    across a depth edge would invent points in mid-air between an object and the wall behind
+    it; invalid zeros stay invalid. (OpenCV's resize does both; its edge-aware joint filters
+    are in the contrib build, which the project does not install.)"""
+    import cv2
+    from scipy.ndimage import maximum_filter, minimum_filter
+
+    d = np.ascontiguousarray(depth_m, dtype=np.float32)
+    near = cv2.resize(d, (w, h), interpolation=cv2.INTER_NEAREST)
+    lin = cv2.resize(d, (w, h), interpolation=cv2.INTER_LINEAR)
+    hi, lo = maximum_filter(d, size=3, mode="nearest"), minimum_filter(d, size=3, mode="nearest")
+    smooth = (lo > 0) & (hi - lo <= UPSAMPLE_SMOOTH * lo)
+    smooth_up = cv2.resize(smooth.astype(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST).astype(bool)
+    return np.where(smooth_up, lin, near).astype(np.float32)

@@ -64,7 +64,9 @@ def _resolve_depth(
     k = loaded.intrinsics
     uses = []
     if loaded.depth_m is not None:
-        return loaded.depth_m, k, "sensor", [BackendUse("depth", "sensor", "sensor depth given")], None
+        up = loaded.depth_upsampled_from
+        said = "sensor depth given" if up is None else f"sensor depth given at {up[0]}x{up[1]} px, upsampled to the photo (nearest neighbour)"
+        return loaded.depth_m, k, "sensor", [BackendUse("depth", "sensor", said)], None
     estimator, use = registries.depth.resolve(config.depth_backend)
     uses.append(use)
     known = None if k.source == "default-fov" else k

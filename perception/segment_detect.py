@@ -424,12 +424,33 @@ class DetectionSegmenter:
             for i, c in enumerate(cands):
                 # A segmenter that takes no hints still should not keep what is surely not the object.
                 masks[i] = masks[i] & ~(self._hint(c, depth_m, valid, background, clusters, sem_labels) == HINT_BACKGROUND)
+        for i, c in enumerate(cands):
+            if c.score >= CONFIDENT and not np.asarray(masks[i]).any():
+                masks[i] = self._confident_outline(rgb, c, claimed, [m for j, m in enumerate(masks) if j != i and m is not None])
         for c, m in zip(cands, masks):
             m = np.asarray(m, dtype=bool)
             if c.depth_sees and m.any() and valid[m].mean() >= 0.5:  # sparse depth: no 3D trim
                 m = self._trim_3d(m, points, off_room, focal)
                 m = m | self._whole_cluster(c, m, clusters, claimed)
             c.mask = m
+
+    def _confident_outline(self, rgb, c: _Candidate, claimed: np.ndarray, others: list[np.ndarray]) -> np.ndarray:
+        """The outline of a confident box whose hinted cut came back empty: the cut again with only
+        what other instances took as probable background. The depth and semantic hints were
+        wrong (estimated depth laid an over-the-range microwave flat on the wall behind it, so
+        its pixels were all "room"); a box the detector is sure of does not vanish for them.
+        Empty when the colour cut gives the object up even so (thin books on a shelf)."""
+        taken = claimed.copy()
+        for m in others:
+            taken |= np.asarray(m, dtype=bool)
+        seg: BoxPromptSegmenter = self.box_segmenter.backend
+        if not getattr(seg, "accepts_hints", False):
+            return np.zeros_like(taken)
+        hint = np.where(taken, HINT_PROBABLY_BACKGROUND, 0).astype(np.int8)
+        m = np.asarray(seg.segment_boxes(rgb, c.box[None], hints=hint[None])[0], dtype=bool)
+        if m.any():
+            c.meta["outline"] = "cut without depth hints"
+        return m
 
     def _hint(self, c: _Candidate, depth_m, valid, background, clusters, sem_labels) -> np.ndarray:
         """(H, W) int8 hints for the box of ``c`` (see :mod:`perception.box_segment`): room

@@ -234,7 +234,7 @@ CASES = [
     ),
     # --- the depth map ---------------------------------------------------------------------
     Case("depth missing", lambda e: [e.photo, "--depth", str(e.inp / "nope.png")], 3, r"depth map not found: .*nope\.png"),
-    Case("depth wrong size", lambda e: [e.photo, "--depth", str(_depth_png(e.inp / "small.png", MM[::2, ::2]))], 3, r"is 160x120 px but the image is 320x240 px; .*resize it to 320x240 with nearest-neighbour"),
+    Case("depth wrong size", lambda e: [e.photo, "--depth", str(_depth_png(e.inp / "small.png", MM[::4, ::4]))], 3, r"is 80x60 px but the image is 320x240 px; .*resize it to 320x240 with nearest-neighbour"),
     Case("depth colour image", lambda e: [e.photo, "--depth", (Image.fromarray(_photo()).save(e.inp / "c.png"), str(e.inp / "c.png"))[1]], 3, r"depth image .*c\.png has mode RGB; expected one channel"),
     Case("depth wrong dtype", lambda e: [e.photo, "--depth", _npy(e, "cplx.npy", MM.astype(np.complex64))], 3, r"depth array .*cplx\.npy has shape \(240, 320\) and dtype complex64; expected an \(H, W\) array"),
     Case("depth 8-bit", lambda e: [e.photo, "--depth", str(_depth_png(e.inp / "d8.png", MM / 40.0, np.uint8))], 3, r"d8\.png is an 8-bit image .*pass the 16-bit depth PNG, or --depth-scale METRES_PER_STEP"),

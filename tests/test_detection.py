@@ -301,6 +301,35 @@ def test_sam2_answers_box_prompts_when_its_weights_are_there(tiny_sam, tmp_path)
     assert seg.segment_boxes(rgb, np.zeros((0, 4))).shape == (0, 61, 87)
 
 
+def test_a_confident_box_whose_hinted_cut_is_empty_is_cut_again_without_the_hints():
+    """The semantic map (or estimated depth laying the object flat on the wall) calls every pixel
+    of a confident microwave box something else: the hinted cut is empty, and the box would
+    vanish. A box at the detector's trust score is cut again with only other instances' pixels
+    as probable background; a weak box is not (its witnesses were the hints)."""
+    from perception.box_segment import GrabCutBoxSegmenter
+    from perception.segment_detect import DetectionSegmenter, NamedBackend, _Candidate
+
+    rng = np.random.default_rng(0)
+    h, w = 120, 160
+    rgb = np.full((h, w, 3), 200, dtype=np.uint8)
+    rgb += rng.integers(0, 6, rgb.shape, dtype=np.uint8)
+    rgb[40:80, 50:110] = (30, 60, 200)
+    truth = np.zeros((h, w), bool)
+    truth[40:80, 50:110] = True
+    seg = DetectionSegmenter([], NamedBackend("grabcut", GrabCutBoxSegmenter()), None, None)
+    sem = np.full((h, w), "sofa", dtype=object)  # wrong everywhere: another class in the box
+    depth = np.full((h, w), 2.0, np.float32)
+    valid = np.ones((h, w), bool)
+    background = np.ones((h, w), bool)
+    box = np.array([40.0, 30.0, 120.0, 90.0])
+    strong, weak = _Candidate(box.copy(), 0.8, "microwave", "score"), _Candidate(box.copy(), 0.3, "microwave", "semantic")
+    for c in (strong, weak):
+        seg._outline(rgb, [c], depth, valid, background, np.zeros((h, w), np.int64), sem, np.zeros((h, w, 3)), 100.0, np.zeros((h, w), bool))
+    assert (strong.mask & truth).sum() / (strong.mask | truth).sum() > 0.9
+    assert strong.meta["outline"] == "cut without depth hints"
+    assert not weak.mask.any()
+
+
 def test_a_cluster_filling_a_weak_box_witnesses_it_only_with_measured_depth():
     """Depth joined a wardrobe, the cabinet beside it and the wall behind into one cluster that
     reaches far out of the wardrobe's weak box (nyuv2_metric3d_00000): the cluster filling the

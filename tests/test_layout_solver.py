@@ -327,6 +327,37 @@ def test_unsupported_object_is_never_welded_in_mid_air_nor_dropped():
     assert _bottom(result.scene.objects[0]) == pytest.approx(0.0, abs=1e-9)
 
 
+def test_wall_mountable_things_against_a_wall_are_mounted_and_fixed_categories_welded_where_seen():
+    """A television 1.7 m up (beyond the legs a television's stand could have) and an
+    over-the-range microwave seen against a wall with empty space under them are mounted there
+    (welded where seen, fixed objects, support "wall"), not background; the same television in
+    the middle of the room, and a bottle against the wall, still hang as background; a sink (a
+    fixed category) with nothing under it is welded where seen."""
+    walls = (Plane(np.array([1.0, 0.0, 0.0]), 1.0, "wall", 100),)  # x = -1, room at x > -1
+    gen = (
+        _gen(box_asset("tv", (0.08, 1.0, 0.6), label="tv"), (-0.95, 0.0, 1.7)),
+        _gen(box_asset("microwave", (0.4, 0.6, 0.35), label="microwave"), (-0.78, 1.2, 1.4)),
+        _gen(box_asset("tv_mid", (0.08, 1.0, 0.6), label="tv"), (0.8, 0.0, 1.7)),
+        _gen(box_asset("bottle", (0.07, 0.07, 0.25), label="bottle"), (-0.95, -1.0, 1.2)),
+        _gen(box_asset("sink", (0.5, 0.6, 0.2), label="sink", fixed=True), (0.8, 2.0, 0.7)),
+    )
+    result, _ = solve_layout_with_stats(empty_perception(walls, depth_m=20.0), gen, CFG)
+    placements = {p.name: p for p in result.placements}
+    placed = {o.name: o for o in result.scene.objects}
+    for g in gen:
+        name = g.asset.name
+        if name in ("tv", "microwave", "sink"):
+            assert not placements[name].became_background and placements[name].displacement_m == 0.0
+            assert placed[name].asset.is_fixed
+            np.testing.assert_array_equal(placed[name].world_from_asset, g.world_from_asset)  # exactly where seen
+        else:
+            assert placements[name].became_background and "camera saw empty space under it" in placements[name].reason
+    assert placed["tv"].support == "wall" and "mounted on the wall" in placements["tv"].reason
+    assert placed["microwave"].support == "wall"
+    assert placed["sink"].support == "room" and "welded where seen" in placements["sink"].reason
+    assert not gen[0].asset.is_fixed  # the generated asset itself is not changed
+
+
 def test_object_seen_above_its_support_stands_on_legs(tmp_path):
     """A nightstand seen 8 cm above the floor (its dark plinth cut from its mask) keeps its
     height: it stands on four collision legs down to the floor, nothing visual is added, and it

@@ -84,6 +84,34 @@ def test_depth_of_wrong_size_names_both_sizes(tmp_path):
         load_input(InputSpec(tmp_path / "a.png", d2), CFG)
 
 
+def test_smaller_depth_of_the_photos_aspect_is_upsampled_sharp_at_edges(tmp_path):
+    """A phone's LiDAR depth (ARKit: 256x192 beside a 1920x1440 photo) covers the photo's field of
+    view at a lower resolution: it is upsampled, with a warning and the report saying so, smooth
+    surfaces interpolated and a depth edge kept sharp (no points in mid-air between a box and
+    the wall behind it)."""
+    lw, lh = 120, 96
+    low = np.tile(np.linspace(2000, 2600, lw), (lh, 1))  # a wall turning away: smooth
+    low[30:60, 40:80] = 1000  # a box 1 m in front of it
+    d = _depth_png(tmp_path / "d.png", low)
+    with pytest.warns(InputWarning, match=r"120x96 px beside a 240x192 px photo of the same aspect ratio: .*upsampled"):
+        loaded = load_input(InputSpec(_photo(tmp_path / "a.png", 240, 192), d), CFG)
+    assert loaded.depth_m.shape == (192, 240)
+    assert loaded.depth_upsampled_from == (120, 96)
+    box = loaded.depth_m[60:120, 80:160]
+    assert np.allclose(box, 1.0)
+    # Across the box's edge every pixel is the box's or the wall's, none in between.
+    edge = loaded.depth_m[50:130, 70:170]
+    assert np.all((np.abs(edge - 1.0) < 1e-6) | (edge > 1.9))
+    # On the wall, more distinct depths than the source's columns: interpolated, not stairs.
+    row = loaded.depth_m[10]
+    assert len(np.unique(np.round(row, 5))) > 1.5 * lw
+    assert np.all(np.diff(row) >= -1e-6)
+    # Too small to be a registered map at all: refused.
+    d3 = _depth_png(tmp_path / "d3.png", _ramp_mm(30, 24))
+    with pytest.raises(InputError, match="resize it to 240x192"):
+        load_input(InputSpec(tmp_path / "a.png", d3), CFG)
+
+
 def test_all_zero_depth(tmp_path):
     d = _depth_png(tmp_path / "d.png", np.zeros((48, 64)))
     with pytest.raises(InputError, match="no valid depth"):
