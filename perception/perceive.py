@@ -65,7 +65,7 @@ def _resolve_depth(
     uses = []
     if loaded.depth_m is not None:
         up = loaded.depth_upsampled_from
-        said = "sensor depth given" if up is None else f"sensor depth given at {up[0]}x{up[1]} px, upsampled to the photo (nearest neighbour)"
+        said = "sensor depth given" if up is None else f"sensor depth given at {up[0]}x{up[1]} px, upsampled to the photo (bilinear on smooth surfaces, nearest neighbour across depth edges)"
         return loaded.depth_m, k, "sensor", [BackendUse("depth", "sensor", said)], None
     estimator, use = registries.depth.resolve(config.depth_backend)
     uses.append(use)
