@@ -14,7 +14,7 @@ import numpy as np
 
 from scene_builder.frames import pose, rot_z, transform_points
 
-__all__ = ["BoxFit", "extend_depth", "fit_box", "min_area_rectangle"]
+__all__ = ["BoxFit", "extend_depth", "fit_box", "min_area_rectangle", "plan_fit_cost"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -28,6 +28,25 @@ class BoxFit:
     size_m: np.ndarray
     on_floor: bool
     observed_depth_m: float
+
+
+#: A category at least this much wider than deep (or deeper than wide) has a plan orientation
+#: its observed extents can tell (:func:`fit_box`) ...
+PLAN_ANISOTROPY = 1.5
+#: ... when the two ways of reading them differ by more than this (squared log-size units: the
+#: sofa seen end-on scores 2.9 one way, 0.3 the other).
+PLAN_SWAP_MARGIN = 0.5
+
+
+def plan_fit_cost(depth_m: float, width_m: float, typical_depth_m: float, typical_width_m: float) -> float:
+    """Squared log-size distance of an observed plan (depth, width) from a category's: a depth
+    short of the typical one costs 0.6 as much (the unseen back makes it look shallower, as in
+    :func:`perception.naming_prior.size_distance`)."""
+    dd = float(np.log(max(depth_m, 0.01) / typical_depth_m))
+    dw = float(np.log(max(width_m, 0.01) / typical_width_m))
+    if dd < 0.0:
+        dd *= 0.6
+    return dd * dd + dw * dw
 
 
 def min_area_rectangle(xy: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
@@ -80,6 +99,7 @@ def fit_box(
     trim_fraction: float = 0.02,
     floor_snap_m: float = 0.05,
     min_size_m: float = 0.01,
+    typical_size_m: tuple[float, float, float] | None = None,
 ) -> BoxFit:
     """Gravity-aligned box around observed points (world frame, Z up, floor z = 0).
 
@@ -87,6 +107,13 @@ def fit_box(
     from the median (in plan) are ignored for the yaw, and extents use the
     ``trim_fraction / 2`` and ``1 - trim_fraction / 2`` quantiles along each box axis, widened to
     the points within a small margin of them (see ``_robust_extent``).
+
+    ``typical_size_m``: the category's (depth, width, height). For a category much wider than
+    deep (a sofa, a bench, a desk, a shelf: :data:`PLAN_ANISOTROPY`), the front is on a long
+    side when the observed plan extents fit the category clearly better that way
+    (:func:`plan_fit_cost`): a sofa seen end-on, its arm nearest the camera, is 2 m wide and 0.9 m
+    deep, not 0.4 m wide and 1.5 m deep (its completion then grows its seat away from the camera
+    instead of leaving a 20 cm slab).
     """
     pts = np.asarray(points_world_m, dtype=np.float64)
     if len(pts) < 3:
@@ -109,9 +136,17 @@ def fit_box(
     to_cam = np.asarray(camera_position_m, dtype=np.float64)[:2] - centre_xy
     normals = np.vstack([axes, -axes])  # +u, +v, -u, -v
     front = int(np.argmax(normals @ to_cam))
+    ext_uv = hi - lo
+    if typical_size_m is not None:
+        td, tw = float(typical_size_m[0]), float(typical_size_m[1])
+        if max(td, tw) >= PLAN_ANISOTROPY * min(td, tw):
+            cost_u = plan_fit_cost(ext_uv[0], ext_uv[1], td, tw)  # depth along u
+            cost_v = plan_fit_cost(ext_uv[1], ext_uv[0], td, tw)
+            want = (0, 2) if cost_u < cost_v else (1, 3)
+            if front not in want and abs(cost_u - cost_v) > PLAN_SWAP_MARGIN:
+                front = max(want, key=lambda i: float(normals[i] @ to_cam))
     x_axis = normals[front]
     yaw = float(np.arctan2(x_axis[1], x_axis[0]))
-    ext_uv = hi - lo
     depth, width = (ext_uv[0], ext_uv[1]) if front in (0, 2) else (ext_uv[1], ext_uv[0])
     size = np.maximum(np.array([depth, width, float(z_hi) - z_bottom]), min_size_m)
     world_from_box = pose(rot_z(yaw), [centre_xy[0], centre_xy[1], z_bottom])

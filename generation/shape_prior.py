@@ -162,7 +162,10 @@ class ShapePriorGenerator:
         cam_world = perception.camera.position_m
         others = [o.points_world_m for o in perception.objects if o.name != obj.name]
         snap_m = floor_snap_height_m(obj.points_world_m, others)
-        fit = complete_box(fit_box(obj.points_world_m, cam_world, floor_snap_m=snap_m), label, perception.room.walls)
+        # The plan orientation follows the category's proportions (a sofa seen end-on), unless
+        # fronts seen on a face say which face is the front.
+        typical = None if obj.fronts else cat.typical_size_m
+        fit = complete_box(fit_box(obj.points_world_m, cam_world, floor_snap_m=snap_m, typical_size_m=typical), label, perception.room.walls)
         box_from_world = np.linalg.inv(fit.world_from_box)
         pts = transform_points(box_from_world, obj.points_world_m)
         cam = transform_points(box_from_world, cam_world[None])[0]

@@ -50,6 +50,35 @@ def test_fit_box_front_faces_camera_and_stands_on_floor():
     assert min(abs(yaw - 30.0), abs(yaw - 120.0)) < 2.0
 
 
+def test_fit_box_reads_a_sofa_seen_end_on_by_its_proportions():
+    """A 2 m sofa seen end-on (the camera down its length, nearest its arm) shows its arm and its
+    back: the face most toward the camera is the arm's, and the box read that way is 1.9 m deep
+    and 0.4 m wide, completed to nothing. With the sofa's proportions the front is a long side:
+    width 1.9 m, depth what was seen of the short side; a category without a plan orientation
+    (a stool) and a sofa seen from the front are read as before."""
+    from scene_builder.vocabulary import category
+
+    rng = np.random.default_rng(4)
+    sofa = SyntheticBox("sofa", (0.4, 1.9, 0.8), np.radians(0.0), (2.0, 1.0, 0.0))  # long along world y
+    camera = np.array([2.0, -2.5, 1.2])  # looking down +y, from beyond one end, a little aside
+    camera[0] -= 0.8
+    pts = visible_box_points(sofa, camera, 3000.0, rng, noise_m=0.003)
+    plain = fit_box(pts, camera)
+    assert plain.size_m[:2] == pytest.approx([1.9, 0.4], abs=0.05)  # the arm taken for the front
+    fit = fit_box(pts, camera, typical_size_m=category("sofa").typical_size_m)
+    assert fit.size_m[:2] == pytest.approx([0.4, 1.9], abs=0.05)
+    x_axis = fit.world_from_box[:3, 0]
+    assert abs(x_axis[0]) > 0.99 and x_axis @ (camera - fit.world_from_box[:3, 3]) > 0  # the long side towards the camera
+    np.testing.assert_allclose(fit.world_from_box[:2, 3], plain.world_from_box[:2, 3], atol=1e-9)  # the same box
+    stool = fit_box(pts, camera, typical_size_m=category("stool").typical_size_m)
+    np.testing.assert_array_equal(stool.world_from_box, plain.world_from_box)
+    front_cam = np.array([4.5, 1.0, 1.2])  # in front of its long side
+    front_pts = visible_box_points(sofa, front_cam, 3000.0, rng, noise_m=0.003)
+    a = fit_box(front_pts, front_cam)
+    b = fit_box(front_pts, front_cam, typical_size_m=category("sofa").typical_size_m)
+    np.testing.assert_array_equal(a.world_from_box, b.world_from_box)
+
+
 def test_fit_box_keeps_raised_bottom():
     rng = np.random.default_rng(2)
     box = SyntheticBox("microwave", (0.4, 0.5, 0.3), 0.0, (0.0, 0.0, 0.9))
