@@ -41,6 +41,11 @@ OWNERSHIP_SPACING_M = 0.01
 #: Visual vertices within this many voxels of the observed depth on the object's own pixels are
 #: moved onto it.
 SNAP_VOXELS = 1.5
+#: Large furniture whose front is not always the side the camera sees best (a sofa seen end-on
+#: or from behind): its box fit reads the plan by the category's proportions
+#: (:func:`generation.pose.fit_box`). Not screens, clocks or bags, whose seen face is their front
+#: (a monitor read by its proportions stood its template on a 10 cm foot and toppled).
+PLAN_BY_PROPORTIONS = frozenset({"sofa", "bench", "desk", "table", "shelf", "wardrobe", "cabinet", "counter"})
 #: Completed voxels keep this far in front of the walls.
 WALL_CLEARANCE_M = 0.005
 #: A shape prior or template reaching further than this into a wall is not used.
@@ -162,9 +167,9 @@ class ShapePriorGenerator:
         cam_world = perception.camera.position_m
         others = [o.points_world_m for o in perception.objects if o.name != obj.name]
         snap_m = floor_snap_height_m(obj.points_world_m, others)
-        # The plan orientation follows the category's proportions (a sofa seen end-on), unless
-        # fronts seen on a face say which face is the front.
-        typical = None if obj.fronts else cat.typical_size_m
+        # The plan orientation of large furniture follows the category's proportions (a sofa
+        # seen end-on), unless fronts seen on a face say which face is the front.
+        typical = cat.typical_size_m if label in PLAN_BY_PROPORTIONS and not obj.fronts else None
         fit = complete_box(fit_box(obj.points_world_m, cam_world, floor_snap_m=snap_m, typical_size_m=typical), label, perception.room.walls)
         box_from_world = np.linalg.inv(fit.world_from_box)
         pts = transform_points(box_from_world, obj.points_world_m)
