@@ -214,6 +214,7 @@ class DetectionSegmenter:
         #: What answered the last ``segment`` call, for ``Perception.backends``.
         self.uses: list[BackendUse] = []
         self._boxes_per_detector: list[tuple[str, int]] = []
+        self._depth_measured = True  # the last segment() call's depth was a sensor's
 
     # -- the stages ---------------------------------------------------------------------------
 
@@ -242,6 +243,7 @@ class DetectionSegmenter:
         without a semantic class)."""
         h, w = depth_m.shape
         valid = (depth_m > 0) & (depth_m < self.max_depth_m)
+        self._depth_measured = bool(depth_measured)
         dets = self.detect(rgb)
         sem: SemanticMap | None = self.semantic.backend.segment_classes(rgb) if self.semantic is not None else None
         sem_labels = None
@@ -425,7 +427,9 @@ class DetectionSegmenter:
                 # A segmenter that takes no hints still should not keep what is surely not the object.
                 masks[i] = masks[i] & ~(self._hint(c, depth_m, valid, background, clusters, sem_labels) == HINT_BACKGROUND)
         for i, c in enumerate(cands):
-            if c.score >= CONFIDENT and not np.asarray(masks[i]).any():
+            # Estimated depth's hints can be wrong about a whole box; a sensor's are not (on
+            # open3d_TUM the recut gave a desk's pixels to a confident box the depth called room).
+            if not self._depth_measured and c.score >= CONFIDENT and not np.asarray(masks[i]).any():
                 masks[i] = self._confident_outline(rgb, c, claimed, [m for j, m in enumerate(masks) if j != i and m is not None])
         for c, m in zip(cands, masks):
             m = np.asarray(m, dtype=bool)
@@ -435,10 +439,11 @@ class DetectionSegmenter:
             c.mask = m
 
     def _confident_outline(self, rgb, c: _Candidate, claimed: np.ndarray, others: list[np.ndarray]) -> np.ndarray:
-        """The outline of a confident box whose hinted cut came back empty: the cut again with only
-        what other instances took as probable background. The depth and semantic hints were
-        wrong (estimated depth laid an over-the-range microwave flat on the wall behind it, so
-        its pixels were all "room"); a box the detector is sure of does not vanish for them.
+        """The outline of a confident box whose hinted cut came back empty on estimated depth: the
+        cut again with only what other instances took as probable background. The depth and
+        semantic hints were wrong (estimated depth laid an over-the-range microwave flat on the
+        wall behind it, so its pixels were all "room"); a box the detector is sure of does not
+        vanish for them.
         Empty when the colour cut gives the object up even so (thin books on a shelf)."""
         taken = claimed.copy()
         for m in others:

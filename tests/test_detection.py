@@ -304,8 +304,9 @@ def test_sam2_answers_box_prompts_when_its_weights_are_there(tiny_sam, tmp_path)
 def test_a_confident_box_whose_hinted_cut_is_empty_is_cut_again_without_the_hints():
     """The semantic map (or estimated depth laying the object flat on the wall) calls every pixel
     of a confident microwave box something else: the hinted cut is empty, and the box would
-    vanish. A box at the detector's trust score is cut again with only other instances' pixels
-    as probable background; a weak box is not (its witnesses were the hints)."""
+    vanish. On estimated depth a box at the detector's trust score is cut again with only other
+    instances' pixels as probable background; a weak box is not (its witnesses were the hints),
+    nor a box on a sensor's depth."""
     from perception.box_segment import GrabCutBoxSegmenter
     from perception.segment_detect import DetectionSegmenter, NamedBackend, _Candidate
 
@@ -322,12 +323,18 @@ def test_a_confident_box_whose_hinted_cut_is_empty_is_cut_again_without_the_hint
     valid = np.ones((h, w), bool)
     background = np.ones((h, w), bool)
     box = np.array([40.0, 30.0, 120.0, 90.0])
-    strong, weak = _Candidate(box.copy(), 0.8, "microwave", "score"), _Candidate(box.copy(), 0.3, "microwave", "semantic")
-    for c in (strong, weak):
+    def outline(score, measured):
+        c = _Candidate(box.copy(), score, "microwave", "score" if score >= 0.5 else "semantic")
+        seg._depth_measured = measured
         seg._outline(rgb, [c], depth, valid, background, np.zeros((h, w), np.int64), sem, np.zeros((h, w, 3)), 100.0, np.zeros((h, w), bool))
+        return c
+
+    strong = outline(0.8, False)
     assert (strong.mask & truth).sum() / (strong.mask | truth).sum() > 0.9
     assert strong.meta["outline"] == "cut without depth hints"
-    assert not weak.mask.any()
+    assert not outline(0.3, False).mask.any()
+    # A sensor's depth that calls the box's pixels room is believed (a picture on the wall).
+    assert not outline(0.8, True).mask.any()
 
 
 def test_a_cluster_filling_a_weak_box_witnesses_it_only_with_measured_depth():
