@@ -13,6 +13,7 @@ instead)."""
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Callable
 
 import numpy as np
@@ -111,8 +112,6 @@ def _near_wall(b: Body, walls: tuple[Plane, ...], reach_m: float = WALL_CONTACT_
 
 def _mount(b: Body, where: str) -> None:
     """Weld ``b`` to the room where it was seen (parent WALL): its asset becomes fixed."""
-    import dataclasses
-
     b.parent, b.mounted = WALL, where
     if not b.fixed:
         b.fixed = True

@@ -21,7 +21,9 @@ geometry and a classifier as second witnesses).
 4. **Masks**: each kept box prompts a box segmenter (SAM 2 when its weights are present, else
    GrabCut, :mod:`perception.box_segment`) with hints from depth (floor and wall pixels, pixels of
    other depth clusters, far behind the object), from the semantic map (its class, other
-   classes) and from the better boxes already cut. Masks are trimmed to their main 3D clusters
+   classes) and from the better boxes already cut (on estimated depth, a confident box whose
+   hinted cut is empty is cut again without the depth and semantic hints, which were wrong about
+   it). Masks are trimmed to their main 3D clusters
    where depth sees the object; overlaps go to the object in front (what lies inside another's
    box, else the nearer, else the lower in the image); a weaker duplicate in the same family is
    dropped.
