@@ -75,11 +75,11 @@ def unsupport_blocked_pads(bodies: list[Body]) -> set[str]:
 
 
 def unsupport_in_walls(solver: Solver, max_push_m: float) -> None:
-    """A movable body reaching more than ``max_push_m`` into a wall would have to move that far
-    to stand in the room: it is wall (a door, a radiator, a picture seen as an object, or a wall
+    """A movable (or wall-mounted) body reaching more than ``max_push_m`` into a wall would have
+    to move that far to stand in the room: it is wall (a door, a radiator, a picture seen as an object, or a wall
     plane fitted a little off), left where it was seen as static background."""
     for k, b in enumerate(solver.bodies):
-        if not len(solver.wall_n) or b.fixed or b.parent == UNSUPPORTED:
+        if not len(solver.wall_n) or (b.fixed and not b.mounted) or b.parent == UNSUPPORTED:
             continue
         depth = -float(np.min(solver.wall_gaps(k)))
         if depth > max_push_m:

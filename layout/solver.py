@@ -112,7 +112,9 @@ def _trim_walls(solver: Solver, observed: dict[str, np.ndarray], clearance_m: fl
     anything was cut."""
     changed = False
     for k, b in enumerate(solver.bodies):
-        if b.fixed or b.asset.kind is AssetKind.DEFORMABLE or not solver.walls:
+        # (A thing mounted on the wall where seen is cut at it like a movable one: it is fixed
+        # because it hangs there, not because it is built into the wall.)
+        if (b.fixed and not b.mounted) or b.asset.kind is AssetKind.DEFORMABLE or not solver.walls:
             continue
         pts = observed.get(b.name)
         seen = None if pts is None else pts + (b.position_m - b.initial_position_m)

@@ -111,7 +111,9 @@ def _near_wall(b: Body, walls: tuple[Plane, ...], reach_m: float = WALL_CONTACT_
 
 
 def _mount(b: Body, where: str) -> None:
-    """Weld ``b`` to the room where it was seen (parent WALL): its asset becomes fixed."""
+    """Weld ``b`` to the room where it was seen (parent WALL): its asset becomes fixed, and
+    ``b.mounted`` says the layout fixed it (its completion is still cut at the walls and one
+    reaching deep into a wall is still background, like a movable one's)."""
     b.parent, b.mounted = WALL, where
     if not b.fixed:
         b.fixed = True
@@ -276,7 +278,11 @@ def build_support(
             if j >= 0:
                 bodies[j].children.append(i)
             parent_name = bodies[j].name if j >= 0 else ("background" if j == BACKGROUND else "floor")
-        elif (b.fixed or b.asset.label in WALL_MOUNTED) and _near_wall(b, walls):
+        elif b.fixed and _near_wall(b, walls):
+            b.parent = WALL  # built-in furniture hangs on the wall
+            h = bottom
+            parent_name = "wall"
+        elif b.asset.label in WALL_MOUNTED and _near_wall(b, walls):
             _mount(b, "wall")
             h = bottom
             parent_name = "wall"

@@ -335,7 +335,7 @@ def test_wall_mountable_things_against_a_wall_are_mounted_and_fixed_categories_w
     fixed category) with nothing under it is welded where seen."""
     walls = (Plane(np.array([1.0, 0.0, 0.0]), 1.0, "wall", 100),)  # x = -1, room at x > -1
     gen = (
-        _gen(box_asset("tv", (0.08, 1.0, 0.6), label="tv"), (-0.95, 0.0, 1.7)),
+        _gen(box_asset("tv", (0.12, 1.0, 0.6), label="tv"), (-0.97, 0.0, 1.7)),  # its back 3 cm into the wall
         _gen(box_asset("microwave", (0.4, 0.6, 0.35), label="microwave"), (-0.78, 1.2, 1.4)),
         _gen(box_asset("tv_mid", (0.08, 1.0, 0.6), label="tv"), (0.8, 0.0, 1.7)),
         _gen(box_asset("bottle", (0.07, 0.07, 0.25), label="bottle"), (-0.95, -1.0, 1.2)),
@@ -353,6 +353,11 @@ def test_wall_mountable_things_against_a_wall_are_mounted_and_fixed_categories_w
         else:
             assert placements[name].became_background and "camera saw empty space under it" in placements[name].reason
     assert placed["tv"].support == "wall" and "mounted on the wall" in placements["tv"].reason
+    # Its completion is cut at the wall like a movable one's: nothing of it is in the wall.
+    for name in ("tv", "microwave"):
+        v = np.concatenate(_world_pieces(placed[name]))
+        assert walls[0].signed_distance_m(v).min() >= CFG.clearance_m - 1e-4
+    assert result.max_penetration_after_m < 1e-5
     assert placed["microwave"].support == "wall"
     assert placed["sink"].support == "room" and "welded where seen" in placements["sink"].reason
     assert not gen[0].asset.is_fixed  # the generated asset itself is not changed
