@@ -362,6 +362,8 @@ class Item:
     objects: tuple[tuple[str, str, bool], ...] = ()  # (name, label, interactive)
     inventory: object = None  # detect.InventoryScore of the interactive objects (set "real")
     inventory_perceived: object = None  # ... of every perceived object
+    max_penetration_m: float | None = None  # the built scene's deepest overlap at t = 0 (verify_scene)
+    stable: bool | None = None  # every movable object stayed at rest in the settle check
 
 
 def run_item(set_name: str, sample: Path, out_dir: Path, config, with_depth: bool) -> Item:
@@ -387,7 +389,8 @@ def run_item(set_name: str, sample: Path, out_dir: Path, config, with_depth: boo
     fates = object_fates([o.name for o in result.perception.objects], scene, result.layout.placements)
     inter = set(interactive_names(scene))
     objects = tuple((o.name, o.asset.label, o.name in inter) for o in scene.objects)
-    item = Item(set_name, sample.name, "built", seconds, fates=fates, objects=objects)
+    item = Item(set_name, sample.name, "built", seconds, fates=fates, objects=objects,
+                max_penetration_m=float(result.verdict.max_penetration_m), stable=bool(result.verdict.stable))
     if set_name == "real":
         inv = _inventory().get(sample.name)
         if inv is not None:
@@ -464,6 +467,10 @@ def summarize(items: list[Item]) -> dict:
             "background_objects": sum(f.background for f in fates),
             "interactive_share_of_perceived": (sum(f.interactive for f in fates) / perceived) if perceived else None,
             "build_s_median": float(np.median([i.seconds for i in built])) if built else None,
+            # Physical validity of what was built (the objects that ended interactive or fixed):
+            # the deepest overlap over every build, and the builds not at rest.
+            "max_penetration_mm": max((1000.0 * i.max_penetration_m for i in built if i.max_penetration_m is not None), default=None),
+            "builds_not_at_rest": sum(1 for i in built if i.stable is False),
         }
         for key, pick in (("inventory", lambda i: i.inventory), ("inventory_perceived", lambda i: i.inventory_perceived)):
             scores = [pick(i) for i in built if pick(i) is not None]

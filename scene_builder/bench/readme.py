@@ -53,14 +53,22 @@ def _objects(data: dict) -> str:
         rows.append(f"| real RGB-D suite: things a person lists that are interactive objects (of {real.get('inventory_seen', '-')} listed in {real['built']} photos) | {_f(real.get('inventory_instance_recall'))} | 0.00 |")
         rows.append(f"| ... interactive objects that are listed things (precision) | {_f(real.get('inventory_instance_precision'))} | - |")
     lines = ["\n".join(rows), ""]
-    fates = ["| set | inputs (built / refused / crashed) | perceived objects | interactive | fixed | background | interactive share of perceived | build seconds, median |",
-             "|---|---|---:|---:|---:|---:|---:|---:|"]
+    physics = any("max_penetration_mm" in (s.get(n) or {}) for n in ("sun-rgbd", "sun-plain", "coco", "real"))
+    head = "| set | inputs (built / refused / crashed) | perceived objects | interactive | fixed | background | interactive share of perceived | build seconds, median |"
+    rule = "|---|---|---:|---:|---:|---:|---:|---:|"
+    if physics:  # results written before the bench recorded each build's physics check have none
+        head += " max penetration mm (every build) | builds not at rest |"
+        rule += "---:|---:|"
+    fates = [head, rule]
     for name in ("sun-rgbd", "sun-plain", "coco", "real"):
         v = s.get(name)
         if not v:
             continue
-        fates.append(f"| {name} | {v['inputs']} ({v['built']} / {v['refused']} / {v['crashed']}) | {v['perceived_objects']} | {v['interactive_objects']} | "
-                     f"{v['fixed_objects']} | {v['background_objects']} | {_f(v['interactive_share_of_perceived'])} | {_f(v['build_s_median'], 1)} |")
+        row = (f"| {name} | {v['inputs']} ({v['built']} / {v['refused']} / {v['crashed']}) | {v['perceived_objects']} | {v['interactive_objects']} | "
+               f"{v['fixed_objects']} | {v['background_objects']} | {_f(v['interactive_share_of_perceived'])} | {_f(v['build_s_median'], 1)} |")
+        if physics:
+            row += f" {_f(v.get('max_penetration_mm'), 2)} | {v.get('builds_not_at_rest', '-')} |"
+        fates.append(row)
     lines.append("\n".join(fates))
     meta = data.get("meta", {})
     if meta:
