@@ -218,6 +218,61 @@ def _given_name(mask: np.ndarray, labels: np.ndarray, masks: InstanceMasks) -> t
     return given[inst - 1], float(masks.scores[inst - 1])
 
 
+#: A fragment joins the object it belongs to when this share of its points lies inside that
+#: object's footprint (gravity-aligned, grown by FRAGMENT_GAP_M) and it comes within
+#: FRAGMENT_GAP_M of its points.
+FRAGMENT_INSIDE = 0.8
+FRAGMENT_GAP_M = 0.05
+
+
+def _merge_fragments(
+    kept: list[tuple[np.ndarray, np.ndarray]], points_world: list[np.ndarray], names: list[tuple[str, float]]
+) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[np.ndarray], list[tuple[str, float]], int]:
+    """One object per real thing: a smaller object named in the family of a larger one (a seat or
+    bed, a table or desk, a cabinet: :data:`perception.detection.FAMILIES`) whose points lie in
+    the larger's footprint and touch them is a fragment of it (a sleigh bed's mattress, cut apart
+    from its frame by a depth edge, which the detector boxed as a table and the classifier named
+    a bed); the two become one object, named by the fragment named with more confidence (the
+    frame alone looked like a sofa to both models). Pillows and things of other families on a
+    bed stay objects. Returns the kept masks and pixels, points, names and the merge count.
+    kept: (mask, pixel index) per object; points_world: (N, 3) per object; names: (label, conf)."""
+    from scipy.spatial import Delaunay, QhullError, cKDTree
+
+    from perception.detection import family
+
+    order = sorted(range(len(kept)), key=lambda i: -len(points_world[i]))
+    gone: set[int] = set()
+    kept, points_world, names = list(kept), list(points_world), list(names)
+    for host in order:
+        if host in gone or len(family(names[host][0])) < 2:
+            continue
+        for frag in order:
+            if frag == host or frag in gone or names[frag][0] not in family(names[host][0]):
+                continue
+            ph, pf = points_world[host], points_world[frag]
+            if len(pf) > len(ph) or len(ph) < 4 or len(pf) < 4:
+                continue
+            try:
+                hull = Delaunay(ph[:: max(1, len(ph) // 3000), :2])
+            except QhullError:  # a host whose footprint is a line has no inside
+                continue
+            sub = pf[:: max(1, len(pf) // 2000)]
+            inside = hull.find_simplex(sub[:, :2]) >= 0
+            if inside.mean() < FRAGMENT_INSIDE:
+                continue
+            gap, _ = cKDTree(ph[:: max(1, len(ph) // 20000)]).query(sub, k=1, distance_upper_bound=FRAGMENT_GAP_M)
+            if not np.any(np.isfinite(gap)):
+                continue
+            mask = kept[host][0] | kept[frag][0]
+            kept[host] = (mask, kept[host][1] | kept[frag][1])
+            points_world[host] = np.concatenate([ph, pf])  # for the next fragment; the caller recomputes them in pixel order
+            if names[frag][1] > names[host][1]:
+                names[host] = names[frag]
+            gone.add(frag)
+    keep = [i for i in range(len(kept)) if i not in gone]
+    return [kept[i] for i in keep], [points_world[i] for i in keep], [names[i] for i in keep], len(gone)
+
+
 def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step: Callable[[str], None] | None = None) -> Perception:
     """Load and check the input, find gravity, floor, walls and the objects.
 
@@ -352,6 +407,10 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
             if names[i][0] == "object" and (guess := prior.name(c, m, s))[0] != "object":
                 names[i] = guess
                 named_by_prior += 1
+    kept, points_world, names, merged = _merge_fragments(kept, points_world, names)
+    if merged:
+        points_world = [transform_points(frame.world_from_camera, points_cam[pix]) for _, pix in kept]
+        backends.append(BackendUse("fragments", "family-footprint", f"merged {merged} fragments into the object of one family they lie on (a mattress on its bed frame)"))
     per_label: dict[str, int] = {}
     objects = []
     for object_id, ((mask, pix), points_w, (label, conf)) in enumerate(zip(kept, points_world, names), start=1):

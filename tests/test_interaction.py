@@ -280,7 +280,7 @@ def _check_built(out: Path, movable: set[str]) -> tuple[int, int]:
 @pytest.mark.skipif(not SAMPLES, reason="no real RGB-D samples with intrinsics in ../shared/data/real")
 @pytest.mark.parametrize("sample", real_sample_params(with_intrinsics=True)[1::2])
 def test_real_sample_push_and_open(sample, built_real_sample):
-    """Every other real sample (the ones test_robot does not build with the Panda; built once per
+    """Every other real sample (none of them one test_robot builds with the Panda; built once per
     session, shared with test_end_to_end): every movable object pushed, every door and drawer
     pulled open. The probes take 35-150 s a sample on the CI machine; the interaction bench of
     BENCHMARKS.md probes all of them."""

@@ -8,7 +8,7 @@ import pytest
 from PIL import Image
 
 from perception import perceive
-from perception.perceive import _fill_silhouettes
+from perception.perceive import _fill_silhouettes, _merge_fragments
 from scene_builder.config import InputSpec, PerceptionConfig
 from tests.test_perception_synthetic import F, H, W, _camera, _render
 
@@ -120,3 +120,35 @@ def test_colour_split_labels_are_unchanged_on_a_real_sample(monkeypatch):
     assert len(calls) >= 5  # the split's neighbour search really ran on this photo
     assert new.labels.max() >= 10
     assert np.array_equal(new.labels, old.labels)
+
+
+def _slab(x0, x1, y0, y1, z0, z1, step=0.05):
+    g = np.mgrid[x0:x1 + 1e-9:step, y0:y1 + 1e-9:step, z0:z1 + 1e-9:step].reshape(3, -1).T
+    return g
+
+
+def test_a_fragment_of_one_family_lying_in_an_objects_footprint_joins_it():
+    """A sleigh bed's frame (head- and footboard and a side rail around a 2 x 1.5 m footprint)
+    named sofa, its mattress inside named bed with more confidence: one object, named bed, with
+    both masks and pixels. A bench against the footboard (outside the footprint) and a pillow
+    on the mattress (another family) stay objects; so does a second bed standing apart."""
+    frame = np.vstack([_slab(0, 2, 0, 0.05, 0, 1.0), _slab(0, 2, 1.45, 1.5, 0, 1.0), _slab(0, 0.05, 0, 1.5, 0, 0.6), _slab(1.95, 2.0, 0, 1.5, 0, 0.6)])
+    mattress = _slab(0.1, 1.9, 0.1, 1.4, 0.45, 0.55)
+    bench = _slab(0.5, 1.5, -0.55, -0.05, 0, 0.45)
+    pillow = _slab(0.2, 0.6, 0.3, 0.8, 0.6, 0.7)
+    other_bed = mattress + [4.0, 0.0, 0.0]
+    clouds = [frame, mattress, bench, pillow, other_bed]
+    names = [("sofa", 0.57), ("bed", 0.6), ("bench", 0.7), ("pillow", 0.8), ("bed", 0.5)]
+    kept = []
+    for i in range(len(clouds)):
+        m = np.zeros((10, 10), dtype=bool)
+        m[i, :] = True
+        kept.append((m, m.copy()))
+    out, points, out_names, merged = _merge_fragments(kept, clouds, names)
+    assert merged == 1 and len(out) == 4
+    assert out_names == [("bed", 0.6), ("bench", 0.7), ("pillow", 0.8), ("bed", 0.5)]
+    assert out[0][0][:2].all() and out[0][1][:2].all() and out[0][0].sum() == 20
+    assert len(points[0]) == len(frame) + len(mattress)
+    # The same mattress 30 cm above the frame touches nothing: not merged.
+    floating = [frame, mattress + [0.0, 0.0, 0.6]]
+    assert _merge_fragments(kept[:2], floating, names[:2])[3] == 0
