@@ -8,7 +8,7 @@ import pytest
 from PIL import Image
 
 from perception import perceive
-from perception.perceive import _fill_silhouettes, _merge_fragments
+from perception.perceive import _cut_above_tops, _fill_silhouettes, _merge_fragments
 from scene_builder.config import InputSpec, PerceptionConfig
 from tests.test_perception_synthetic import F, H, W, _camera, _render
 
@@ -152,3 +152,35 @@ def test_a_fragment_of_one_family_lying_in_an_objects_footprint_joins_it():
     # The same mattress 30 cm above the frame touches nothing: not merged.
     floating = [frame, mattress + [0.0, 0.0, 0.6]]
     assert _merge_fragments(kept[:2], floating, names[:2])[3] == 0
+
+
+def test_a_desk_ends_at_its_top_and_what_rises_behind_it_is_background():
+    """An office desk (top at 0.72 m) whose cut took the partition panel behind it (up to 1.45
+    m): the points and pixels more than 4 cm above the top leave the desk; a table seen with
+    nothing above its top, a table seen edge-on (no dense band of heights) and a cabinet with the
+    same points are unchanged."""
+    rng = np.random.default_rng(0)
+    top = np.column_stack([rng.uniform(0, 1.5, 4000), rng.uniform(0, 0.7, 4000), rng.normal(0.72, 0.005, 4000)])
+    panel = np.column_stack([rng.uniform(0, 1.5, 6000), np.full(6000, 0.72), rng.uniform(0.72, 1.45, 6000)])
+    desk = np.vstack([top, panel])
+    edge_on = np.column_stack([rng.uniform(0, 1.5, 3000), np.zeros(3000), rng.uniform(0.0, 0.75, 3000)])
+
+    def kept_for(points):
+        pix = np.zeros((100, 200), dtype=bool)
+        pix.ravel()[: len(points)] = True
+        return (pix.copy(), pix)
+
+    clouds = [desk, top, edge_on, desk]
+    kept = [kept_for(p) for p in clouds]
+    out, points, cut = _cut_above_tops(kept, clouds, ["desk", "table", "table", "cabinet"])
+    assert cut == 1
+    # The kept points are the desk's at and just above its top: every top point, none of the
+    # panel more than 5 cm over it.
+    kept_z = {tuple(p) for p in points[0]}
+    gone = np.array([tuple(p) not in kept_z for p in desk])
+    assert not gone[:4000].any() and gone[4000:].mean() > 0.9
+    assert points[0][:, 2].max() < 0.77
+    assert out[0][1].sum() == len(points[0]) and out[0][0].sum() == len(points[0])
+    assert not out[0][1].ravel()[np.flatnonzero(gone)].any()  # the dropped points' pixels leave the mask
+    for i in (1, 2, 3):
+        assert points[i] is clouds[i] and out[i] is kept[i]
