@@ -223,6 +223,9 @@ def _given_name(mask: np.ndarray, labels: np.ndarray, masks: InstanceMasks) -> t
 #: FRAGMENT_GAP_M of its points.
 FRAGMENT_INSIDE = 0.8
 FRAGMENT_GAP_M = 0.05
+#: Furniture whose fragments are merged (small things of one family, a vase beside a mug, are not:
+#: one's footprint often holds the other's).
+FRAGMENT_LABELS = frozenset({"sofa", "bench", "bed", "table", "desk", "cabinet", "drawer_unit", "wardrobe"})
 
 
 def _merge_fragments(
@@ -244,7 +247,7 @@ def _merge_fragments(
     gone: set[int] = set()
     kept, points_world, names = list(kept), list(points_world), list(names)
     for host in order:
-        if host in gone or len(family(names[host][0])) < 2:
+        if host in gone or names[host][0] not in FRAGMENT_LABELS or len(family(names[host][0])) < 2:
             continue
         for frag in order:
             if frag == host or frag in gone or names[frag][0] not in family(names[host][0]):

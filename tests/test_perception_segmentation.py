@@ -152,6 +152,9 @@ def test_a_fragment_of_one_family_lying_in_an_objects_footprint_joins_it():
     # The same mattress 30 cm above the frame touches nothing: not merged.
     floating = [frame, mattress + [0.0, 0.0, 0.6]]
     assert _merge_fragments(kept[:2], floating, names[:2])[3] == 0
+    # Small things of one family are not merged: a vase standing in a bowl's footprint.
+    bowl, vase = _slab(0, 0.3, 0, 0.3, 0.7, 0.8), _slab(0.1, 0.2, 0.1, 0.2, 0.8, 1.0)
+    assert _merge_fragments(kept[:2], [bowl, vase], [("bowl", 0.5), ("vase", 0.6)])[3] == 0
 
 
 def test_a_desk_ends_at_its_top_and_what_rises_behind_it_is_background():
