@@ -278,12 +278,11 @@ def build_support(
             if j >= 0:
                 bodies[j].children.append(i)
             parent_name = bodies[j].name if j >= 0 else ("background" if j == BACKGROUND else "floor")
-        elif b.fixed and _near_wall(b, walls):
-            b.parent = WALL  # built-in furniture hangs on the wall
-            h = bottom
-            parent_name = "wall"
-        elif b.asset.label in WALL_MOUNTED and _near_wall(b, walls):
-            _mount(b, "wall")
+        elif (b.fixed or b.asset.label in WALL_MOUNTED) and _near_wall(b, walls):
+            if b.fixed:
+                b.parent = WALL  # built-in furniture hangs on the wall
+            else:
+                _mount(b, "wall")
             h = bottom
             parent_name = "wall"
         elif b.fixed:

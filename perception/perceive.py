@@ -219,8 +219,8 @@ def _given_name(mask: np.ndarray, labels: np.ndarray, masks: InstanceMasks) -> t
 
 
 #: A fragment joins the object it belongs to when this share of its points lies inside that
-#: object's footprint (gravity-aligned, grown by FRAGMENT_GAP_M) and it comes within
-#: FRAGMENT_GAP_M of its points.
+#: object's footprint (the convex hull of its points in plan) and it comes within FRAGMENT_GAP_M
+#: of its points.
 FRAGMENT_INSIDE = 0.8
 FRAGMENT_GAP_M = 0.05
 #: Furniture whose fragments are merged (small things of one family, a vase beside a mug, are not:
@@ -238,7 +238,8 @@ def _merge_fragments(
     a bed); the two become one object, named by the fragment named with more confidence (the
     frame alone looked like a sofa to both models). Pillows and things of other families on a
     bed stay objects. Returns the kept masks and pixels, points, names and the merge count.
-    kept: (mask, pixel index) per object; points_world: (N, 3) per object; names: (label, conf)."""
+    kept: (silhouette mask, mask of the pixels with points) per object, both (H, W) bool;
+    points_world: (N, 3) per object; names: (label, conf)."""
     from scipy.spatial import Delaunay, QhullError, cKDTree
 
     from perception.detection import family
@@ -247,7 +248,7 @@ def _merge_fragments(
     gone: set[int] = set()
     kept, points_world, names = list(kept), list(points_world), list(names)
     for host in order:
-        if host in gone or names[host][0] not in FRAGMENT_LABELS or len(family(names[host][0])) < 2:
+        if host in gone or names[host][0] not in FRAGMENT_LABELS:
             continue
         for frag in order:
             if frag == host or frag in gone or names[frag][0] not in family(names[host][0]):
@@ -294,9 +295,9 @@ def _cut_above_tops(
     what rises behind (the partition panel behind an office desk, 60 cm over the desk top), and
     a table completed up to that height swallows what stands on it. The top is the highest dense
     band of heights (:data:`TOP_SHARE` of the points within :data:`TOP_BAND_M`, at their median
-    height); the points more than :data:`ABOVE_TOP_M` above it leave the object's points and mask (they are
-    background). Objects with no such band (a table seen edge-on) are unchanged. Returns the
-    kept masks and pixels, the points and the number of objects cut."""
+    height); the points more than :data:`ABOVE_TOP_M` above it leave the object's points and
+    mask (they are background). Objects with no such band (a table seen edge-on) are unchanged.
+    Returns the kept masks and pixels, the points and the number of objects cut."""
     out_kept, out_points, cut = list(kept), list(points_world), 0
     for i, (label, pts) in enumerate(zip(labels, points_world)):
         if label not in TOPPED or len(pts) < 50:
