@@ -17,7 +17,7 @@ import numpy as np
 from generation.assembly import ConvexSolids, JointSpec, PartSpec, box_solid
 from scene_builder.model import JointType, TriangleMesh
 
-__all__ = ["PRIOR_LABELS", "prior_parts"]
+__all__ = ["PRIOR_LABELS", "prior_parts", "shelf_boards"]
 
 _E = 5e-4
 
@@ -60,8 +60,15 @@ def _chair(d, w, h, material, rgba, label):
                      description=f"{label}: {what}", rgba=rgba)]
 
 
-def _shelf(d, w, h, material, rgba, label, max_pieces: int = 12):
-    t = _clip(0.05 * min(d, w), 0.008, 0.018)
+def _shelf_thickness(d, w):
+    return _clip(0.05 * min(d, w), 0.008, 0.018)
+
+
+def _shelf(d, w, h, material, rgba, label, max_pieces: int = 12, boards=None):
+    """Side panels, bottom, top and back, and shelf boards: at ``boards`` = ((top height, y from,
+    y to, front x), ...) where things were seen resting (:func:`shelf_boards`), else evenly spaced (about
+    0.35 m apart)."""
+    t = _shelf_thickness(d, w)
     back = _clip(0.02 * d, 0.004, 0.008)
     solids = [
         box_solid([-d / 2, -w / 2, 0.0], [d / 2, -w / 2 + t, h]),
@@ -70,12 +77,73 @@ def _shelf(d, w, h, material, rgba, label, max_pieces: int = 12):
         box_solid([-d / 2, -w / 2, h - t], [d / 2, w / 2, h]),
         box_solid([-d / 2, -w / 2, 0.0], [-d / 2 + back, w / 2, h]),
     ]
-    n = int(np.clip(round(h / 0.35) - 1, 0, max_pieces - len(solids)))
-    for i in range(n):
-        z = h * (i + 1) / (n + 1)
-        solids.append(box_solid([-d / 2 + back - _E, -w / 2 + t - _E, z - t / 2], [d / 2, w / 2 - t + _E, z + t / 2]))
-    return [PartSpec("body", None, ConvexSolids(tuple(solids)), material, affordance_rank=3,
-                     affordance="place objects on shelves", description=f"{label}: frame with {n} shelves", rgba=rgba)]
+    if boards is None:
+        n = int(np.clip(round(h / 0.35) - 1, 0, max_pieces - len(solids)))
+        for i in range(n):
+            z = h * (i + 1) / (n + 1)
+            solids.append(box_solid([-d / 2 + back - _E, -w / 2 + t - _E, z - t / 2], [d / 2, w / 2 - t + _E, z + t / 2]))
+        return [PartSpec("body", None, ConvexSolids(tuple(solids)), material, affordance_rank=3,
+                         affordance="place objects on shelves", description=f"{label}: frame with {n} shelves", rgba=rgba)]
+    frame = PartSpec("body", None, ConvexSolids(tuple(solids)), material, affordance_rank=3,
+                     affordance="place objects on shelves", rgba=rgba,
+                     description=f"{label}: frame with {len(boards)} shelf boards where things were seen resting")
+    parts = [frame]
+    # The boards are welded parts of at most max_pieces boxes each: the collision pieces of one
+    # part are capped, and merging boxes of different heights would fill the space between them.
+    for k in range(0, len(boards), max_pieces):
+        chunk = boards[k:k + max_pieces]
+        z0 = min(b[0] for b in chunk) - t
+        board_solids = tuple(box_solid([-d / 2 + back - _E, y0, z - t], [x1, y1, z]) for z, y0, y1, x1 in chunk)
+        parts.append(PartSpec(f"boards_{k // max_pieces + 1}", "body", ConvexSolids(board_solids), material,
+                              JointSpec(JointType.FIXED, (1.0, 0.0, 0.0), (0.0, 0.0, z0)), affordance_rank=3,
+                              affordance="place objects on shelves", description=f"{label}: shelf boards", rgba=rgba))
+    return parts
+
+
+#: Things whose bottoms lie within this height of the lowest of them, side by side within
+#: BOARD_GAP_M, rest on one board.
+BOARD_MERGE_M = 0.08
+BOARD_GAP_M = 0.25
+#: A board reaches this far past the things on it (within the frame).
+BOARD_MARGIN_M = 0.05
+
+
+def shelf_boards(contents, size_m, shelf_points_m=None) -> tuple[tuple[float, float, float, float], ...]:
+    """Shelf boards under what a shelf holds: ``contents`` = (bottom, top, y from, y to, x front) of each
+    thing seen inside the shelf's box (box frame, metres), ``size_m`` = (D, W, H),
+    ``shelf_points_m``: the shelf's own observed points (box frame). Returns (top height, y from,
+    y to, front x) of each board: one under each row of things side by side whose bottoms are
+    within BOARD_MERGE_M, its top at the lowest bottom, spanning the row plus BOARD_MARGIN_M,
+    from the back to the shelf's front seen there (the 98th percentile of its points' x around
+    the board, never behind what it holds; the box's front without points); none where the
+    bottom panel holds them (within 3 cm of it) and none that would cut through a thing the
+    camera saw."""
+    d, w, h = (float(v) for v in size_m)
+    t = _shelf_thickness(d, w)
+    inner = (-w / 2 + t, w / 2 - t)
+    rows: list[list[float]] = []  # [z, y0, y1, x front of what is on it]
+    for z, _, y0, y1, x1 in sorted(tuple(float(v) for v in c) for c in contents):
+        if z < t + 0.03 or z > h - t:
+            continue
+        for row in rows:
+            if z - row[0] <= BOARD_MERGE_M and y0 - row[2] <= BOARD_GAP_M and row[1] - y1 <= BOARD_GAP_M:
+                row[1], row[2], row[3] = min(row[1], y0), max(row[2], y1), max(row[3], x1)
+                break
+        else:
+            rows.append([z, y0, y1, x1])
+    pts = None if shelf_points_m is None else np.asarray(shelf_points_m, dtype=np.float64)
+    boards = []
+    for z, y0, y1, x1 in rows:
+        y0, y1 = max(inner[0], y0 - BOARD_MARGIN_M), min(inner[1], y1 + BOARD_MARGIN_M)
+        front = d / 2
+        if pts is not None:
+            near = (pts[:, 1] >= y0) & (pts[:, 1] <= y1) & (np.abs(pts[:, 2] - z) <= 0.1)
+            if np.count_nonzero(near) >= 20:
+                front = float(np.clip(max(np.percentile(pts[near, 0], 98), x1), -d / 2 + 0.05, d / 2))
+        cuts = any(b + 0.01 < z and z - t < e - 0.01 and c < y1 and y0 < f for b, e, c, f, _ in contents)
+        if y1 - y0 > 0.02 and not cuts:
+            boards.append((z, y0, y1, front))
+    return tuple(boards)
 
 
 def _sofa(d, w, h, material, rgba, label):
@@ -230,8 +298,9 @@ PRIOR_LABELS = (
 
 
 def prior_parts(label: str, size_m, material: str, shell_thickness_m: float | None, rgba=None,
-                max_pieces: int = 12) -> list[PartSpec]:
+                max_pieces: int = 12, boards=None) -> list[PartSpec]:
     """Part specifications of the shape prior of ``label`` fitted to ``size_m`` = (D, W, H).
+    ``boards``: a shelf's boards where things were seen resting in it (:func:`shelf_boards`).
 
     Raises ValueError for a label without a prior (see :data:`PRIOR_LABELS`).
     """
@@ -241,7 +310,7 @@ def prior_parts(label: str, size_m, material: str, shell_thickness_m: float | No
     if label in ("chair", "stool"):
         return _chair(d, w, h, material, rgba, label)
     if label == "shelf":
-        return _shelf(d, w, h, material, rgba, label, max_pieces)
+        return _shelf(d, w, h, material, rgba, label, max_pieces, boards)
     if label in ("sofa", "bed"):
         return _sofa(d, w, h, material, rgba, label)
     if label in ("counter", "sink"):

@@ -92,6 +92,26 @@ def complete_box(fit, label: str, walls=()):
     return fit
 
 
+#: Another object with this share of its points inside a shelf's box is held by the shelf.
+HELD_SHARE = 0.8
+
+
+def _held(others_world_m, box_from_world: np.ndarray, size_m) -> list[tuple[float, float, float, float]]:
+    """(bottom, top, y from, y to, x front) in the box frame (2nd / 98th percentiles) of each object of
+    ``others_world_m`` (point arrays) whose points lie in the box of ``size_m`` (a shelf's
+    contents)."""
+    d, w, h = (float(v) for v in size_m)
+    held = []
+    for o in others_world_m:
+        q = transform_points(box_from_world, o)
+        inside = (np.abs(q[:, 0]) <= d / 2) & (np.abs(q[:, 1]) <= w / 2) & (q[:, 2] >= 0.0) & (q[:, 2] <= h)
+        if np.mean(inside) >= HELD_SHARE:
+            z0, z1 = np.percentile(q[:, 2], [2, 98])
+            y0, y1 = np.percentile(q[:, 1], [2, 98])
+            held.append((float(z0), float(z1), float(y0), float(y1), float(np.percentile(q[:, 0], 98))))
+    return held
+
+
 def _column(points_world_m: np.ndarray):
     """(plan outline as a shapely Polygon, bottom, top) of another object's observed points: the
     convex hull of their plan positions, shrunk by 2 cm, and their 2nd / 98th height
@@ -159,7 +179,7 @@ class ShapePriorGenerator:
         from scipy.spatial import cKDTree
 
         from generation.pose import fit_box, floor_snap_height_m
-        from generation.priors import PRIOR_LABELS, prior_parts
+        from generation.priors import PRIOR_LABELS, prior_parts, shelf_boards
         from scene_builder.vocabulary import category
 
         label = obj.label
@@ -198,8 +218,12 @@ class ShapePriorGenerator:
         elif label in PRIOR_LABELS:
             # panels need room: a sliver of points (a shelf seen edge-on) would leave an empty box
             size = np.maximum(size, 0.15 * np.asarray(cat.typical_size_m))
-            specs = prior_parts(label, size, cm.material, cm.shell_thickness_m, rgba, config.max_collision_pieces)
-            description += "; shape prior"
+            boards = None
+            if label == "shelf":
+                held = _held(others, box_from_world, size)
+                boards = shelf_boards(held, size, pts) if held else None
+            specs = prior_parts(label, size, cm.material, cm.shell_thickness_m, rgba, config.max_collision_pieces, boards)
+            description += "; shape prior" if boards is None else f"; shape prior, {len(boards)} boards under what it holds"
         elif soft is not None:
             kind = AssetKind.DEFORMABLE
             cfg = replace(config, max_visual_faces=min(config.max_visual_faces, 800))

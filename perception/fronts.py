@@ -12,7 +12,9 @@ photo and the world through the same plane (:class:`scene_builder.model.Front`).
 
 An object of a category that may hold drawers without being made of them (a table that is a
 night stand, a desk) keeps its fronts only when at least ``MIN_HANDLED_FRONTS`` of them show a
-handle; ovens and dishwashers get their largest front as a flap hinged at the bottom.
+handle; ovens and dishwashers get their largest front as a flap hinged at the bottom. On sensor
+depth, a panel whose middle lies ``OPENING_RECESS_M`` or more behind the face is an opening, not a
+front (the cubbies of an open bookcase).
 """
 
 from __future__ import annotations
@@ -44,6 +46,10 @@ YAW_STEP_DEG = 2.5
 YAW_PX = 160
 #: Fronts smaller than this (m) in either direction are not kept (a sliver of a cut face).
 MIN_FRONT_M = 0.07
+#: On sensor depth, a "front" whose middle was measured this far (median, m) behind the face is
+#: an opening (an open shelf's cubby, 6-32 cm deep on promptda_arkit's bookcase), not a door or a
+#: drawer. Not on estimated depth, whose relief inside a face is not measured well enough.
+OPENING_RECESS_M = 0.05
 
 
 @dataclass(frozen=True, eq=False)
@@ -180,10 +186,12 @@ def rectify(rgb: np.ndarray, camera: Camera, face: Face, mask: np.ndarray | None
     return img, inside, m_per_px
 
 
-def fronts_on_face(rgb: np.ndarray, camera: Camera, face: Face, label: str = "", mask: np.ndarray | None = None) -> tuple[Front, ...]:
+def fronts_on_face(rgb: np.ndarray, camera: Camera, face: Face, label: str = "", mask: np.ndarray | None = None,
+                   depth: np.ndarray | None = None) -> tuple[Front, ...]:
     """The door and drawer fronts on ``face`` of the photo ``rgb`` (the analysis image), left to
     right then top to bottom. ``label``: the object's category (ovens and dishwashers: the largest
-    front is a flap hinged at its bottom)."""
+    front is a flap hinged at its bottom). ``depth``: measured (sensor) depth of the analysis
+    image, to tell openings from fronts (:data:`OPENING_RECESS_M`)."""
     from perception.front_parse import parse_face
 
     img, inside, m = rectify(rgb, camera, face, mask)
@@ -209,12 +217,38 @@ def fronts_on_face(rgb: np.ndarray, camera: Camera, face: Face, label: str = "",
         if p.handle is not None:
             hw = face.points(np.array(p.handle[0] * m), np.array((h - p.handle[1]) * m))
             handle = k.project(transform_points(camera_from_world, hw[None]))[0]
+        if depth is not None and _recess_m(px, world, depth, camera) >= OPENING_RECESS_M:
+            continue
         score = 0.5 * float(p.handle is not None) + 0.5 * p.support
         out.append(Front(p.kind, p.hinge, px, world, handle, float(np.clip(score, 0.0, 1.0))))
     if label in ("oven", "dishwasher") and out:
         big = max(range(len(out)), key=lambda i: _area(out[i]))
         out[big] = replace(out[big], kind="flap", hinge="bottom")
     return tuple(out)
+
+
+def _recess_m(px: np.ndarray, world: np.ndarray, depth_m: np.ndarray, camera: Camera) -> float:
+    """Median distance (m, along the optical axis) by which the depth measured in the middle of
+    a panel (its corners ``px`` in the image, ``world`` on the face plane, shrunk to 60 % about
+    its centre, away from the frame around it) lies behind the face plane; 0 without valid depth."""
+    from skimage.draw import polygon
+
+    c = px.mean(axis=0)
+    inner = c + 0.6 * (px - c)
+    rr, cc = polygon(inner[:, 1], inner[:, 0], depth_m.shape)
+    d = depth_m[rr, cc]
+    ok = d > 0
+    if np.count_nonzero(ok) < 10:
+        return 0.0
+    rr, cc, d = rr[ok], cc[ok], d[ok]
+    # the face plane's depth on each pixel's ray: z = n.(p0 - o) / n.(R K^-1 [u, v, 1])
+    k = camera.intrinsics
+    rays_cam = np.column_stack([(cc - k.cx_px) / k.fx_px, (rr - k.cy_px) / k.fy_px, np.ones(len(rr))])
+    rot = camera.world_from_camera[:3, :3]
+    normal = np.cross(world[1] - world[0], world[3] - world[0])
+    denom = (rays_cam @ rot.T) @ normal
+    plane_z = np.where(np.abs(denom) > 1e-9, float(normal @ (world[0] - camera.position_m)) / np.where(denom == 0, 1.0, denom), np.nan)
+    return float(np.nanmedian(d - plane_z)) if np.any(np.isfinite(plane_z)) else 0.0
 
 
 def _area(f: Front) -> float:
@@ -231,7 +265,8 @@ def with_fronts(objects: tuple[PerceivedObject, ...], observation: Observation, 
             face = face_of(obj.points_world_m, camera.position_m, walls)
             if face.width_m > 0.1 and face.height_m > 0.1:
                 face = refine_yaw(observation.rgb, camera, face, obj.points_world_m)
-                fronts = fronts_on_face(observation.rgb, camera, face, obj.label, obj.mask)
+                depth = observation.depth_m if observation.depth_source == "sensor" else None
+                fronts = fronts_on_face(observation.rgb, camera, face, obj.label, obj.mask, depth)
                 if obj.label not in FRONT_LABELS and sum(f.handle_px is not None for f in fronts) < MIN_HANDLED_FRONTS:
                     fronts = ()
                 if fronts:

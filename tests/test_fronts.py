@@ -132,3 +132,24 @@ def test_fronts_keep_clear_of_a_side_wall_the_run_reaches_into():
     assert y1 == pytest.approx(0.6 - 0.003 - WALL_CLEARANCE_M, abs=1e-9)
     corners = np.array([[x, y1, z] for x in (-0.3, 0.3) for z in (z0, z1)]) @ world_from_box[:3, :3].T + world_from_box[:3, 3]
     assert side.signed_distance_m(corners).min() == pytest.approx(WALL_CLEARANCE_M, abs=1e-9)
+
+
+def test_a_panel_whose_middle_is_measured_deep_behind_the_face_is_an_opening():
+    """An open bookcase's cubbies parse as panels like doors; on sensor depth their middles lie
+    15-30 cm behind the face (promptda_arkit), a door's on it."""
+    from perception.fronts import OPENING_RECESS_M, _recess_m
+    from scene_builder.model import Camera, CameraIntrinsics
+
+    k = CameraIntrinsics(200.0, 200.0, 99.5, 79.5, 200, 160)
+    rot = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # looking along world +x
+    cam = Camera(k, np.block([[rot, np.array([[0.0], [0.0], [1.0]])], [np.zeros((1, 3)), np.ones((1, 1))]]))
+    world = np.array([[2.0, 0.3, 0.7], [2.0, -0.3, 0.7], [2.0, -0.3, 1.3], [2.0, 0.3, 1.3]])  # on the face x = 2
+    cam_pts = (world - cam.position_m) @ rot  # camera frame
+    px = np.column_stack([k.fx_px * cam_pts[:, 0] / cam_pts[:, 2] + k.cx_px, k.fy_px * cam_pts[:, 1] / cam_pts[:, 2] + k.cy_px])
+    flat = np.full((160, 200), 2.0, np.float32)
+    assert _recess_m(px, world, flat, cam) == pytest.approx(0.0, abs=1e-6)
+    cubby = flat.copy()
+    cubby[60:100, 80:120] = 2.2  # the panel's middle seen 20 cm deeper
+    recess = _recess_m(px, world, cubby, cam)
+    assert recess == pytest.approx(0.2, abs=1e-3) and recess > OPENING_RECESS_M
+    assert _recess_m(px, world, np.zeros_like(flat), cam) == 0.0  # no valid depth: no evidence

@@ -135,3 +135,50 @@ def test_an_object_carved_to_a_speck_is_its_fitted_box():
     assert "fitted box" in bench.asset.description
     assert np.allclose(bench.asset.size_m, 0.01)  # fit_box's smallest box
     assert bench.asset.mass_kg == pytest.approx(1e-6 * bench.asset.parts[0].material.density_kg_m3)
+
+
+def test_shelf_boards_lie_under_each_row_of_held_things_and_cut_none():
+    """promptda_arkit's bookcase: books stand in cubbies of two columns at different heights. A
+    board goes under each row (its top at the lowest bottom of the row), only as wide as the row
+    plus a margin, reaching the shelf's front seen there; none for things on the bottom panel and
+    none through a thing seen standing across its height."""
+    from generation.priors import BOARD_MARGIN_M, shelf_boards
+
+    size = (0.4, 3.0, 1.5)
+    held = [
+        (0.40, 0.60, -1.2, -1.1, -0.05),  # left column, row at 0.40..0.42
+        (0.42, 0.55, -1.05, -0.95, 0.00),
+        (0.46, 0.62, 0.3, 0.4, -0.02),  # a column 1.3 m away: its own board
+        (0.80, 1.00, -1.2, -1.0, 0.02),  # the row above
+        (0.01, 0.30, 0.9, 1.0, 0.0),  # on the bottom panel: no board
+    ]
+    shelf_points = np.column_stack([np.full(300, 0.10), np.linspace(-1.3, 0.0, 300), np.full(300, 0.41)])
+    boards = shelf_boards(held, size, shelf_points)
+    assert [round(b[0], 2) for b in boards] == [0.40, 0.46, 0.80]
+    z, y0, y1, front = boards[0]
+    assert y0 == pytest.approx(-1.2 - BOARD_MARGIN_M) and y1 == pytest.approx(-0.95 + BOARD_MARGIN_M)
+    assert front == pytest.approx(0.10, abs=0.01)  # where the shelf's points end, not the box's front (0.2)
+    assert boards[2][3] == pytest.approx(0.2)  # no points near that board: the box's front
+    # a tall thing standing across the height of a board between its row's ends: that board goes
+    cut = shelf_boards(held + [(0.10, 0.70, -1.10, -1.06, 0.0)], size, shelf_points)
+    assert [round(b[0], 2) for b in cut] == [0.10, 0.46, 0.80]
+
+
+def test_a_shelf_prior_with_boards_puts_their_tops_at_the_given_heights():
+    from generation.priors import prior_parts
+
+    boards = ((0.40, -1.0, -0.5, 0.1), (0.80, 0.2, 0.9, 0.15))
+    parts = prior_parts("shelf", (0.4, 2.0, 1.2), "particleboard", None, None, 12, boards)
+    frame, board_part = parts
+    assert board_part.parent == "body" and board_part.joint is not None
+    tops = sorted(float(s.vertices_m[:, 2].max()) for s in board_part.geometry.solids)
+    assert tops == pytest.approx([0.40, 0.80])
+    fronts = sorted(float(s.vertices_m[:, 0].max()) for s in board_part.geometry.solids)
+    assert fronts == pytest.approx([0.1, 0.15])
+    # more boards than a part may have collision pieces: several welded parts, none merged
+    many = tuple((0.1 + 0.05 * i, -0.9, 0.9, 0.2) for i in range(15))
+    parts = prior_parts("shelf", (0.4, 2.0, 1.2), "particleboard", None, None, 12, many)
+    assert [len(p.geometry.solids) for p in parts[1:]] == [12, 3]
+    # without boards: evenly spaced, as before
+    (body,) = prior_parts("shelf", (0.4, 2.0, 1.2), "particleboard", None, None, 12)
+    assert len(body.geometry.solids) == 5 + 2
