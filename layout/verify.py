@@ -210,28 +210,34 @@ def valid_depth(depth_m: np.ndarray) -> np.ndarray:
 class _Renders:
     """RGB (the scene's own lights), depth and object labels rendered from ``input_camera``."""
 
-    def __init__(self, m, d, index: _SceneIndex, scene: Scene, mjcf_path: Path, size: tuple[int, int]) -> None:
+    @staticmethod
+    def renderer(m, mjcf_path: Path, size: tuple[int, int]):
+        """A MuJoCo renderer of ``size`` (h, w) for the model ``m`` (about 0.5 s to make: one
+        serves every render of a check); the caller closes it."""
         import mujoco
 
-        cam = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, "input_camera")
-        if cam < 0:
+        if mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, "input_camera") < 0:
             raise ExportError(f"{mjcf_path.name}: no camera named 'input_camera'; the exporter must add the input camera")
         h, w = size
         m.vis.global_.offwidth = max(int(m.vis.global_.offwidth), w)
         m.vis.global_.offheight = max(int(m.vis.global_.offheight), h)
-        renderer = mujoco.Renderer(m, height=h, width=w)
-        try:
-            renderer.update_scene(d, camera=cam)
-            self.rgb = np.array(renderer.render(), dtype=np.uint8)
-            renderer.enable_depth_rendering()
-            renderer.update_scene(d, camera=cam)
-            self.depth = np.array(renderer.render(), dtype=np.float64)
-            renderer.disable_depth_rendering()
-            renderer.enable_segmentation_rendering()
-            renderer.update_scene(d, camera=cam)
-            seg = np.array(renderer.render())
-        finally:
-            renderer.close()
+        return mujoco.Renderer(m, height=h, width=w)
+
+    def __init__(self, renderer, m, d, index: _SceneIndex, scene: Scene) -> None:
+        import mujoco
+
+        cam = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, "input_camera")
+        h, w = renderer.height, renderer.width
+        renderer.update_scene(d, camera=cam)
+        self.rgb = np.array(renderer.render(), dtype=np.uint8)
+        renderer.enable_depth_rendering()
+        renderer.update_scene(d, camera=cam)
+        self.depth = np.array(renderer.render(), dtype=np.float64)
+        renderer.disable_depth_rendering()
+        renderer.enable_segmentation_rendering()
+        renderer.update_scene(d, camera=cam)
+        seg = np.array(renderer.render())
+        renderer.disable_segmentation_rendering()
         ids, types = seg[..., 0], seg[..., 1]
         self.hit = ids >= 0
         # Segmentation ids -> object index + 1 (0: not an object: the room, the background).
@@ -331,12 +337,16 @@ def verify_scene(
     d = mujoco.MjData(m)
     mujoco.mj_forward(m, d)
     max_pen, pen_by_object, contact_points = _penetration(m, d, index)
-    size = perception.observation.depth_m.shape if perception is not None else None
-    first = _Renders(m, d, index, scene, mjcf_path, size) if size is not None else None
-    tracks = _simulate(m, d, scene, index, float(config.settle_s))
-    mujoco.mj_forward(m, d)
-    end_pen, end_by_object, _ = _penetration(m, d, index)
-    last = _Renders(m, d, index, scene, mjcf_path, size) if size is not None else None
+    renderer = _Renders.renderer(m, mjcf_path, perception.observation.depth_m.shape) if perception is not None else None
+    try:
+        first = _Renders(renderer, m, d, index, scene) if renderer is not None else None
+        tracks = _simulate(m, d, scene, index, float(config.settle_s))
+        mujoco.mj_forward(m, d)
+        end_pen, end_by_object, _ = _penetration(m, d, index)
+        last = _Renders(renderer, m, d, index, scene) if renderer is not None else None
+    finally:
+        if renderer is not None:
+            renderer.close()
 
     verdicts, trajectories = [], []
     max_drift, max_rot, stable = 0.0, 0.0, True
