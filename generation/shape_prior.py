@@ -96,7 +96,7 @@ def complete_box(fit, label: str, walls=()):
 HELD_SHARE = 0.8
 
 
-def _held(others_world_m, box_from_world: np.ndarray, size_m) -> list[tuple[float, float, float, float]]:
+def _held(others_world_m, box_from_world: np.ndarray, size_m) -> list[tuple[float, float, float, float, float]]:
     """(bottom, top, y from, y to, x front) in the box frame (2nd / 98th percentiles) of each object of
     ``others_world_m`` (point arrays) whose points lie in the box of ``size_m`` (a shelf's
     contents)."""

@@ -47,7 +47,7 @@ YAW_PX = 160
 #: Fronts smaller than this (m) in either direction are not kept (a sliver of a cut face).
 MIN_FRONT_M = 0.07
 #: On sensor depth, a "front" whose middle was measured this far (median, m) behind the face is
-#: an opening (an open shelf's cubby, 6-32 cm deep on promptda_arkit's bookcase), not a door or a
+#: an opening (an open shelf's cubby, 7-33 cm deep on promptda_arkit's bookcase), not a door or a
 #: drawer. Not on estimated depth, whose relief inside a face is not measured well enough.
 OPENING_RECESS_M = 0.05
 
