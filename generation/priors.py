@@ -77,20 +77,20 @@ def _shelf(d, w, h, material, rgba, label, max_pieces: int = 12, boards=None):
         box_solid([-d / 2, -w / 2, h - t], [d / 2, w / 2, h]),
         box_solid([-d / 2, -w / 2, 0.0], [-d / 2 + back, w / 2, h]),
     ]
-    if boards is None:
+    if boards is None:  # evenly spaced, in the frame's part
         n = int(np.clip(round(h / 0.35) - 1, 0, max_pieces - len(solids)))
         for i in range(n):
             z = h * (i + 1) / (n + 1)
             solids.append(box_solid([-d / 2 + back - _E, -w / 2 + t - _E, z - t / 2], [d / 2, w / 2 - t + _E, z + t / 2]))
-        return [PartSpec("body", None, ConvexSolids(tuple(solids)), material, affordance_rank=3,
-                         affordance="place objects on shelves", description=f"{label}: frame with {n} shelves", rgba=rgba)]
-    frame = PartSpec("body", None, ConvexSolids(tuple(solids)), material, affordance_rank=3,
-                     affordance="place objects on shelves", rgba=rgba,
-                     description=f"{label}: frame with {len(boards)} shelf boards where things were seen resting")
-    parts = [frame]
-    # The boards are welded parts of at most max_pieces boxes each: the collision pieces of one
-    # part are capped, and merging boxes of different heights would fill the space between them.
-    for k in range(0, len(boards), max_pieces):
+        what = f"frame with {n} shelves"
+    else:
+        what = f"frame with {len(boards)} shelf boards where things were seen resting"
+    parts = [PartSpec("body", None, ConvexSolids(tuple(solids)), material, affordance_rank=3,
+                      affordance="place objects on shelves", description=f"{label}: {what}", rgba=rgba)]
+    # Boards where things were seen are welded parts of at most max_pieces boxes each: the
+    # collision pieces of one part are capped, and merging boxes of different heights would fill
+    # the space between them.
+    for k in range(0, len(boards or ()), max_pieces):
         chunk = boards[k:k + max_pieces]
         z0 = min(b[0] for b in chunk) - t
         board_solids = tuple(box_solid([-d / 2 + back - _E, y0, z - t], [x1, y1, z]) for z, y0, y1, x1 in chunk)
