@@ -124,6 +124,26 @@ def _column(points_world_m: np.ndarray):
     return hull, float(lo), float(hi)
 
 
+#: Categories that hold things inside their outline (between their boards), not only on top.
+HOLDS_INSIDE = frozenset({"shelf"})
+#: An object is inside another's column (held in it, not lying on its top) when its median height
+#: is this far below that column's top and most of its points lie within its plan outline.
+INSIDE_BELOW_TOP_M = 0.05
+
+
+def _inside_column(points_world_m: np.ndarray, column) -> bool:
+    """Whether an object's observed points stand inside ``column`` (see :func:`_column`): half
+    or more of them within its plan outline and their median height ``INSIDE_BELOW_TOP_M`` or
+    more below its top (a book in a bookcase; a mat lying on a bed is at the bed's top)."""
+    import shapely
+
+    outline, _, z_hi = column
+    p = np.asarray(points_world_m, dtype=np.float64)
+    if outline.is_empty or float(np.median(p[:, 2])) > z_hi - INSIDE_BELOW_TOP_M:
+        return False
+    return float(np.mean(shapely.contains_xy(outline, p[:, 0], p[:, 1]))) >= 0.5
+
+
 def _thin(points_m: np.ndarray, spacing_m: float) -> np.ndarray:
     """One point per occupied ``spacing_m`` grid cell of (N, 3) points (the first, in input
     order: deterministic)."""
@@ -280,7 +300,16 @@ class ShapePriorGenerator:
         others_bottom = np.concatenate([np.full(len(t), np.percentile(o[:, 2], 2)) for t, o in zip(others_thin, others)]) if others else None
         own_tree = cKDTree(_thin(obj.points_world_m, OWNERSHIP_SPACING_M))
         walls = perception.room.walls
-        columns = [_column(o) for o in others]
+        # A shelf's column does not carve what stands inside it: books held in an open bookcase
+        # stand inside the bookcase's column, and carving them to it left each a sliver of its
+        # front face that toppled (promptda_arkit). A bed's or table's column still carves under
+        # what lies on it (a pillow lies below a headboard's height, on the bed, not in it).
+        columns = []
+        for o in perception.objects:
+            if o.name != obj.name:
+                c = _column(o.points_world_m)
+                if not (o.label in HOLDS_INSIDE and _inside_column(obj.points_world_m, c)):
+                    columns.append(c)
 
         def blocked(p_box: np.ndarray) -> np.ndarray:
             """Voxel centres this object may not fill: seen free space, behind a wall, or nearer

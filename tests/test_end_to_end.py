@@ -88,7 +88,7 @@ def test_an_open_bookcase_holds_its_books_on_boards_where_they_were_seen(tmp_pat
     are openings (measured 7-33 cm behind the face), not 16 doors and drawers; the bookcase is a
     frame with boards under the rows of books, and the books rest on them as interactive objects
     (before: 24 of its 30 perceived objects were static background, "nothing seen under it" or
-    "what is under it is another object's")."""
+    "what is under it is another object's"; then 7, five of them books toppling)."""
     from scene_builder.config import BuildConfig, ExportConfig, InputSpec
     from scene_builder.pipeline import build
 
@@ -103,5 +103,8 @@ def test_an_open_bookcase_holds_its_books_on_boards_where_they_were_seen(tmp_pat
     on_shelf = [p for p in result.layout.placements if p.support == shelf.name and not p.became_background]
     assert len(on_shelf) >= 15, [(p.name, p.reason) for p in result.layout.placements]
     assert result.verdict.max_penetration_m < 1e-3 and result.verdict.stable
+    # Measured: 1 of 30 background (a bottle with another's pad under it). Each book is whole
+    # (a shelf's column does not carve what stands in it; carved, 5 toppled) and the pushes end
+    # clear (two stacked books overlapping 15 mm were cut apart; before, 3 more background).
     background = [p for p in result.layout.placements if p.became_background]
-    assert len(background) <= len(result.layout.placements) // 3, [(p.name, p.reason) for p in background]
+    assert len(background) <= 2, [(p.name, p.reason) for p in background]

@@ -182,3 +182,24 @@ def test_a_shelf_prior_with_boards_puts_their_tops_at_the_given_heights():
     # without boards: evenly spaced, as before
     (body,) = prior_parts("shelf", (0.4, 2.0, 1.2), "particleboard", None, None, 12)
     assert len(body.geometry.solids) == 5 + 2
+
+
+def test_a_shelf_column_holds_what_stands_inside_it_but_not_what_lies_on_top_or_beside():
+    """promptda_arkit: carving each book to the bookcase's column (the space under another object's
+    top is that object's body) left slivers of their front faces that toppled. A thing inside a
+    shelf's plan outline and well below its top is held in it; one on its top or beside it is not."""
+    from generation.shape_prior import _column, _inside_column
+
+    rng = np.random.default_rng(0)
+    # a bookcase 0.3 m deep, 2 m wide, 2 m high: back panel, sides, boards' front edges
+    n = 2000
+    shelf = np.column_stack([rng.uniform(0.0, 0.3, n), rng.uniform(-1.0, 1.0, n), rng.uniform(0.0, 2.0, n)])
+    column = _column(shelf)
+
+    def thing(x, y, z):
+        return np.column_stack([rng.uniform(x, x + 0.03, 200), rng.uniform(y, y + 0.1, 200), rng.uniform(z, z + 0.2, 200)])
+
+    assert _inside_column(thing(0.05, 0.0, 0.8), column)  # a book on a board
+    assert not _inside_column(thing(0.05, 0.0, 2.0), column)  # a vase on the top
+    assert not _inside_column(thing(0.05, 1.2, 0.8), column)  # a lamp beside it
+    assert not _inside_column(thing(-0.5, 0.0, 0.8), column)  # a chair in front of it
