@@ -28,7 +28,7 @@ def write_texture(texture: Texture, out_dir: Path) -> str:
     path = Path(out_dir) / rel
     if not path.exists():
         path.parent.mkdir(parents=True, exist_ok=True)
-        Image.fromarray(np.ascontiguousarray(texture.image_rgb)).save(path, format="PNG", compress_level=6)
+        Image.fromarray(np.ascontiguousarray(texture.image_rgb)).save(path, format="PNG", compress_level=1)
     return rel
 
 

@@ -98,7 +98,15 @@ def complete_occupancy(
         occ |= occ[::-1, :, :]
     occ = ndimage.binary_closing(np.pad(occ, 1), iterations=1)[1:-1, 1:-1, 1:-1] | occ
     occ = ndimage.binary_fill_holes(occ)
-    stop = np.zeros(dims, dtype=bool) if blocked is None else np.asarray(blocked(centres), dtype=bool).reshape(dims)
+    stop = np.zeros(dims, dtype=bool)
+    if blocked is not None:
+        # Asked only where the occupancy can end up: in an occupied column, at or under its
+        # highest occupied voxel (filling down and carving touch nothing else). The same answer
+        # as asking everywhere, in a third to a half of the time.
+        any_col = occ.any(axis=2)
+        k_top = dims[2] - 1 - np.argmax(occ[:, :, ::-1], axis=2)
+        ask = (any_col[:, :, None] & (np.arange(dims[2])[None, None, :] <= k_top[:, :, None])).ravel()
+        stop.ravel()[ask] = np.asarray(blocked(centres[ask]), dtype=bool)
     if fill_down:
         # each occupied column is solid from its lowest occupied voxel down to the bottom of the
         # box, or to the first blocked voxel under it (another object's top, seen floor)

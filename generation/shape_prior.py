@@ -15,6 +15,7 @@ category's typical depth when the camera saw only a face (never through a wall),
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import replace
 
 import numpy as np
@@ -110,6 +111,17 @@ def _held(others_world_m, box_from_world: np.ndarray, size_m) -> list[tuple[floa
             y0, y1 = np.percentile(q[:, 1], [2, 98])
             held.append((float(z0), float(z1), float(y0), float(y1), float(np.percentile(q[:, 0], 98))))
     return held
+
+
+@functools.lru_cache(maxsize=64)
+def _ownership(obj: PerceivedObject) -> tuple[np.ndarray, float, tuple]:
+    """(points thinned to OWNERSHIP_SPACING_M, 2nd height percentile, :func:`_column`) of a
+    perceived object. Every object's completion looks at every other object: cached per object
+    (a frozen dataclass compared by identity), they are computed once per build, not n^2 times."""
+    p = obj.points_world_m
+    thin = _thin(p, OWNERSHIP_SPACING_M)
+    thin.flags.writeable = False
+    return thin, float(np.percentile(p[:, 2], 2)), _column(p)
 
 
 def _column(points_world_m: np.ndarray):
@@ -293,23 +305,21 @@ class ShapePriorGenerator:
             size = fit.size_m.copy()
 
         voxel_m = float(size.max()) / config.voxel_resolution
-        others_thin = [_thin(o, OWNERSHIP_SPACING_M) for o in others]
-        others_tree = cKDTree(np.concatenate(others_thin)) if others else None
+        owned = [_ownership(o) for o in perception.objects if o.name != obj.name]
+        others_tree = cKDTree(np.concatenate([t for t, _, _ in owned])) if others else None
         # Each thinned point's owner's bottom (2nd height percentile): hidden space below an
         # object's observed bottom is never that object's (it rests on what is there).
-        others_bottom = np.concatenate([np.full(len(t), np.percentile(o[:, 2], 2)) for t, o in zip(others_thin, others)]) if others else None
-        own_tree = cKDTree(_thin(obj.points_world_m, OWNERSHIP_SPACING_M))
+        others_bottom = np.concatenate([np.full(len(t), bottom) for t, bottom, _ in owned]) if others else None
+        own_tree = cKDTree(_ownership(obj)[0])
         walls = perception.room.walls
         # A shelf's column does not carve what stands inside it: books held in an open bookcase
         # stand inside the bookcase's column, and carving them to it left each a sliver of its
         # front face that toppled (promptda_arkit). A bed's or table's column still carves under
         # what lies on it (a pillow lies below a headboard's height, on the bed, not in it).
         columns = []
-        for o in perception.objects:
-            if o.name != obj.name:
-                c = _column(o.points_world_m)
-                if not (o.label in HOLDS_INSIDE and _inside_column(obj.points_world_m, c)):
-                    columns.append(c)
+        for o, (_, _, c) in zip((o for o in perception.objects if o.name != obj.name), owned):
+            if not (o.label in HOLDS_INSIDE and _inside_column(obj.points_world_m, c)):
+                columns.append(c)
 
         def blocked(p_box: np.ndarray) -> np.ndarray:
             """Voxel centres this object may not fill: seen free space, behind a wall, or nearer
@@ -321,10 +331,10 @@ class ShapePriorGenerator:
             for wall in walls:
                 out |= wall.signed_distance_m(p_world) < WALL_CLEARANCE_M + 0.5 * voxel_m
             if others_tree is not None:
-                d_own, _ = own_tree.query(p_world)
+                d_own, _ = own_tree.query(p_world, workers=2)  # (both cores: the queries are most of the time)
                 # Another object's surface matters only where it is nearer than this one's.
                 bound = float(d_own.max()) + voxel_m
-                d_other, idx = others_tree.query(p_world, distance_upper_bound=bound)
+                d_other, idx = others_tree.query(p_world, distance_upper_bound=bound, workers=2)
                 near = np.isfinite(d_other)
                 above = np.zeros(len(p_world), dtype=bool)
                 above[near] = p_world[near, 2] >= others_bottom[idx[near]] - 0.5 * voxel_m

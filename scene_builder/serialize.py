@@ -46,7 +46,7 @@ def _png_base64(image_rgb: np.ndarray) -> str:
     from PIL import Image
 
     buf = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(image_rgb)).save(buf, format="PNG", compress_level=6)
+    Image.fromarray(np.ascontiguousarray(image_rgb)).save(buf, format="PNG", compress_level=1)
     return base64.b64encode(buf.getvalue()).decode("ascii")
 
 
