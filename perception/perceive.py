@@ -9,6 +9,7 @@ import numpy as np
 
 from perception.backends import PerceptionRegistries, build_registries
 from perception.inputs import LoadedInput, check_depth, load_input
+from perception.lying_on import split_lying
 from perception.naming_prior import GeometricPriorNamer
 from perception.protocols import InstanceMasks
 from perception.room import RoomFrame, estimate_room, place_floor_under
@@ -277,14 +278,9 @@ def _merge_fragments(
     return [kept[i] for i in keep], [points_world[i] for i in keep], [names[i] for i in keep], len(gone)
 
 
-#: Labels whose object ends at its top surface.
+#: Labels whose object ends at its top surface (found by ``perception.lying_on.top_height``);
+#: points more than ABOVE_TOP_M above its height (depth noise, a top's lip) are not the table's.
 TOPPED = frozenset({"table", "desk"})
-#: A top is the highest TOP_BAND_M band of heights holding at least TOP_SHARE of the object's
-#: points, at least MIN_TOP_M above the floor; points more than ABOVE_TOP_M above its median
-#: height (depth noise, a top's lip) are not the table's.
-TOP_BAND_M = 0.06
-TOP_SHARE = 0.15
-MIN_TOP_M = 0.25
 ABOVE_TOP_M = 0.04
 
 
@@ -294,26 +290,20 @@ def _cut_above_tops(
     """A table or desk is what lies at and under its top: a detector's box and the cut in it take
     what rises behind (the partition panel behind an office desk, 60 cm over the desk top), and
     a table completed up to that height swallows what stands on it. The top is the highest dense
-    band of heights (:data:`TOP_SHARE` of the points within :data:`TOP_BAND_M`, at their median
-    height); the points more than :data:`ABOVE_TOP_M` above it leave the object's points and
+    band of heights (``perception.lying_on.top_height``); the points more than
+    :data:`ABOVE_TOP_M` above it leave the object's points and
     mask (they are background). Objects with no such band (a table seen edge-on) are unchanged.
     Returns the kept masks and pixels, the points and the number of objects cut."""
+    from perception.lying_on import top_height
+
     out_kept, out_points, cut = list(kept), list(points_world), 0
     for i, (label, pts) in enumerate(zip(labels, points_world)):
         if label not in TOPPED or len(pts) < 50:
             continue
         z = pts[:, 2]
-        step = TOP_BAND_M / 3
-        edges = np.arange(max(float(z.min()), MIN_TOP_M - step), float(z.max()) + step, step)
-        if len(edges) < 4:
+        top = top_height(z)  # the top surface's height
+        if top is None:
             continue
-        counts = np.histogram(z, bins=edges)[0]
-        band = counts[:-2] + counts[1:-1] + counts[2:]
-        dense = np.flatnonzero(band >= TOP_SHARE * len(z))
-        if not len(dense):
-            continue
-        lo, hi = edges[dense[-1]], edges[dense[-1] + 3]
-        top = float(np.median(z[(z >= lo) & (z <= hi)]))  # the top surface's height
         drop = z > top + ABOVE_TOP_M
         if not np.any(drop):
             continue
@@ -468,6 +458,9 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     kept, points_world, cut = _cut_above_tops(kept, points_world, [n for n, _ in names])
     if cut:
         backends.append(BackendUse("table-tops", "height-layers", f"{cut} tables or desks kept to their top: what rose above it (a partition behind a desk) is background"))
+    kept, points_world, names, pillows = split_lying(kept, points_world, names)
+    if pillows:
+        backends.append(BackendUse("lying-on", "height-layers", f"{pillows} pillows lying on a bed or sofa cut out of it as objects"))
     per_label: dict[str, int] = {}
     objects = []
     for object_id, ((mask, pix), points_w, (label, conf)) in enumerate(zip(kept, points_world, names), start=1):
