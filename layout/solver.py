@@ -19,7 +19,8 @@ Method
    stably: a rigid body's centre of mass 20 % of its footprint width inside the supporting face,
    a soft body's whole footprint on it (``support_region``).
 4. When the pushes stall (a table jammed between a shelf and a wall, two cabinets observed on one
-   small top), the lighter side of each pair still overlapping, and any body that its support
+   small top), what still overlaps is cut apart once more (``layout.trim``) and pushed again; then
+   the lighter side of each pair still overlapping, and any body that its support
    region holds inside a wall, goes to its nearest free spot (rings of candidate moves); with
    no room left on its support it comes down to the floor.
 Since every move is the minimum that removes a violation, the result is the nearest feasible
