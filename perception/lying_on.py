@@ -10,10 +10,9 @@ What lies on a mattress is found from the bed's own points:
 1. **the top**: :func:`top_height`, the highest dense band of heights (the mattress, a seat);
 2. **what rises a little above it**: points :data:`MIN_ABOVE_M` to :data:`MAX_ABOVE_M` above the
    top (a pillow is 10-25 cm high; the headboard goes on far higher), connected in the image;
-3. **lying on it**: enough of a blob's points stand over the top's plan outline, shrunk by
+3. **lying on it**: most of a blob's points stand over the top's plan outline, shrunk by
    :data:`INSET_M` (the headboard and the footboard stand at its edges, not over it), and the
-   blob is pillow-sized in plan; its points beyond the outline (the strip of headboard the
-   pillows touch in the image) stay the host's;
+   blob is pillow-sized in plan;
 4. **one per pillow**: a blob wider than :data:`SPLIT_WIDTH_M` (pillows side by side touch in the
    image) is split where its height profile dips between two pillows, near equal widths of
    :data:`PILLOW_WIDTH_M` (a bolster, with no dip, stays whole).
@@ -43,9 +42,6 @@ MAX_ABOVE_M = 0.35
 #: headboard's own lower strip 0.0).
 ON_TOP_SHARE = 0.4
 INSET_M = 0.05
-#: A blob's points more than BEYOND_M outside the top's outline are not the pillow's (the strip of
-#: headboard the pillows touch in the image: 28 % of one blob on sunrgbd_000002, 0.3 m behind).
-BEYOND_M = 0.03
 #: A pillow-sized blob: at least MIN_POINTS points and MIN_WIDTH_M wide, at most MAX_DEPTH_M deep
 #: (across its longer plan axis) and MAX_WIDTH_M wide.
 MIN_POINTS = 150
@@ -97,11 +93,9 @@ def lying_parts(pix: np.ndarray, points_world_m: np.ndarray) -> list[np.ndarray]
     on_top = np.abs(z - top) <= TOP_BAND_M / 2
     if np.count_nonzero(on_top) < 3:
         return []
-    hull = shapely.MultiPoint(pts[on_top, :2]).convex_hull
-    outline = hull.buffer(-INSET_M)
+    outline = shapely.MultiPoint(pts[on_top, :2]).convex_hull.buffer(-INSET_M)
     if outline.is_empty:
         return []
-    over = shapely.contains_xy(hull.buffer(BEYOND_M), pts[:, 0], pts[:, 1])
     rising = (z > top + MIN_ABOVE_M) & (z < top + MAX_ABOVE_M)
     image = np.zeros(pix.shape, dtype=bool)
     flat = np.flatnonzero(pix.ravel())
@@ -117,10 +111,6 @@ def lying_parts(pix: np.ndarray, points_world_m: np.ndarray) -> list[np.ndarray]
         p = pts[sel]
         if np.mean(shapely.contains_xy(outline, p[:, 0], p[:, 1])) < ON_TOP_SHARE:
             continue  # the headboard, the footboard, an arm: at the edge of the top, not on it
-        sel &= over  # the headboard's lower strip that the pillows touch in the image stays the bed's
-        if np.count_nonzero(sel) < MIN_POINTS:
-            continue
-        p = pts[sel]
         for part in _one_per_pillow(p):
             whole = np.zeros(len(pts), dtype=bool)
             whole[np.flatnonzero(sel)[part]] = True
