@@ -38,7 +38,7 @@ import numpy as np
 from scene_builder.frames import transform_points
 from scene_builder.model import Background, Camera, Observation, PerceivedObject, Plane, Texture, TriangleMesh
 
-__all__ = ["GRAZING_DEG", "GRAZING_DEPTH_RATIO", "MAX_NODES", "MAX_DEPTH_RATIO", "fill_depth_behind", "grid_stride", "observed_background", "plane_labels", "stretched_faces"]
+__all__ = ["GRAZING_DEG", "GRAZING_DEPTH_RATIO", "MAX_NODES", "MAX_DEPTH_RATIO", "fill_depth_behind", "grid_stride", "observed_background", "plane_depths", "plane_labels", "stretched_faces"]
 
 #: The grid has at most about this many nodes (one per ``stride`` x ``stride`` pixels).
 MAX_NODES = 100_000
@@ -67,7 +67,7 @@ def grid_stride(width_px: int, height_px: int, max_nodes: int = MAX_NODES) -> in
     return max(1, int(np.ceil(np.sqrt(width_px * height_px / float(max_nodes)))))
 
 
-def _plane_depths(rays_cam: np.ndarray, camera: Camera, planes: list[Plane]) -> np.ndarray:
+def plane_depths(rays_cam: np.ndarray, camera: Camera, planes: list[Plane]) -> np.ndarray:
     """(P, N) planar depth at which each of the (N, 3) camera rays (z = 1) meets each plane
     (inf when it does not, or behind the camera). Rays are scaled so planar depth = ray length
     factor."""
@@ -114,7 +114,7 @@ def fill_depth_behind(
     if len(idx) == 0:
         return out
     planes = [FLOOR, *walls]
-    t = _plane_depths(rays_cam.reshape(-1, 3)[idx], camera, planes)  # (P, n)
+    t = plane_depths(rays_cam.reshape(-1, 3)[idx], camera, planes)  # (P, n)
     t_floor = t[0].copy()
     low = lower_m.reshape(-1)[idx]
     t = np.where(t > low[None, :], t, np.inf)
@@ -207,7 +207,7 @@ def plane_labels(points_world_m: np.ndarray, depth_m: np.ndarray, rays_cam: np.n
     out[on] = best[on]
     none = (depth_m <= 0) & ~hidden
     if np.any(none):
-        t = _plane_depths(rays_cam[none], camera, planes)
+        t = plane_depths(rays_cam[none], camera, planes)
         first = np.argmin(t, axis=0)
         ok = np.isfinite(t.min(axis=0)) & (t.min(axis=0) <= cap_m)
         idx = np.full(first.shape, -1)
@@ -289,7 +289,7 @@ def observed_background(
     uu, vv = np.meshgrid(u, v)
     rays = np.stack([(uu - k.cx_px) / k.fx_px, (vv - k.cy_px) / k.fy_px, np.ones_like(uu)], axis=-1)
     filled = fill_depth_behind(np.where(valid, node_depth, 0.0), need, lower, rays, camera, tuple(planes[1:]), footprint)
-    t_planes = _plane_depths(rays.reshape(-1, 3), camera, planes).reshape(len(planes), nv, nu)
+    t_planes = plane_depths(rays.reshape(-1, 3), camera, planes).reshape(len(planes), nv, nu)
     # Observed nodes on a room plane lie on it exactly (the plane is the fit of many noisy points).
     node_shown = shown[np.ix_(vi, ui)]
     snap = valid & ~node_obj & (node_shown >= 0)
@@ -410,11 +410,11 @@ def _tuck_stretched(verts, faces, uv, observed, rays, depth, camera: Camera, fla
         on = np.repeat(plane_of[far_node], 3)
         for k in np.unique(on[on >= 0]):
             sel = on == k
-            t = _plane_depths(r[sel], camera, [planes[int(k)]])[0]
+            t = plane_depths(r[sel], camera, [planes[int(k)]])[0]
             new_depth[sel] = np.where(np.isfinite(t) & (t >= depth[sf.ravel()][sel]), t, new_depth[sel])
     # Not pushed under the floor: a near floor node tucked back to a far corner's depth stops
     # where its ray meets the floor.
-    new_depth = np.minimum(new_depth, _plane_depths(r, camera, [FLOOR])[0])
+    new_depth = np.minimum(new_depth, plane_depths(r, camera, [FLOOR])[0])
     new_cam = r * new_depth[:, None]
     new_verts = transform_points(camera.world_from_camera, new_cam)
     faces = faces.copy()

@@ -233,6 +233,8 @@ def _recess_m(px: np.ndarray, world: np.ndarray, depth_m: np.ndarray, camera: Ca
     its centre, away from the frame around it) lies behind the face plane; 0 without valid depth."""
     from skimage.draw import polygon
 
+    from perception.background import plane_depths
+
     c = px.mean(axis=0)
     inner = c + 0.6 * (px - c)
     rr, cc = polygon(inner[:, 1], inner[:, 0], depth_m.shape)
@@ -241,14 +243,15 @@ def _recess_m(px: np.ndarray, world: np.ndarray, depth_m: np.ndarray, camera: Ca
     if np.count_nonzero(ok) < 10:
         return 0.0
     rr, cc, d = rr[ok], cc[ok], d[ok]
-    # the face plane's depth on each pixel's ray: z = n.(p0 - o) / n.(R K^-1 [u, v, 1])
+    normal = np.cross(world[1] - world[0], world[3] - world[0])
+    normal /= np.linalg.norm(normal)
+    if normal @ (camera.position_m - world[0]) < 0:
+        normal = -normal  # toward the camera, as plane_depths wants a wall's
     k = camera.intrinsics
     rays_cam = np.column_stack([(cc - k.cx_px) / k.fx_px, (rr - k.cy_px) / k.fy_px, np.ones(len(rr))])
-    rot = camera.world_from_camera[:3, :3]
-    normal = np.cross(world[1] - world[0], world[3] - world[0])
-    denom = (rays_cam @ rot.T) @ normal
-    plane_z = np.where(np.abs(denom) > 1e-9, float(normal @ (world[0] - camera.position_m)) / np.where(denom == 0, 1.0, denom), np.nan)
-    return float(np.nanmedian(d - plane_z)) if np.any(np.isfinite(plane_z)) else 0.0
+    plane_z = plane_depths(rays_cam, camera, [Plane(normal, -float(normal @ world[0]), "wall")])[0]
+    seen = np.isfinite(plane_z)
+    return float(np.median(d[seen] - plane_z[seen])) if np.any(seen) else 0.0
 
 
 def _area(f: Front) -> float:
