@@ -217,7 +217,8 @@ class ShapePriorGenerator:
         label = obj.label
         cat = category(label)
         cam_world = perception.camera.position_m
-        others = [o.points_world_m for o in perception.objects if o.name != obj.name]
+        other_objects = [o for o in perception.objects if o.name != obj.name]
+        others = [o.points_world_m for o in other_objects]
         snap_m = floor_snap_height_m(obj.points_world_m, others)
         # The plan orientation of large furniture follows the category's proportions (a sofa
         # seen end-on), unless fronts seen on a face say which face is the front.
@@ -305,7 +306,7 @@ class ShapePriorGenerator:
             size = fit.size_m.copy()
 
         voxel_m = float(size.max()) / config.voxel_resolution
-        owned = [_ownership(o) for o in perception.objects if o.name != obj.name]
+        owned = [_ownership(o) for o in other_objects]
         others_tree = cKDTree(np.concatenate([t for t, _, _ in owned])) if others else None
         # Each thinned point's owner's bottom (2nd height percentile): hidden space below an
         # object's observed bottom is never that object's (it rests on what is there).
@@ -317,7 +318,7 @@ class ShapePriorGenerator:
         # front face that toppled (promptda_arkit). A bed's or table's column still carves under
         # what lies on it (a pillow lies below a headboard's height, on the bed, not in it).
         columns = []
-        for o, (_, _, c) in zip((o for o in perception.objects if o.name != obj.name), owned):
+        for o, (_, _, c) in zip(other_objects, owned):
             if not (o.label in HOLDS_INSIDE and _inside_column(obj.points_world_m, c)):
                 columns.append(c)
 
