@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["top_height", "split_lying", "lying_parts", "HOSTS"]
+__all__ = ["top_height", "split_lying", "lying_parts", "without_points", "HOSTS"]
 
 #: A top is the highest TOP_BAND_M band of heights holding at least TOP_SHARE of the object's
 #: points, at least MIN_TOP_M above the floor.
@@ -150,7 +150,18 @@ def _one_per_pillow(p: np.ndarray) -> list[np.ndarray]:
             if len(left) and len(right) and height[k] <= min(left.max(), right.max()) - VALLEY_M:
                 cuts.append(float(centres[k]))  # a dip between two pillows (a bolster has none)
     edges = [-np.inf, *cuts, np.inf]
-    return [(along >= a) & (along < b) for a, b in zip(edges[:-1], edges[1:]) if np.count_nonzero((along >= a) & (along < b)) >= MIN_POINTS]
+    segments = [(along >= a) & (along < b) for a, b in zip(edges[:-1], edges[1:])]
+    return [s for s in segments if np.count_nonzero(s) >= MIN_POINTS]
+
+
+def without_points(mask: np.ndarray, pix: np.ndarray, points: np.ndarray, drop: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
+    """An object's (mask, pixels with points) and points (raster order) without the points
+    ``drop`` (N,) bool selects and their pixels (new arrays; the inputs are left as they are)."""
+    idx = np.flatnonzero(pix.ravel())[drop]
+    mask, pix = mask.copy(), pix.copy()
+    mask.ravel()[idx] = False
+    pix.ravel()[idx] = False
+    return (mask, pix), points[~drop]
 
 
 def split_lying(
@@ -170,7 +181,6 @@ def split_lying(
         if not parts:
             continue
         flat = np.flatnonzero(pix.ravel())
-        host_mask, host_pix = mask.copy(), pix.copy()
         taken = np.zeros(len(pts), dtype=bool)
         for sel in parts:
             part_pix = np.zeros_like(pix)
@@ -180,7 +190,5 @@ def split_lying(
             out_names.append(("pillow", confidence))
             taken |= sel
             added += 1
-        host_mask.ravel()[flat[taken]] = False
-        host_pix.ravel()[flat[taken]] = False
-        out_kept[i], out_points[i] = (host_mask, host_pix), pts[~taken]
+        out_kept[i], out_points[i] = without_points(mask, pix, pts, taken)
     return out_kept, out_points, out_names, added

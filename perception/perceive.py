@@ -9,7 +9,7 @@ import numpy as np
 
 from perception.backends import PerceptionRegistries, build_registries
 from perception.inputs import LoadedInput, check_depth, load_input
-from perception.lying_on import split_lying
+from perception.lying_on import split_lying, top_height, without_points
 from perception.naming_prior import GeometricPriorNamer
 from perception.protocols import InstanceMasks
 from perception.room import RoomFrame, estimate_room, place_floor_under
@@ -294,8 +294,6 @@ def _cut_above_tops(
     :data:`ABOVE_TOP_M` above it leave the object's points and
     mask (they are background). Objects with no such band (a table seen edge-on) are unchanged.
     Returns the kept masks and pixels, the points and the number of objects cut."""
-    from perception.lying_on import top_height
-
     out_kept, out_points, cut = list(kept), list(points_world), 0
     for i, (label, pts) in enumerate(zip(labels, points_world)):
         if label not in TOPPED or len(pts) < 50:
@@ -307,12 +305,7 @@ def _cut_above_tops(
         drop = z > top + ABOVE_TOP_M
         if not np.any(drop):
             continue
-        mask, pix = kept[i]
-        idx = np.flatnonzero(pix.ravel())[drop]
-        pix, mask = pix.copy(), mask.copy()
-        pix.ravel()[idx] = False
-        mask.ravel()[idx] = False
-        out_kept[i], out_points[i] = (mask, pix), pts[~drop]
+        out_kept[i], out_points[i] = without_points(*kept[i], pts, drop)
         cut += 1
     return out_kept, out_points, cut
 
