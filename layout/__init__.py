@@ -8,11 +8,12 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-__all__ = ["adopt_settled", "make_background", "reseat_objects", "reseatable", "settled_scene", "solve_layout", "unstable_objects", "verify_scene"]
+__all__ = ["adopt_settled", "make_background", "reseat_objects", "reseatable", "settled_scene", "settled_together", "solve_layout", "unstable_objects", "verify_scene"]
 
 if TYPE_CHECKING:  # pragma: no cover
     from layout.solver import solve_layout
-    from layout.verify import adopt_settled, make_background, reseat_objects, reseatable, settled_scene, unstable_objects, verify_scene
+    from layout.repair import adopt_settled, make_background, reseat_objects, reseatable, settled_scene, settled_together, unstable_objects
+    from layout.verify import verify_scene
 
 
 def __getattr__(name: str):
@@ -20,8 +21,12 @@ def __getattr__(name: str):
         from layout.solver import solve_layout
 
         return solve_layout
-    if name in ("verify_scene", "adopt_settled", "settled_scene", "unstable_objects", "make_background", "reseat_objects", "reseatable"):
-        from layout import verify
+    if name == "verify_scene":
+        from layout.verify import verify_scene
 
-        return getattr(verify, name)
+        return verify_scene
+    if name in ("adopt_settled", "settled_scene", "unstable_objects", "make_background", "reseat_objects", "reseatable", "settled_together"):
+        from layout import repair
+
+        return getattr(repair, name)
     raise AttributeError(f"module 'layout' has no attribute {name!r}")
