@@ -8,11 +8,11 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-__all__ = ["adopt_settled", "make_background", "reseat_objects", "reseatable", "settled_scene", "settled_together", "solve_layout", "unstable_objects", "verify_scene"]
+__all__ = ["adopt_settled", "knocked", "make_background", "reseat_objects", "reseatable", "settled_scene", "settled_together", "solve_layout", "unstable_objects", "verify_scene"]
 
 if TYPE_CHECKING:  # pragma: no cover
     from layout.solver import solve_layout
-    from layout.repair import adopt_settled, make_background, reseat_objects, reseatable, settled_scene, settled_together, unstable_objects
+    from layout.repair import adopt_settled, knocked, make_background, reseat_objects, reseatable, settled_scene, settled_together, unstable_objects
     from layout.verify import verify_scene
 
 
@@ -25,7 +25,7 @@ def __getattr__(name: str):
         from layout.verify import verify_scene
 
         return verify_scene
-    if name in ("adopt_settled", "settled_scene", "unstable_objects", "make_background", "reseat_objects", "reseatable", "settled_together"):
+    if name in ("adopt_settled", "knocked", "settled_scene", "unstable_objects", "make_background", "reseat_objects", "reseatable", "settled_together"):
         from layout import repair
 
         return getattr(repair, name)

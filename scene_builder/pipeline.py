@@ -186,7 +186,7 @@ def build(
     # Stages are imported here, not at module level, so `scene-builder --help` stays instant.
     from exporters import export_scene, record_scene, write_mjcf
     from generation import generate_assets
-    from layout import make_background, reseat_objects, reseatable, settled_scene, settled_together, solve_layout, unstable_objects, verify_scene
+    from layout import knocked, make_background, reseat_objects, reseatable, settled_scene, settled_together, solve_layout, unstable_objects, verify_scene
     from perception import perceive
     from perception.inputs import check_paths
     from scene_builder.report import build_report, write_report
@@ -227,11 +227,14 @@ def build(
             last = round_ == UNSTABLE_ROUNDS - 1  # the last round re-seats nothing: it must end at rest
             reseat = {} if last else {n: r for n, r in reseatable(verdict, unstable, scene).items() if reseated.get(n, 0) < RESEAT_TIMES}
             give_up = {n: r for n, r in unstable.items() if n not in reseat}
-            with log.stage("unstable repaired", lambda: f"{len(reseat)} re-seated, {len(give_up)} to background; {_verdict_summary(verdict)}"):
+            # What only fell because one of those fell onto it is checked again with that one held.
+            held = set() if last else knocked(verdict, scene, set(give_up), set(give_up))
+            give_up = {n: r for n, r in give_up.items() if n not in held}
+            with log.stage("unstable repaired", lambda: f"{len(reseat)} re-seated, {len(give_up)} to background, {len(held)} checked again; {_verdict_summary(verdict)}"):
                 if reseat:
                     # What came to rest against them moves with them (stable itself: within the
                     # drift bounds), so the group keeps the contacts it settled into.
-                    together = settled_together(scene, verdict, set(reseat), set(give_up))
+                    together = settled_together(scene, verdict, set(reseat), set(give_up) | held)
                     with_them = {n: "moved with the objects re-seated beside it, where they came to rest together" for n in together}
                     layout = reseat_objects(layout, verdict, {**reseat, **with_them})
                     for n in reseat:

@@ -97,3 +97,30 @@ def test_neighbours_that_settled_against_a_reseated_object_move_with_it(tmp_path
     together = settled_together(scene, verdict, {"hanging"}, {"stays"})
     assert together == {"beside", "chained"}  # chained: 1 cm from beside, in turn
     assert settled_together(scene, verdict, set(), set()) == set()
+
+
+def test_a_box_knocked_over_by_a_falling_board_gets_another_check(tmp_path):
+    from layout import knocked, make_background, unstable_objects
+    from scene_builder.model import LayoutResult, Placement
+
+    # A 2 m board leaning 10 degrees towards a tall box 0.5 m away falls onto it; a third box hangs
+    # 5 cm up far from both and drops at once (it moves first: nothing knocked it).
+    a = np.radians(10.0)
+    lean = np.array([[np.cos(a), 0.0, np.sin(a)], [0.0, 1.0, 0.0], [-np.sin(a), 0.0, np.cos(a)]])
+    board = PlacedObject(box_asset("board", (0.04, 0.6, 2.0)), pose(lean, (0.02 * np.cos(a), 0.0, 0.02 * np.sin(a))), "floor")
+    box = _on("box", (0.15, 0.3, 0.9), (0.6, 0.0, 0.0))  # tall and light: pushed over when hit
+    drop = _on("drop", (0.3, 0.3, 0.3), (0.0, 2.0, 0.05))
+    scene = _scene([board, box, drop])
+    config = LayoutConfig(settle_s=1.5)
+    from layout import verify_scene
+
+    verdict, _ = verify_scene(write_fixture_mjcf(scene, tmp_path / "k.xml"), scene, config)
+    unstable = unstable_objects(verdict, scene, config)
+    assert {"board", "box", "drop"} <= set(unstable)
+    assert knocked(verdict, scene, set(unstable), set(unstable)) == {"box"}
+    assert knocked(verdict, scene, set(unstable), {"drop"}) == set()  # only the board fell onto it
+    # With the board made background where it was seen, the box stands.
+    placements = tuple(Placement(o.name, 0.0, 0.0, o.support, False, "") for o in scene.objects)
+    layout = make_background(LayoutResult(scene=scene, support=(), placements=placements), {"board": "toppled", "drop": "fell"})
+    again, _ = verify_scene(write_fixture_mjcf(layout.scene, tmp_path / "k2.xml"), layout.scene, config)
+    assert {v.name: v.drift_m for v in again.objects}["box"] < 0.002
