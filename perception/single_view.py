@@ -410,7 +410,7 @@ class SingleViewDepth:
 
         depth = np.where(floor, np.minimum(floor_z, room), np.where(obj, obj_z, room))
         for b in placed:  # detected objects: where a ray meets the cuboid before the room
-            hit = self._cuboid_depth(b, rays, down, r_fwd, cam_h, h, w)
+            hit = self._cuboid_depth(b, rays, down, r_fwd, r_right, cam_h, h, w)
             depth = np.where(np.isfinite(hit) & (hit < depth), hit, depth)
         self.last_objects = tuple(placed)
         depth = np.where(np.isfinite(depth) & (depth > 0), depth, self.max_depth_m)
@@ -481,23 +481,34 @@ class SingleViewDepth:
         return cam_h
 
     @staticmethod
-    def _cuboid_depth(b: "PlacedBox", rays: np.ndarray, down: np.ndarray, r_fwd: np.ndarray, cam_h: float,
-                      h: int, w: int) -> np.ndarray:
+    def _cuboid_depth(b: "PlacedBox", rays: np.ndarray, down: np.ndarray, r_fwd: np.ndarray, r_right: np.ndarray,
+                      cam_h: float, h: int, w: int) -> np.ndarray:
         """(H, W) depth where the rays inside the object's box meet its cuboid (front face at
-        ``front_m``, ``depth_m`` deep, ``height_m`` high, standing on the floor), inf elsewhere."""
+        ``front_m``, ``depth_m`` deep, ``height_m`` high, standing on the floor), inf elsewhere.
+        The cuboid is as wide as its front face (the box's bottom corners at the front distance,
+        unbounded on a side where the box runs out of the image): the image box of a cuboid is
+        its front's width all the way up, but its top and back recede and narrow in the image,
+        so a ray through the box's upper corners passes beside it (a bed 1.6 m wide otherwise
+        grew to 2.4 m at its back)."""
         out = np.full((h, w), np.inf)
         u0, v0, u1, v1 = b.box_px
         sl = (slice(int(v0), int(np.ceil(v1)) + 1), slice(int(u0), int(np.ceil(u1)) + 1))
-        f, d = r_fwd[sl], down[sl]
+        f, d, r = r_fwd[sl], down[sl], r_right[sl]
         front, back = b.front_m, b.back_m
+        vb = min(int(round(v1)), h - 1)
+        ua, ub = int(np.clip(round(u0), 0, w - 1)), int(np.clip(round(u1), 0, w - 1))
+        left = -np.inf if u0 <= 1.0 else front * r_right[vb, ua] / r_fwd[vb, ua]
+        right = np.inf if u1 >= w - 2.0 else front * r_right[vb, ub] / r_fwd[vb, ub]
         with np.errstate(divide="ignore", invalid="ignore"):
             t_front = front / f
             hgt = cam_h - t_front * d
             t_top = np.where(d > 1e-6, (cam_h - b.height_m) / d, np.inf)
-            on_top = (hgt > b.height_m) & (t_top * f >= front) & (t_top * f <= back)
+            beside_top = (t_top * r < left) | (t_top * r > right)
+            on_top = (hgt > b.height_m) & (t_top * f >= front) & (t_top * f <= back) & ~beside_top
             t_back = back / f
             hgt_back = cam_h - t_back * d
-            on_back = (hgt > b.height_m) & ~on_top & (hgt_back >= 0) & (hgt_back <= b.back_height_m)
+            beside_back = (t_back * r < left) | (t_back * r > right)
+            on_back = (hgt > b.height_m) & ~on_top & (hgt_back >= 0) & (hgt_back <= b.back_height_m) & ~beside_back
         z = np.where((hgt >= 0) & (hgt <= b.height_m), t_front, np.where(on_top, t_top, np.where(on_back, t_back, np.inf)))
         out[sl] = z
         return out

@@ -151,6 +151,36 @@ def test_camera_height_from_an_object_of_known_height():
     assert est._camera_height([cut], rays, down, g) == pytest.approx(1.3) and est.last_scale_note is None
 
 
+def test_a_detected_cuboid_is_as_wide_as_its_front():
+    """A bed's image box is as wide as its front all the way up, but its top recedes and narrows
+    in the image: the depth of the box's upper corners is not the bed's (it was, and the bed grew
+    from 1.6 m wide at its foot to 2.4 m at its head)."""
+    from perception.single_view import PlacedBox
+
+    f, w, h = 500.0, 640, 480
+    cx, cy = (w - 1) / 2, (h - 1) / 2
+    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    rays = np.stack([(u - cx) / f, (v - cy) / f, np.ones_like(u)], axis=-1)
+    g = np.array([0.0, 1.0, 0.0])  # a level camera 1.3 m above the floor
+    down, r_fwd, r_right = rays @ g, rays[..., 2], rays[..., 0]
+    cam_h, front = 1.3, 2.0
+    # The front face, 1.6 m wide, spans columns cx -/+ f * 0.8 / 2; its foot is the box's bottom row.
+    u0, u1, v1 = cx - f * 0.8 / front, cx + f * 0.8 / front, cy + f * cam_h / front
+    bed = PlacedBox("bed", (u0, cy + 25.0, u1, v1), 1.0, front, 2.0, 0.6, False, False, 1.1)  # top: the headboard's
+    depth = SingleViewDepth._cuboid_depth(bed, rays, down, r_fwd, r_right, cam_h, h, w)
+    hit = np.isfinite(depth)
+    lateral = (depth * r_right)[hit]
+    assert lateral.min() == pytest.approx(-0.8, abs=0.01) and lateral.max() == pytest.approx(0.8, abs=0.01)
+    assert (depth * r_fwd)[hit].max() == pytest.approx(4.0, abs=0.01)  # the headboard, 2 m behind the front
+    # The box's upper corners look past the head of the bed.
+    assert not hit[int(cy) + 30, int(u0) + 2] and not hit[int(cy) + 30, int(u1) - 2]
+    assert hit[int(cy) + 30, int(cx)]
+    # A box running out of the image on the left is not bounded there.
+    cut = PlacedBox("bed", (0.0, cy + 25.0, u1, v1), 1.0, front, 2.0, 0.6, False, False, 1.1)
+    wide = SingleViewDepth._cuboid_depth(cut, rays, down, r_fwd, r_right, cam_h, h, w)
+    assert np.isfinite(wide[int(cy) + 30, 2])
+
+
 @pytest.mark.slow
 def test_detected_beds_stand_on_the_floor():
     """With the COCO detector the beds of the SUN RGB-D bedroom photos become cuboids standing on
