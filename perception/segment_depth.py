@@ -47,7 +47,11 @@ _LAYER_BIN_M = 0.01
 def _voxelize(points: np.ndarray, voxel_m: float) -> tuple[np.ndarray, np.ndarray]:
     """(M, 3) voxel centroids and (N,) voxel index of each of the (N, 3) points."""
     keys = np.floor(points / voxel_m).astype(np.int64)
-    _, inverse = np.unique(keys, axis=0, return_inverse=True)
+    keys -= keys.min(axis=0) if len(keys) else 0
+    dims = keys.max(axis=0) + 1 if len(keys) else np.ones(3, dtype=np.int64)
+    # One int64 per voxel, ordered as the rows are lexicographically: a 1-D sort, 5x faster than
+    # np.unique(axis=0)'s row sort (0.8 s of a 23 s build of emsanet_sample), the same voxels.
+    _, inverse = np.unique((keys[:, 0] * dims[1] + keys[:, 1]) * dims[2] + keys[:, 2], return_inverse=True)
     inverse = inverse.reshape(-1)
     counts = np.bincount(inverse)
     centroids = np.stack([np.bincount(inverse, weights=points[:, i]) for i in range(3)], axis=1) / counts[:, None]

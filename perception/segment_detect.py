@@ -250,7 +250,9 @@ class DetectionSegmenter:
         sem: SemanticMap | None = self.semantic.backend.segment_classes(rgb) if self.semantic is not None else None
         sem_labels = None
         if sem is not None:
-            lut = np.asarray(sem.labels, dtype=object)
+            # Fixed-width strings, not Python objects: comparing and sorting them per pixel is
+            # 5x faster (np.unique over the map was 0.6 s of emsanet_sample's perception).
+            lut = np.asarray([str(v) for v in sem.labels])
             sem_labels = lut[np.clip(sem.classes, 0, len(lut) - 1)]
         clusters = np.asarray(self.geometry.segment(rgb, depth_m, intrinsics, background, up_cam=up_cam).labels)
         cluster_sizes = np.bincount(clusters.ravel())
