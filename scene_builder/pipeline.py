@@ -164,6 +164,15 @@ def default_out_dir(image_path: Path) -> Path:
     return Path(f"{Path(image_path).stem}_scene")
 
 
+def _final_check(scene, config: BuildConfig, last_round: bool):
+    """Whether a physics check of ``scene`` is the build's last (its render-and-compare is then
+    needed): the last settle round's, or one that finds nothing unstable; with
+    ``adopt_settled`` the settled scene is checked once more after the rounds."""
+    from layout import unstable_objects
+
+    return lambda verdict: not config.layout.adopt_settled and (last_round or not unstable_objects(verdict, scene, config.layout))
+
+
 def build(
     inputs: InputSpec,
     out_dir: Path,
@@ -214,7 +223,7 @@ def build(
             mjcf_path = write_mjcf(scene, staging)
         with log.live("physics check", lambda: _verdict_summary(verdict)) as step:
             step(f"{config.layout.settle_s:g} s of simulation, then render-and-compare")
-            verdict, fidelity = verify_scene(mjcf_path, scene, config.layout, perceived)
+            verdict, fidelity = verify_scene(mjcf_path, scene, config.layout, perceived, fidelity_when=_final_check(scene, config, False))
         first_verdict = verdict  # before any object became background in the settle rounds
         reseated: dict[str, int] = {}  # how often each object was re-seated (at most RESEAT_TIMES)
         for round_ in range(UNSTABLE_ROUNDS):
@@ -244,7 +253,8 @@ def build(
                 scene = layout.scene
                 shutil.rmtree(staging / "meshes", ignore_errors=True)  # the old objects' meshes
                 mjcf_path = write_mjcf(scene, staging)
-                verdict, fidelity = verify_scene(mjcf_path, scene, config.layout, perceived)
+                verdict, fidelity = verify_scene(mjcf_path, scene, config.layout, perceived,
+                                                 fidelity_when=_final_check(scene, config, round_ + 1 == UNSTABLE_ROUNDS))
         if config.layout.adopt_settled:
             with log.live("adopt settled", lambda: _verdict_summary(verdict)) as step:
                 step("re-checking the settled poses")

@@ -199,6 +199,24 @@ def test_render_and_compare_matches_independent_raycast(tmp_path):
     assert fid2.depth_absrel > fid.depth_absrel
 
 
+def test_renders_only_when_asked_and_from_the_start_pose(tmp_path):
+    """A check whose scene will be repaired skips its renders; asked for, the t = 0 render is of
+    the start pose although it is made after the settle (a box dropped from 30 cm renders where
+    it started, and after the settle where it landed)."""
+    from layout import verify_scene
+
+    scene = _scene([_placed("drop", (0.4, 0.4, 0.4), (0.2, 0.0, 0.3))])
+    perception = _raycast_perception(scene)
+    path = write_fixture_mjcf(scene, tmp_path / "f.xml")
+    cfg = LayoutConfig(settle_s=0.5)
+    seen = []
+    verdict, none = verify_scene(path, scene, cfg, perception, fidelity_when=lambda v: seen.append(v) or False)
+    assert none is None and seen == [verdict] and verdict.settle_max_drift_m > 0.25
+    _, fid = verify_scene(path, scene, cfg, perception, fidelity_when=lambda v: True)
+    assert fid.depth_absrel < 0.02 and fid.mask_iou_mean > 0.85  # where it was seen
+    assert fid.depth_absrel_settled > 0.02  # after it fell
+
+
 def test_missing_body_is_an_export_error(tmp_path):
     from layout import verify_scene
     from scene_builder.errors import ExportError
