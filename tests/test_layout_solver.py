@@ -248,6 +248,14 @@ def test_fixed_furniture_does_not_move_and_walls_push_out():
     # Cut at the wall: 15 of its 30 cm of collision depth are left, on the room side.
     v = np.concatenate(_world_pieces(placed["in_wall"]))
     assert np.ptp(v[:, 0]) == pytest.approx(0.15 - CFG.clearance_m, abs=1e-6)
+    # Built-in furniture completed 2 cm into the wall it stands against is cut at it too (it
+    # cannot move, but it overlapped the wall), where it stands.
+    run = box_asset("run", (0.6, 1.0, 0.9), label="counter", fixed=True)
+    result, _ = solve_layout_with_stats(empty_perception(walls), (_gen(run, (-0.72, 0.0, 0.0)),), CFG)
+    v = np.concatenate(_world_pieces(result.scene.objects[0]))
+    assert walls[0].signed_distance_m(v).min() >= CFG.clearance_m - 1e-4
+    assert v[:, 0].max() == pytest.approx(-0.72 + 0.3)  # its front where it stood
+    assert result.max_penetration_after_m < 1e-5 and not result.placements[0].became_background
     # A part wholly behind a wall is not cut to nothing: that object is wall (a picture, a door).
     behind = box_asset("behind", (0.2, 0.2, 0.3))
     result, _ = solve_layout_with_stats(empty_perception(walls), (_gen(behind, (-1.2, 0.0, 0.0)),), CFG)
