@@ -16,7 +16,9 @@ from scene_builder.model import AssetKind, LayoutResult, ObjectVerdict, PhysicsV
 from layout.snapping import asset_bounds
 from layout.verify import DEFORMABLE_SAG_FRACTION
 
+
 def _body_pose(t: Trajectory, k: int) -> np.ndarray:
+    """(4, 4) world pose of a trajectory's body at sample ``k``."""
     return pose(matrix_from_quat_wxyz(t.quats_wxyz[k]), t.positions_m[k])
 
 
@@ -227,7 +229,6 @@ def make_background(layout: LayoutResult, reasons: dict[str, str]) -> LayoutResu
     """``layout`` with the objects named in ``reasons`` made part of the static background where
     they are (``layout.background.absorb``); what rested on them now rests on the background.
     Their placements say why (the reason, then "kept where seen as static background")."""
-
     from layout.background import absorb
 
     scene = layout.scene
