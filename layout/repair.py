@@ -145,10 +145,9 @@ def settled_together(scene: Scene, verdict: PhysicsVerdict, reseat: set[str], st
     seen poses, which the settle did not check (a bed that settled 4 cm, re-seated, reaching
     2 mm into the night stand left where it was seen); the group keeps the contacts it settled
     into. ``stay``: objects that keep their poses (those becoming background)."""
-    tracks = {t.name for t in verdict.trajectories}
-    fixed = {v.name for v in verdict.objects if v.fixed}
+    moving = {t.name for t in verdict.trajectories}  # fixed furniture has no trajectory
     boxes = {o.name: _world_box(asset_bounds(o.asset), o.world_from_asset) for o in settled_scene(scene, verdict).objects}
-    free = [n for n in sorted(boxes) if n in tracks and n not in fixed and n not in reseat and n not in stay]
+    free = [n for n in sorted(boxes) if n in moving and n not in reseat and n not in stay]
     group, added = set(reseat), set()
     grew = True
     while grew:
