@@ -36,6 +36,13 @@ PLAN_ANISOTROPY = 1.5
 #: ... when the two ways of reading them differ by more than this (squared log-size units: the
 #: sofa seen end-on scores 2.9 one way, 0.3 the other).
 PLAN_SWAP_MARGIN = 0.5
+#: Points spanning at most this share of their width in depth are one seen face (a microwave's
+#: door, a cabinet's front) ...
+FACE_DEPTH_SHARE = 0.2
+#: ... and a face this near a wall (its nearest 10 % of points, m) ...
+FACE_NEAR_WALL_M = 0.6
+#: ... turned at most this far from it (degrees) stands parallel to that wall (:func:`fit_box`).
+FACE_TO_WALL_MAX_DEG = 35.0
 
 
 def plan_fit_cost(depth_m: float, width_m: float, typical_depth_m: float, typical_width_m: float) -> float:
@@ -100,6 +107,7 @@ def fit_box(
     floor_snap_m: float = 0.05,
     min_size_m: float = 0.01,
     typical_size_m: tuple[float, float, float] | None = None,
+    walls=(),
 ) -> BoxFit:
     """Gravity-aligned box around observed points (world frame, Z up, floor z = 0).
 
@@ -114,6 +122,9 @@ def fit_box(
     (:func:`plan_fit_cost`): a sofa seen end-on, its arm nearest the camera, is 2 m wide and 0.9 m
     deep, not 0.4 m wide and 1.5 m deep (its completion then grows its seat away from the camera
     instead of leaving a 20 cm slab).
+
+    ``walls``: the room's wall planes. Points that are one seen face near a wall, turned from it
+    by less than :data:`FACE_TO_WALL_MAX_DEG`, take the wall's direction (:func:`_wall_angle`).
     """
     pts = np.asarray(points_world_m, dtype=np.float64)
     if len(pts) < 3:
@@ -121,7 +132,8 @@ def fit_box(
     xy = pts[:, :2]
     r = np.linalg.norm(xy - np.median(xy, axis=0), axis=1)
     keep = r <= np.quantile(r, 1.0 - trim_fraction)
-    angle, _, _ = min_area_rectangle(xy[keep])
+    angle, lo_r, hi_r = min_area_rectangle(xy[keep])
+    angle = _wall_angle(pts[keep], angle, hi_r - lo_r, walls)
     axes = np.array([[np.cos(angle), np.sin(angle)], [-np.sin(angle), np.cos(angle)]])  # rows: box axes in plan
     uv = xy @ axes.T
     q = trim_fraction / 2.0
@@ -151,6 +163,29 @@ def fit_box(
     size = np.maximum(np.array([depth, width, float(z_hi) - z_bottom]), min_size_m)
     world_from_box = pose(rot_z(yaw), [centre_xy[0], centre_xy[1], z_bottom])
     return BoxFit(world_from_box, size, on_floor, float(depth))
+
+
+def _wall_angle(points_m: np.ndarray, angle: float, extent: np.ndarray, walls) -> float:
+    """The rectangle angle of an object's plan: ``angle`` (its minimum-area rectangle, sides
+    ``extent``), or the direction of the nearest wall when the points are one seen face
+    (thinner than :data:`FACE_DEPTH_SHARE` of their width) within :data:`FACE_NEAR_WALL_M` of it
+    and turned from it by at most :data:`FACE_TO_WALL_MAX_DEG`. Depth estimated from one photo
+    tilts a flat face (COCO 000089's microwave in its cabinet niche read 25 degrees off its wall):
+    the rectangle of a tilted face is a 1 cm slab turned into the room, whose completion cannot
+    grow it a body behind the face."""
+    if not walls or min(extent) > FACE_DEPTH_SHARE * max(extent):
+        return angle
+    best = None
+    for wall in walls:
+        n = np.asarray(wall.normal, dtype=np.float64)
+        near = float(np.quantile(wall.signed_distance_m(points_m), 0.1))
+        if not -0.05 <= near <= FACE_NEAR_WALL_M:
+            continue
+        wall_angle = float(np.mod(np.arctan2(n[1], n[0]), np.pi / 2))
+        turn = float(np.degrees(abs((angle - wall_angle + np.pi / 4) % (np.pi / 2) - np.pi / 4)))
+        if turn <= FACE_TO_WALL_MAX_DEG and (best is None or near < best[0]):
+            best = (near, wall_angle)
+    return angle if best is None else best[1]
 
 
 def extend_depth(fit: BoxFit, depth_m: float) -> BoxFit:

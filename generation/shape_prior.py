@@ -53,6 +53,11 @@ WALL_CLEARANCE_M = 0.005
 MAX_BEHIND_WALL_M = 0.01
 
 
+#: Categories whose depth is what was seen (never completed, never turned to a wall: a book's
+#: face tilted by estimated depth would become a 15 cm block).
+FLAT_LABELS = frozenset({"towel", "blanket", "book", "laptop"})
+
+
 def depth_to_walls(fit, walls) -> float:
     """How deep (m) ``fit`` can grow away from the camera, its observed front face fixed, before
     its back reaches a wall of ``walls`` (inf when no wall is behind it). A picture or a pillar
@@ -80,7 +85,7 @@ def complete_box(fit, label: str, walls=()):
     from generation.pose import extend_depth
     from scene_builder.vocabulary import category
 
-    if label in ("towel", "blanket", "book", "laptop"):
+    if label in FLAT_LABELS:
         return fit
     td, tw, th = category(label).typical_size_m
     d, w, h = (float(v) for v in fit.size_m)
@@ -223,7 +228,8 @@ class ShapePriorGenerator:
         # The plan orientation of large furniture follows the category's proportions (a sofa
         # seen end-on), unless fronts seen on a face say which face is the front.
         typical = cat.typical_size_m if label in PLAN_BY_PROPORTIONS and not obj.fronts else None
-        fit = complete_box(fit_box(obj.points_world_m, cam_world, floor_snap_m=snap_m, typical_size_m=typical), label, perception.room.walls)
+        fit = fit_box(obj.points_world_m, cam_world, floor_snap_m=snap_m, typical_size_m=typical, walls=() if label in FLAT_LABELS else perception.room.walls)
+        fit = complete_box(fit, label, perception.room.walls)
         box_from_world = np.linalg.inv(fit.world_from_box)
         pts = transform_points(box_from_world, obj.points_world_m)
         cam = transform_points(box_from_world, cam_world[None])[0]

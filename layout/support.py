@@ -54,11 +54,15 @@ DEFORMABLE_MIN_FACE_AREA = 0.5
 # Fixed (built-in) furniture this close to a wall and off the floor hangs on the wall.
 WALL_CONTACT_M = 0.05
 # Things made to hang on a wall (a wall-mounted television, an over-the-range microwave, a wall
-# cabinet or shelf, a clock, a sconce): seen within WALL_CONTACT_M of a wall with nothing under
-# them, they are mounted on it, welded where seen (``ObjectAsset.is_fixed``), not left hanging as
+# cabinet or shelf, a clock, a sconce): seen within WALL_MOUNT_REACH_M of a wall with nothing
+# under them, they are mounted on it, welded where seen (``ObjectAsset.is_fixed``), not left hanging as
 # static background (an over-the-range microwave hangs above the hob). A bottle or a book
 # against a wall with nothing under it is not mounted: it stays background, counted.
 WALL_MOUNTED = frozenset({"tv", "monitor", "microwave", "cabinet", "shelf", "clock", "lamp"})
+# Depth estimated from one photo puts a picture on its wall 13-18 cm in front of it
+# (``sunrgbd_imvotenet_000004`` as a plain photo); a television on an arm, a cabinet on rails or a
+# sconce stands that far off the wall anyway.
+WALL_MOUNT_REACH_M = 0.15
 # A support more than this far below an object's observed bottom is not what it rests on: the
 # object would drop further than its observed bottom can be wrong (legs hidden behind a nearer
 # object are extended to the floor by generation, ``generation.pose.floor_snap_height_m``).
@@ -263,6 +267,12 @@ def build_support(
             # Its legs (or stem, or base) were not seen, or were hidden: legs down to what it
             # stands on.
             options = search(LEGS_MAX_DROP_M, min_background_m=LEGS_MIN_BACKGROUND_M)
+        if options and min(options)[0] > max(MAX_DROP_M, b.height_m) and b.asset.label in WALL_MOUNTED and b.asset.label != "lamp" and not b.fixed and _near_wall(b, walls, WALL_MOUNT_REACH_M):
+            # Made to hang on a wall, seen against one more than its own height above what is
+            # under it (a picture read as a television 68 cm above a bed's pillows): it hangs
+            # there, mounted, rather than standing on legs down to the bed. (Not a lamp, which
+            # may stand on its own hidden stem.)
+            options = []
         if options:
             _, _, h, j, k = min(options)
             narrow = float(np.min(np.ptp(foot, axis=0))) if len(foot) else 0.0
@@ -278,7 +288,7 @@ def build_support(
             if j >= 0:
                 bodies[j].children.append(i)
             parent_name = bodies[j].name if j >= 0 else ("background" if j == BACKGROUND else "floor")
-        elif (b.fixed or b.asset.label in WALL_MOUNTED) and _near_wall(b, walls):
+        elif (b.fixed and _near_wall(b, walls)) or (b.asset.label in WALL_MOUNTED and _near_wall(b, walls, WALL_MOUNT_REACH_M)):
             if b.fixed:
                 b.parent = WALL  # built-in furniture hangs on the wall
             else:

@@ -213,3 +213,26 @@ def test_voxel_pieces_stop_when_convex_and_reject_empty():
     assert np.allclose(piece.bounds, [[0.02, 0.04, 0.0], [0.18, 0.2, 0.12]])
     with pytest.raises(ValueError, match="empty"):
         voxel_convex_pieces(np.zeros((4, 4, 4), dtype=bool), 0.01, np.zeros(3))
+
+
+def test_a_shape_contradicts_estimated_depth_only_beyond_its_relative_error():
+    """A face 20 cm in front of what was seen 3 m away fills seen free space when a sensor
+    measured that depth (noise there is about 3 cm), not when one photo's depth estimate gave it
+    (good to about 5 %); 60 cm in front contradicts both."""
+    from generation.visibility import FreeSpace
+    from scene_builder.model import Camera, CameraIntrinsics, Observation
+
+    k = CameraIntrinsics.from_fov(64, 48, 60.0)
+    depth = np.full((48, 64), 3.0, np.float32)
+    rgb = np.zeros((48, 64, 3), np.uint8)
+    camera = Camera(k, np.eye(4))  # OpenCV camera at the origin looking along +z
+    xy = np.random.default_rng(0).uniform(-0.3, 0.3, size=(200, 2))
+
+    def share(source, z_m):
+        space = FreeSpace(Observation("x", rgb, depth, k, source), camera)
+        return space.violation(np.column_stack([xy, np.full(len(xy), z_m)]))
+
+    assert share("sensor", 2.8) == 1.0
+    assert share("depth-anything", 2.8) == 0.0
+    assert share("sensor", 2.4) == 1.0 and share("depth-anything", 2.4) == 1.0
+    assert share("sensor", 3.0) == 0.0

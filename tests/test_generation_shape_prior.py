@@ -46,6 +46,42 @@ def test_wall_in_front_or_beside_does_not_limit_depth():
     np.testing.assert_allclose(complete_box(fit, "table", (behind_camera, side)).size_m, complete_box(fit, "table").size_m)
 
 
+def test_a_face_tilted_by_estimated_depth_near_a_wall_takes_the_wall_direction():
+    """A microwave's front 20-40 cm before a wall, read 25 degrees off it (depth from one photo):
+    its box is parallel to the wall, holds every point, and completes a body behind the face, short
+    of the wall; the same face 2 m from any wall, or turned 50 degrees, keeps its own rectangle;
+    a box whose sides were seen is never turned."""
+    rng = np.random.default_rng(3)
+    camera = np.array([3.0, 0.0, 1.3])
+    wall = Plane(np.array([1.0, 0.0, 0.0]), 0.5, "wall", 1000)  # x = -0.5, room at x > -0.5
+
+    def face(turn_deg, x_m):
+        a = np.radians(turn_deg)
+        y = rng.uniform(-0.25, 0.25, 600)
+        return np.column_stack([x_m - np.sin(a) * y, np.cos(a) * y, rng.uniform(1.2, 1.5, 600)])
+
+    def yaw(fit):
+        return float(np.degrees(np.arctan2(fit.world_from_box[1, 0], fit.world_from_box[0, 0])))
+
+    def off_wall(fit):  # degrees from the wall's directions
+        return min(yaw(fit) % 90.0, 90.0 - yaw(fit) % 90.0)
+
+    tilted = face(25.0, -0.2)
+    fit = fit_box(tilted, camera, walls=(wall,))
+    assert yaw(fit) == pytest.approx(0.0, abs=1e-6)
+    assert fit.size_m[0] == pytest.approx(0.5 * np.sin(np.radians(25.0)), abs=0.02)  # every point inside
+    done = complete_box(fit, "microwave", (wall,))
+    back = done.world_from_box[0, 3] - done.size_m[0] / 2
+    assert done.size_m[0] > 0.25 and back >= -0.5 - 1e-9  # a microwave's body, never into the wall
+    assert off_wall(fit_box(tilted, camera)) == pytest.approx(25.0, abs=1.0)  # no wall: as seen
+    assert off_wall(fit_box(face(25.0, 1.8), camera, walls=(wall,))) == pytest.approx(25.0, abs=1.0)
+    assert off_wall(fit_box(face(50.0, -0.2), camera, walls=(wall,))) == pytest.approx(40.0, abs=1.0)
+    a = np.radians(20.0)
+    local = rng.uniform([-0.2, -0.3, 0.0], [0.2, 0.3, 0.8], size=(2000, 3))  # a box 40 x 60 cm
+    solid = local @ np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]]).T
+    assert off_wall(fit_box(solid, camera, walls=(wall,))) == pytest.approx(20.0, abs=1.0)
+
+
 def _slab(lo, hi, n, rng):
     return rng.uniform(lo, hi, size=(n, 3))
 

@@ -371,6 +371,30 @@ def test_wall_mountable_things_against_a_wall_are_mounted_and_fixed_categories_w
     assert not gen[0].asset.is_fixed  # the generated asset itself is not changed
 
 
+def test_wall_mountable_thing_seen_far_above_a_bed_hangs_on_the_wall():
+    """A picture read as a television, seen 12 cm in front of the wall (estimated depth) and
+    70 cm above a bed's top, more than its own height: it is mounted on the wall where seen, not
+    stood on 70 cm legs on the bed (where it toppled). A lamp in the same place (a floor lamp's
+    stem may be hidden) is not mounted; a television only 20 cm above the bed stands on it."""
+    walls = (Plane(np.array([1.0, 0.0, 0.0]), 1.0, "wall", 100),)  # x = -1, room at x > -1
+    bed = _gen(box_asset("bed", (2.0, 1.5, 0.6), label="bed"), (0.1, 0.0, 0.0))
+    gen = (
+        bed,
+        _gen(box_asset("tv", (0.05, 0.3, 0.3), label="tv"), (-0.85, -0.3, 1.3)),
+        _gen(box_asset("lamp", (0.05, 0.3, 0.3), label="lamp"), (-0.85, 0.3, 1.3)),
+    )
+    result, _ = solve_layout_with_stats(empty_perception(walls, depth_m=20.0), gen, CFG)
+    placements = {p.name: p for p in result.placements}
+    placed = {o.name: o for o in result.scene.objects}
+    assert placed["tv"].support == "wall" and placed["tv"].asset.is_fixed
+    assert "mounted on the wall" in placements["tv"].reason and placements["tv"].displacement_m == 0.0
+    assert not placements["lamp"].became_background and placed["lamp"].support != "wall"
+    low = (bed, _gen(box_asset("tv", (0.05, 0.3, 0.3), label="tv"), (-0.85, -0.3, 0.8)))
+    result, _ = solve_layout_with_stats(empty_perception(walls, depth_m=20.0), low, CFG)
+    tv = {o.name: o for o in result.scene.objects}["tv"]
+    assert tv.support == "bed" and not tv.asset.is_fixed
+
+
 def test_object_seen_above_its_support_stands_on_legs(tmp_path):
     """A nightstand seen 8 cm above the floor (its dark plinth cut from its mask) keeps its
     height: it stands on four collision legs down to the floor, nothing visual is added, and it
