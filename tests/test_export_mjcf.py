@@ -201,3 +201,36 @@ def test_a_part_too_light_for_mujoco_is_named_before_mujoco_refuses_it(tmp_path)
     scene = Scene(scene.camera, scene.room, scene.objects + (PlacedObject(speck, scene.objects[0].world_from_asset @ np.diag([1, 1, 1, 1.0])),))
     with pytest.raises(ExportError, match="object speck: part body weighs .* under what MuJoCo simulates"):
         write_mjcf(scene, tmp_path)
+
+
+def test_writing_a_scene_again_rewrites_only_what_changed(tmp_path):
+    """The repair rounds write the same scene again: an unchanged mesh file is left as written
+    (same bytes, same mtime), a moved object's meshes are not rewritten either (geometry is in the
+    asset frame), a changed mesh is rewritten, and a file changed by anyone else since is
+    rewritten with the scene's content."""
+    import os
+
+    scene = mixed_scene()
+    write_mjcf(scene, tmp_path)
+    objs = sorted((tmp_path / "meshes").glob("*.obj"))
+    assert objs
+    before = {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in objs}
+    victim = objs[0]
+    victim.write_text("tampered\n")
+    os.utime(victim, ns=(0, 0))
+    first = scene.objects[0]
+    lifted = first.world_from_asset.copy()
+    lifted[2, 3] += 0.01
+    moved = dataclasses.replace(first, world_from_asset=lifted)
+    write_mjcf(dataclasses.replace(scene, objects=(moved, *scene.objects[1:])), tmp_path)
+    for p in objs:
+        if p == victim:
+            assert p.read_bytes() == before[p][1]
+        else:
+            assert (p.stat().st_mtime_ns, p.read_bytes()) == before[p]
+    part = first.asset.parts[0]
+    grown = dataclasses.replace(part, visual=dataclasses.replace(part.visual, vertices_m=part.visual.vertices_m * 1.01))
+    changed = dataclasses.replace(first, asset=dataclasses.replace(first.asset, parts=(grown, *first.asset.parts[1:])))
+    write_mjcf(dataclasses.replace(scene, objects=(changed, *scene.objects[1:])), tmp_path)
+    rewritten = [p for p in objs if p.read_bytes() != before[p][1]]
+    assert len(rewritten) == 1 and "vis" in rewritten[0].name
