@@ -61,13 +61,20 @@ def valid_identifier(name: str) -> str:
     """A USD prim name (``Tf.MakeValidIdentifier`` rules: letters, digits, ``_``, not starting
     with a digit). Written without pxr so that it is cheap; ``test_export_usd`` checks it agrees
     with ``Tf.MakeValidIdentifier``."""
-    name = name.split("\x00", 1)[0]  # Tf reads a C string
     if not name:
         return "_"
-    # Tf works on UTF-8 bytes: every byte that is not [A-Za-z0-9_] becomes one "_".
-    out = "".join(chr(b) if chr(b).isascii() and (chr(b).isalnum() or b == 0x5F) else "_" for b in name.encode("utf-8"))
-    if out[0].isdigit():
-        out = "_" + out[1:]
+    # Tf works on UTF-8 bytes: the first byte stays when it is [A-Za-z_] and becomes "_"
+    # otherwise (a NUL too); every later byte that is not [A-Za-z0-9_] becomes one "_", except a
+    # NUL, which it keeps and which then ends the name (pxr returns a C string): "\x000" -> "_0",
+    # "a\x000" -> "a".
+    raw = name.encode("utf-8")
+    first = chr(raw[0])
+    out = first if first.isascii() and (first.isalpha() or first == "_") else "_"
+    for b in raw[1:]:
+        if b == 0:
+            break
+        c = chr(b)
+        out += c if c.isascii() and (c.isalnum() or c == "_") else "_"
     return out
 
 

@@ -7,7 +7,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import example, given, settings, strategies as st
 
 from exporters import names, write_usd
 from exporters.usd import build_stage, validate_stage
@@ -142,6 +142,9 @@ def test_camera_with_off_centre_principal_point(tmp_path):
 
 @settings(max_examples=60, deadline=None)
 @given(st.text(min_size=0, max_size=12))
+@example("\x000")  # a leading NUL becomes "_" and the rest is kept ("_0"); a later NUL ends the name
+@example("a\x000")
+@example("0\x00a")
 def test_valid_identifier_matches_tf(name):
     from pxr import Tf
 
