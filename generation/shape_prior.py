@@ -25,7 +25,7 @@ from scene_builder.frames import pose, transform_points
 from generation.visibility import FreeSpace, surface_samples
 from scene_builder.model import AssetKind, GeneratedAsset, Inertial, ObjectAsset, PerceivedObject, Perception
 
-__all__ = ["ShapePriorGenerator", "BACKEND_NAME", "complete_box", "depth_to_walls", "with_structure_mass"]
+__all__ = ["ShapePriorGenerator", "BACKEND_NAME", "complete_box", "depth_to_walls", "fitted_box", "with_structure_mass"]
 
 BACKEND_NAME = "shape-prior"
 # a face seen head-on spans less than this fraction of the expected depth: complete the depth
@@ -96,6 +96,18 @@ def complete_box(fit, label: str, walls=()):
     if d < _DEPTH_COMPLETE_FRACTION * expected:
         return extend_depth(fit, min(expected, depth_to_walls(fit, walls)))
     return fit
+
+
+def fitted_box(points_world_m: np.ndarray, camera_position_m: np.ndarray, label: str, walls=(), *, floor_snap_m: float,
+               typical_size_m: tuple[float, float, float] | None = None):
+    """An object's box: :func:`generation.pose.fit_box` (a face seen near one of ``walls`` turned
+    parallel to it, except for :data:`FLAT_LABELS`, whose seen rectangle is what they are),
+    completed by :func:`complete_box` (never past ``walls``)."""
+    from generation.pose import fit_box
+
+    fit = fit_box(points_world_m, camera_position_m, floor_snap_m=floor_snap_m, typical_size_m=typical_size_m,
+                  walls=() if label in FLAT_LABELS else walls)
+    return complete_box(fit, label, walls)
 
 
 #: Another object with this share of its points inside a shelf's box is held by the shelf.
@@ -215,7 +227,7 @@ class ShapePriorGenerator:
         from generation.physics import too_small
         from scipy.spatial import cKDTree
 
-        from generation.pose import fit_box, floor_snap_height_m
+        from generation.pose import floor_snap_height_m
         from generation.priors import PRIOR_LABELS, prior_parts, shelf_boards
         from scene_builder.vocabulary import category
 
@@ -228,8 +240,7 @@ class ShapePriorGenerator:
         # The plan orientation of large furniture follows the category's proportions (a sofa
         # seen end-on), unless fronts seen on a face say which face is the front.
         typical = cat.typical_size_m if label in PLAN_BY_PROPORTIONS and not obj.fronts else None
-        fit = fit_box(obj.points_world_m, cam_world, floor_snap_m=snap_m, typical_size_m=typical, walls=() if label in FLAT_LABELS else perception.room.walls)
-        fit = complete_box(fit, label, perception.room.walls)
+        fit = fitted_box(obj.points_world_m, cam_world, label, perception.room.walls, floor_snap_m=snap_m, typical_size_m=typical)
         box_from_world = np.linalg.inv(fit.world_from_box)
         pts = transform_points(box_from_world, obj.points_world_m)
         cam = transform_points(box_from_world, cam_world[None])[0]

@@ -63,6 +63,9 @@ WALL_MOUNTED = frozenset({"tv", "monitor", "microwave", "cabinet", "shelf", "clo
 # (``sunrgbd_imvotenet_000004`` as a plain photo); a television on an arm, a cabinet on rails or a
 # sconce stands that far off the wall anyway.
 WALL_MOUNT_REACH_M = 0.15
+# Of those, the ones mounted even when a support lies far below them (more than their own
+# height): not a lamp, which may be a floor lamp standing on a stem the camera did not see.
+MOUNTED_ABOVE_SUPPORT = WALL_MOUNTED - {"lamp"}
 # A support more than this far below an object's observed bottom is not what it rests on: the
 # object would drop further than its observed bottom can be wrong (legs hidden behind a nearer
 # object are extended to the floor by generation, ``generation.pose.floor_snap_height_m``).
@@ -267,11 +270,11 @@ def build_support(
             # Its legs (or stem, or base) were not seen, or were hidden: legs down to what it
             # stands on.
             options = search(LEGS_MAX_DROP_M, min_background_m=LEGS_MIN_BACKGROUND_M)
-        if options and min(options)[0] > max(MAX_DROP_M, b.height_m) and b.asset.label in WALL_MOUNTED and b.asset.label != "lamp" and not b.fixed and _near_wall(b, walls, WALL_MOUNT_REACH_M):
+        mountable = b.asset.label in WALL_MOUNTED and _near_wall(b, walls, WALL_MOUNT_REACH_M)
+        if options and mountable and b.asset.label in MOUNTED_ABOVE_SUPPORT and not b.fixed and min(options)[0] > max(MAX_DROP_M, b.height_m):
             # Made to hang on a wall, seen against one more than its own height above what is
             # under it (a picture read as a television 68 cm above a bed's pillows): it hangs
-            # there, mounted, rather than standing on legs down to the bed. (Not a lamp, which
-            # may stand on its own hidden stem.)
+            # there, mounted, rather than standing on legs down to the bed.
             options = []
         if options:
             _, _, h, j, k = min(options)
@@ -288,7 +291,7 @@ def build_support(
             if j >= 0:
                 bodies[j].children.append(i)
             parent_name = bodies[j].name if j >= 0 else ("background" if j == BACKGROUND else "floor")
-        elif (b.fixed and _near_wall(b, walls)) or (b.asset.label in WALL_MOUNTED and _near_wall(b, walls, WALL_MOUNT_REACH_M)):
+        elif (b.fixed and _near_wall(b, walls)) or mountable:
             if b.fixed:
                 b.parent = WALL  # built-in furniture hangs on the wall
             else:

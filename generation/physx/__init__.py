@@ -98,8 +98,8 @@ class PhysxVlmGenerator:
         turned (its front then faces the box's side)."""
         from generation.physx.convert import model_size_m, physx_object, to_object_asset
         from generation.physx.vlm import decode_conversation, object_crop
-        from generation.pose import fit_box, floor_snap_height_m
-        from generation.shape_prior import FLAT_LABELS, complete_box
+        from generation.pose import floor_snap_height_m
+        from generation.shape_prior import fitted_box
 
         from scene_builder.frames import pose, rot_z, transform_points
         from scene_builder.model import GeneratedAsset
@@ -107,7 +107,7 @@ class PhysxVlmGenerator:
         crop = object_crop(perception.observation.rgb, obj.mask, config.vlm_crop_px, config.vlm_crop_fill)
         others = [o.points_world_m for o in perception.objects if o.name != obj.name]
         snap_m = floor_snap_height_m(obj.points_world_m, others)
-        fit = complete_box(fit_box(obj.points_world_m, perception.camera.position_m, floor_snap_m=snap_m, walls=() if obj.label in FLAT_LABELS else perception.room.walls), obj.label, perception.room.walls)
+        fit = fitted_box(obj.points_world_m, perception.camera.position_m, obj.label, perception.room.walls, floor_snap_m=snap_m)
         conv = self.converse(crop, config)
         description, grids, _ = decode_conversation(conv)
         observed = np.asarray(fit.size_m, dtype=np.float64)
