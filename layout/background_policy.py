@@ -43,6 +43,21 @@ def _pad_blocked(b: Body, bodies: list[Body], legs_pending: bool = False) -> boo
     return clip_pad(rect, yaw, b.position_m, z_lo, z_hi, _obstacles(b, bodies), np.zeros(2), 0.0, probe=True) is None
 
 
+def pad_blockers(b: Body, bodies: list[Body]) -> list[int]:
+    """Indices of the bodies whose pieces reach into the pad under ``b`` (legs still to be made)."""
+    rect, yaw, z_lo, z_hi = _pad_frame(b, legs_pending=True)
+    out = []
+    for k, o in enumerate(bodies):
+        pieces = [p.verts_rel_m + o.position_m for p in o.pieces]
+        if o is not b and clip_pad(rect, yaw, b.position_m, z_lo, z_hi, pieces, np.zeros(2), 0.0, probe=True) is None:
+            out.append(k)
+    return out
+
+
+#: Why a body whose pad reaches into another body is left where seen (``unsupport_blocked_pads``).
+BLOCKED_PAD_REASON = "what is under it is another object's, with no face to rest on"
+
+
 def unsupport_blocked_pads(bodies: list[Body]) -> set[str]:
     """A body resting on the background whose pad would reach into another body (one placed
     after it in the support graph, e.g. overlapping it from the side) gets its pad cut back clear
@@ -70,7 +85,7 @@ def unsupport_blocked_pads(bodies: list[Body]) -> set[str]:
             to_floor.add(b.name)
             continue
         b.parent = UNSUPPORTED
-        b.unsupported_reason = "what is under it is another object's, with no face to rest on"
+        b.unsupported_reason = BLOCKED_PAD_REASON
     return to_floor
 
 

@@ -36,12 +36,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from layout.background import BackgroundSupport, HiddenBelow
-from layout.background_policy import static_background, uncage_bodies, unsupport_blocked_pads, unsupport_in_walls
+from layout.background_policy import BLOCKED_PAD_REASON, pad_blockers, static_background, uncage_bodies, unsupport_blocked_pads, unsupport_in_walls
 from layout.bodies import Body, make_body, rebuilt, with_legs
 from layout.pushes import PENETRATION_TOL_M, Solver
 from layout.snapping import YawSnap, reference_yaw, snap_yaw
 from layout.support import UNSUPPORTED, build_support
-from layout.trim import trim_pair, trim_to_walls
+from layout.trim import collision_volume_m3, trim_pair, trim_to_walls
 from scene_builder.config import LayoutConfig
 from scene_builder.errors import InputError
 from scene_builder.model import AssetKind, GeneratedAsset, LayoutResult, Perception, PlacedObject, Placement, Scene
@@ -105,6 +105,33 @@ def _trim_overlaps(solver: Solver, observed: dict[str, np.ndarray]) -> bool:
                 heights = np.array([bodies[b.parent].position_m[2] + f.height_rel_m for f in faces])
                 b.support_surface = int(np.argmin(np.abs(heights - b.bottom_m))) if len(faces) else -1
     return changed
+
+
+#: A cut may take at most this share of a blocker's collision volume: a cut is a half-space
+#: through a whole convex piece, and through a desk's top slab or a shelf's board it lowered the
+#: whole top under everything else on it (open3d_TUM, promptda_arkit: they fell).
+MAX_CUT_SHARE = 0.05
+
+
+def _cut_blockers(bodies: list[Body], poses: list[np.ndarray], assets: list, observed: dict[str, np.ndarray]) -> list | None:
+    """The assets (body order) with every body left unsupported because another body's pieces
+    fill the space under it (``background_policy.BLOCKED_PAD_REASON``) cut apart from those
+    bodies at the poses where both were seen (``poses``; ``layout.trim.trim_pair``, between what
+    the camera saw of each where their visuals overlap), or None when there is nothing to cut."""
+    out = list(assets)
+    changed = False
+    for i, b in enumerate(bodies):
+        if b.unsupported_reason != BLOCKED_PAD_REASON:
+            continue
+        for k in pad_blockers(b, bodies):
+            o = bodies[k]
+            a, c, depth, _ = trim_pair(out[i], poses[i], out[k], poses[k], observed_a=observed.get(b.name), observed_b=observed.get(o.name))
+            if c is not out[k] and collision_volume_m3(c) < (1.0 - MAX_CUT_SHARE) * collision_volume_m3(out[k]):
+                continue
+            if depth > PENETRATION_TOL_M and (a is not out[i] or c is not out[k]):
+                out[i], out[k] = a, c
+                changed = True
+    return out if changed else None
 
 
 def _trim_walls(solver: Solver, observed: dict[str, np.ndarray], clearance_m: float) -> bool:
@@ -182,10 +209,12 @@ def solve_layout_with_stats(
     ref = reference_yaw(perception.room)
     snaps: list[YawSnap] = [YawSnap(False, 0.0, np.nan, np.nan)] * len(generated)
     bodies: list[Body] = []
+    poses: list[np.ndarray] = []
     for k in order:
         g = generated[k]
         pose, snap = snap_yaw(g.asset, g.world_from_asset, g.observed_points_world_m, ref, seed=seed + k)
         snaps[k] = snap
+        poses.append(pose)
         bodies.append(make_body(g.asset, pose))
     lap("snap")
     if not bodies:
@@ -200,10 +229,20 @@ def solve_layout_with_stats(
     background = perception.room.background
     ground = BackgroundSupport(background, walls)
     hidden = HiddenBelow(perception.observation, perception.camera)
+    observed = {g.asset.name: g.observed_points_world_m for g in generated}
     edges, _ = build_support(bodies, walls, solver.vertical_clash, ground.height_under if background is not None else None, config.max_lower_m, hidden)
     # Pads under bodies resting on the background are cut back clear of their neighbours (legged
     # furniture whose pad cannot be stands on legs down to the floor) before the legs are made.
     to_floor = unsupport_blocked_pads(bodies)
+    cut = _cut_blockers(bodies, poses, [generated[k].asset for k in order], observed)
+    if cut is not None:
+        # What is under such a body was another's completion reaching around where it was seen
+        # (a bed's top completed up around the pillows seen on it, to the headboard): the pair is
+        # cut apart where each was seen, and the support graph is built again from the start.
+        bodies = [make_body(a, pose) for a, pose in zip(cut, poses)]
+        solver = Solver(bodies, walls, config, seed)
+        edges, _ = build_support(bodies, walls, solver.vertical_clash, ground.height_under if background is not None else None, config.max_lower_m, hidden)
+        to_floor = unsupport_blocked_pads(bodies)
     edges = [dataclasses.replace(e, parent="floor") if e.child in to_floor else e for e in edges]
     for i, b in enumerate(bodies):
         if b.legs_m > 0.0 and b.parent != UNSUPPORTED:
@@ -224,7 +263,6 @@ def solve_layout_with_stats(
     for i, b in enumerate(bodies):
         solver.world.set_position(i, b.position_m)
     lap("support")
-    observed = {g.asset.name: g.observed_points_world_m for g in generated}
     for _ in range(TRIM_PASSES):  # a cut changes the pieces: look again
         if not _trim_overlaps(solver, observed):
             break

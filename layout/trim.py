@@ -106,6 +106,11 @@ def clip_convex(vertices: np.ndarray, normal: np.ndarray, offset: float) -> Tria
     return TriangleMesh(verts, faces)
 
 
+def collision_volume_m3(asset: ObjectAsset) -> float:
+    """Total volume (m^3) of an asset's collision pieces (each its convex hull's)."""
+    return sum(_volume(m) for p in asset.parts for m in p.collision)
+
+
 def _volume(mesh: TriangleMesh) -> float:
     """Volume (m^3) of a closed convex piece (its hull's; 0 when degenerate)."""
     from scipy.spatial import ConvexHull, QhullError
