@@ -15,7 +15,7 @@ from layout.background import CARVE_CLEARANCE_M, absorb, carve, clip_pad, column
 from layout.bodies import Body
 from layout.geometry import swept_part_boxes
 from layout.pushes import Solver
-from layout.support import BACKGROUND, UNSUPPORTED, pad_box
+from layout.support import BACKGROUND, BLOCKED_PAD_REASON, UNSUPPORTED, pad_box
 from scene_builder.model import AssetKind, Background, Plane, TriangleMesh
 
 
@@ -52,10 +52,6 @@ def pad_blockers(b: Body, bodies: list[Body]) -> list[int]:
         if o is not b and clip_pad(rect, yaw, b.position_m, z_lo, z_hi, pieces, np.zeros(2), 0.0, probe=True) is None:
             out.append(k)
     return out
-
-
-#: Why a body whose pad reaches into another body is left where seen (``unsupport_blocked_pads``).
-BLOCKED_PAD_REASON = "what is under it is another object's, with no face to rest on"
 
 
 def unsupport_blocked_pads(bodies: list[Body]) -> set[str]:

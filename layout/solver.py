@@ -36,11 +36,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from layout.background import BackgroundSupport, HiddenBelow
-from layout.background_policy import BLOCKED_PAD_REASON, pad_blockers, static_background, uncage_bodies, unsupport_blocked_pads, unsupport_in_walls
+from layout.background_policy import pad_blockers, static_background, uncage_bodies, unsupport_blocked_pads, unsupport_in_walls
 from layout.bodies import Body, make_body, rebuilt, with_legs
 from layout.pushes import PENETRATION_TOL_M, Solver
 from layout.snapping import YawSnap, reference_yaw, snap_yaw
-from layout.support import UNSUPPORTED, build_support
+from layout.support import BLOCKED_PAD_REASON, UNSUPPORTED, build_support
 from layout.trim import collision_volume_m3, trim_pair, trim_to_walls
 from scene_builder.config import LayoutConfig
 from scene_builder.errors import InputError
@@ -115,7 +115,7 @@ MAX_CUT_SHARE = 0.05
 
 def _cut_blockers(bodies: list[Body], poses: list[np.ndarray], assets: list, observed: dict[str, np.ndarray]) -> list | None:
     """The assets (body order) with every body left unsupported because another body's pieces
-    fill the space under it (``background_policy.BLOCKED_PAD_REASON``) cut apart from those
+    fill the space under it (``layout.support.BLOCKED_PAD_REASON``) cut apart from those
     bodies at the poses where both were seen (``poses``; ``layout.trim.trim_pair``, between what
     the camera saw of each where their visuals overlap), or None when there is nothing to cut."""
     out = list(assets)

@@ -95,6 +95,11 @@ HIDDEN_LEGS_SHARE = 1.0
 LEGS_MIN_BACKGROUND_M = 0.25
 
 
+#: Why a body is left where seen when the surface seen under it is there but another body's
+#: pieces fill the space under it (its pad would reach into them).
+BLOCKED_PAD_REASON = "what is under it is another object's, with no face to rest on"
+
+
 def _footprint_world(b: Body) -> np.ndarray:
     return b.footprint_rel_m + b.position_m[:2]
 
@@ -206,6 +211,7 @@ def build_support(
         min_face_area = DEFORMABLE_MIN_FACE_AREA * polygon_area(foot) if soft else 0.0
         lo_xy = foot.min(axis=0)
         hi_xy = foot.max(axis=0)
+        pad_blocked = [False]  # the background seen under it was found, but another body fills the pad
         def search(drop_m: float, objects: bool = True, min_background_m: float = 0.0) -> list[tuple[float, int, float, int, int]]:
             candidates: list[tuple[float, float, int, int]] = []  # (height, overlap, -body, surface)
             n_placed = len(placed)
@@ -245,6 +251,8 @@ def build_support(
                     h_bg = None  # the floor (seen with a rug or noise on it) is within reach
                 if h_bg is not None and _pad_is_clear(b, h_bg, [bodies[k] for k in placed]):
                     options.append((abs(h_bg - bottom), 1, h_bg, BACKGROUND, -1))
+                elif h_bg is not None:
+                    pad_blocked[0] = True
             if bottom <= drop_m:
                 options.append((abs(bottom), 2, 0.0, FLOOR, -1))
             return options
@@ -306,7 +314,10 @@ def build_support(
             parent_name = "room"
         else:
             b.parent = UNSUPPORTED
-            b.unsupported_reason = "hangs: the camera saw empty space under it" if seen_under else "nothing seen under it to rest on"
+            if pad_blocked[0]:
+                b.unsupported_reason = BLOCKED_PAD_REASON
+            else:
+                b.unsupported_reason = "hangs: the camera saw empty space under it" if seen_under else "nothing seen under it to rest on"
             h = bottom
             parent_name = "none"
         # The gap as observed: the child's and the support's initial heights.

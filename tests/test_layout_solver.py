@@ -453,3 +453,25 @@ def test_pushes_adding_up_past_max_push_leave_the_object_where_seen(seed):
     on_floor = [p for p in result.placements if not p.became_background and p.support == "floor"]
     assert on_floor and max(p.displacement_m for p in on_floor) <= config.max_push_m + 0.02
     assert any("sideways in all" in p.reason and p.became_background for p in result.placements)
+
+
+def test_a_body_whose_pad_is_blocked_says_so_and_not_that_it_hangs():
+    """A mug seen on a surface whose pad would reach into a cabinet beside it (the cabinet's top
+    under a tenth of the mug's footprint, too little to rest on) is left where seen because what
+    is under it is another object's: the report said "hangs: the camera saw empty space under
+    it" (open3d_TUM's mug, a box of sunrgbd_imvotenet_000003), which was not what happened."""
+    from layout.bodies import make_body
+    from layout.support import BLOCKED_PAD_REASON, UNSUPPORTED, build_support
+
+    cabinet = make_body(box_asset("cabinet", (0.5, 0.5, 0.69)), pose(np.eye(3), (0.0, 0.0, 0.0)))
+    mug = make_body(box_asset("mug", (0.1, 0.1, 0.1)), pose(np.eye(3), (0.29, 0.0, 0.7)))  # 1 cm over the cabinet
+
+    def seen_surface(foot, lo_m, hi_m):  # the surface seen around the mug, at 0.70 m
+        return 0.7 if lo_m <= 0.7 <= hi_m else None
+
+    bodies = [cabinet, mug]
+    build_support(bodies, (), None, seen_surface, 0.02, lambda foot, bottom: False)
+    assert mug.parent == UNSUPPORTED and mug.unsupported_reason == BLOCKED_PAD_REASON
+    far = make_body(box_asset("mug", (0.1, 0.1, 0.1)), pose(np.eye(3), (0.6, 0.0, 0.7)))  # clear of the cabinet
+    build_support([make_body(box_asset("cabinet", (0.5, 0.5, 0.69)), np.eye(4)), far], (), None, seen_surface, 0.02, lambda foot, bottom: False)
+    assert far.parent != UNSUPPORTED
