@@ -125,6 +125,8 @@ def _cut_blockers(bodies: list[Body], poses: list[np.ndarray], assets: list, obs
             continue
         for k in pad_blockers(b, bodies):
             o = bodies[k]
+            if AssetKind.DEFORMABLE in (out[i].kind, out[k].kind):
+                continue  # a flex is simulated as its box: nothing to cut (as in _trim_overlaps)
             a, c, depth, _ = trim_pair(out[i], poses[i], out[k], poses[k], observed_a=observed.get(b.name), observed_b=observed.get(o.name))
             if c is not out[k] and collision_volume_m3(c) < (1.0 - MAX_CUT_SHARE) * collision_volume_m3(out[k]):
                 continue
