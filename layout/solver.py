@@ -41,7 +41,7 @@ from layout.bodies import Body, make_body, rebuilt, with_legs
 from layout.pushes import PENETRATION_TOL_M, Solver
 from layout.snapping import YawSnap, reference_yaw, snap_yaw
 from layout.support import BLOCKED_PAD_REASON, UNSUPPORTED, build_support
-from layout.trim import collision_volume_m3, trim_pair, trim_to_walls
+from layout.trim import collision_volume_m3, split_around, trim_pair, trim_to_walls
 from scene_builder.config import LayoutConfig
 from scene_builder.errors import InputError
 from scene_builder.model import AssetKind, GeneratedAsset, LayoutResult, Perception, PlacedObject, Placement, Scene
@@ -111,6 +111,8 @@ def _trim_overlaps(solver: Solver, observed: dict[str, np.ndarray]) -> bool:
 #: through a whole convex piece, and through a desk's top slab or a shelf's board it lowered the
 #: whole top under everything else on it (open3d_TUM, promptda_arkit: they fell).
 MAX_CUT_SHARE = 0.05
+#: The blocker is split this far outside the body's plan box before the cut.
+SPLIT_MARGIN_M = 0.02
 
 
 def _cut_blockers(bodies: list[Body], poses: list[np.ndarray], assets: list, observed: dict[str, np.ndarray]) -> list | None:
@@ -127,7 +129,13 @@ def _cut_blockers(bodies: list[Body], poses: list[np.ndarray], assets: list, obs
             o = bodies[k]
             if AssetKind.DEFORMABLE in (out[i].kind, out[k].kind):
                 continue  # a flex is simulated as its box: nothing to cut (as in _trim_overlaps)
-            a, c, depth, _ = trim_pair(out[i], poses[i], out[k], poses[k], observed_a=observed.get(b.name), observed_b=observed.get(o.name))
+            # The blocker's pieces are split along the sides of the body's plan box first, so the
+            # cut takes only what lies under and around the body.
+            foot = b.footprint_rel_m + b.position_m[:2]
+            local = split_around(out[k], poses[k], foot.min(axis=0) - SPLIT_MARGIN_M, foot.max(axis=0) + SPLIT_MARGIN_M)
+            a, c, depth, _ = trim_pair(out[i], poses[i], local, poses[k], observed_a=observed.get(b.name), observed_b=observed.get(o.name))
+            if c is local and local is not out[k]:
+                c = out[k]  # nothing cut: the blocker stays as it was, unsplit
             if c is not out[k] and collision_volume_m3(c) < (1.0 - MAX_CUT_SHARE) * collision_volume_m3(out[k]):
                 continue
             if depth > PENETRATION_TOL_M and (a is not out[i] or c is not out[k]):

@@ -106,6 +106,40 @@ def clip_convex(vertices: np.ndarray, normal: np.ndarray, offset: float) -> Tria
     return TriangleMesh(verts, faces)
 
 
+def split_around(asset: ObjectAsset, world_from_asset: np.ndarray, lo_xy: np.ndarray, hi_xy: np.ndarray) -> ObjectAsset:
+    """``asset`` (placed at ``world_from_asset``) with every collision piece that reaches across a
+    vertical side of the world plan rectangle [``lo_xy``, ``hi_xy``] split along it, so that a cut
+    around what stands in the rectangle (:func:`trim_pair`: a half-space through a whole convex
+    piece) takes only the pieces inside it, not a desk's whole top. Pieces too thin to split stay
+    whole. The visuals and mass properties are unchanged (``asset`` itself when nothing is split)."""
+    import dataclasses
+
+    rot, t = world_from_asset[:3, :3], world_from_asset[:3, 3]
+    planes = []  # (normal, offset) in the asset frame: the outside of each side is n . x > c
+    for axis in (0, 1):
+        for sign, value in ((-1.0, float(lo_xy[axis])), (1.0, float(hi_xy[axis]))):
+            n_w = np.zeros(3)
+            n_w[axis] = sign
+            planes.append((rot.T @ n_w, sign * value - float(n_w @ t)))
+    parts, changed = [], False
+    for part in asset.parts:
+        pieces = list(part.collision)
+        for n, c in planes:
+            out = []
+            for m in pieces:
+                d = m.vertices_m @ n - c
+                if d.min() < 0.0 < d.max():
+                    inner, outer = clip_convex(m.vertices_m, n, c), clip_convex(m.vertices_m, -n, -c)
+                    if inner is not None and outer is not None:
+                        out += [inner, outer]
+                        changed = True
+                        continue
+                out.append(m)
+            pieces = out
+        parts.append(dataclasses.replace(part, collision=tuple(pieces)))
+    return dataclasses.replace(asset, parts=tuple(parts)) if changed else asset
+
+
 def collision_volume_m3(asset: ObjectAsset) -> float:
     """Total volume (m^3) of an asset's collision pieces (each its convex hull's)."""
     return sum(_volume(m) for p in asset.parts for m in p.collision)

@@ -475,3 +475,26 @@ def test_a_body_whose_pad_is_blocked_says_so_and_not_that_it_hangs():
     far = make_body(box_asset("mug", (0.1, 0.1, 0.1)), pose(np.eye(3), (0.6, 0.0, 0.7)))  # clear of the cabinet
     build_support([make_body(box_asset("cabinet", (0.5, 0.5, 0.69)), np.eye(4)), far], (), None, seen_surface, 0.02, lambda foot, bottom: False)
     assert far.parent != UNSUPPORTED
+
+
+def test_a_cut_under_a_small_thing_takes_only_the_blockers_pieces_around_it():
+    """A book seen sunk 4 cm into a desk's completed top: cut against the whole convex top slab,
+    the half-space lowered the whole top (everything on open3d_TUM's desk fell). Split along the
+    sides of the book's plan box first (layout.trim.split_around), the cut takes only the piece
+    under the book: the rest of the top keeps its height and the desk keeps over 95 % of its
+    collision volume."""
+    from layout.trim import collision_volume_m3, split_around, trim_pair
+
+    desk = asset_from_pieces("desk", "desk", [box_mesh([-0.6, -0.3, 0.0], [0.6, 0.3, 0.75])])
+    book = box_asset("book", (0.2, 0.15, 0.05), label="book")
+    t_desk, t_book = np.eye(4), pose(np.eye(3), (0.2, 0.0, 0.71))
+    whole = trim_pair(book, t_book, desk, np.eye(4))[1]
+    assert max(float(m.vertices_m[:, 2].max()) for m in whole.parts[0].collision) < 0.74  # the whole top lowered
+    local = split_around(desk, t_desk, np.array([0.08, -0.095]), np.array([0.32, 0.095]))
+    assert len(local.parts[0].collision) == 9 and collision_volume_m3(local) == pytest.approx(collision_volume_m3(desk))
+    cut = trim_pair(book, t_book, local, t_desk)[1]
+    tops = [(m.vertices_m[:, :2].mean(axis=0), float(m.vertices_m[:, 2].max())) for m in cut.parts[0].collision]
+    inside = [z for c, z in tops if 0.08 < c[0] < 0.32 and abs(c[1]) < 0.095]
+    outside = [z for c, z in tops if not (0.08 < c[0] < 0.32 and abs(c[1]) < 0.095)]
+    assert max(inside) < 0.74 and min(outside) == pytest.approx(0.75)
+    assert collision_volume_m3(cut) > 0.95 * collision_volume_m3(desk)
