@@ -112,8 +112,6 @@ def split_around(asset: ObjectAsset, world_from_asset: np.ndarray, lo_xy: np.nda
     around what stands in the rectangle (:func:`trim_pair`: a half-space through a whole convex
     piece) takes only the pieces inside it, not a desk's whole top. Pieces too thin to split stay
     whole. The visuals and mass properties are unchanged (``asset`` itself when nothing is split)."""
-    import dataclasses
-
     rot, t = world_from_asset[:3, :3], world_from_asset[:3, 3]
     planes = []  # (normal, offset) in the asset frame: the outside of each side is n . x > c
     for axis in (0, 1):
