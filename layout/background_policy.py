@@ -44,14 +44,9 @@ def _pad_blocked(b: Body, bodies: list[Body], legs_pending: bool = False) -> boo
 
 
 def pad_blockers(b: Body, bodies: list[Body]) -> list[int]:
-    """Indices of the bodies whose pieces reach into the pad under ``b`` (legs still to be made)."""
-    rect, yaw, z_lo, z_hi = _pad_frame(b, legs_pending=True)
-    out = []
-    for k, o in enumerate(bodies):
-        pieces = [p.verts_rel_m + o.position_m for p in o.pieces]
-        if o is not b and clip_pad(rect, yaw, b.position_m, z_lo, z_hi, pieces, np.zeros(2), 0.0, probe=True) is None:
-            out.append(k)
-    return out
+    """Indices of the bodies whose pieces reach into the pad under ``b`` (legs still to be made):
+    :func:`_pad_blocked` asked of each other body alone."""
+    return [k for k, o in enumerate(bodies) if o is not b and _pad_blocked(b, [b, o], legs_pending=True)]
 
 
 def unsupport_blocked_pads(bodies: list[Body]) -> set[str]:

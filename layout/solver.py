@@ -240,10 +240,14 @@ def solve_layout_with_stats(
     ground = BackgroundSupport(background, walls)
     hidden = HiddenBelow(perception.observation, perception.camera)
     observed = {g.asset.name: g.observed_points_world_m for g in generated}
-    edges, _ = build_support(bodies, walls, solver.vertical_clash, ground.height_under if background is not None else None, config.max_lower_m, hidden)
-    # Pads under bodies resting on the background are cut back clear of their neighbours (legged
-    # furniture whose pad cannot be stands on legs down to the floor) before the legs are made.
-    to_floor = unsupport_blocked_pads(bodies)
+
+    def support() -> tuple[list, set[str]]:
+        edges, _ = build_support(bodies, walls, solver.vertical_clash, ground.height_under if background is not None else None, config.max_lower_m, hidden)
+        # Pads under bodies resting on the background are cut back clear of their neighbours (legged
+        # furniture whose pad cannot be stands on legs down to the floor) before the legs are made.
+        return edges, unsupport_blocked_pads(bodies)
+
+    edges, to_floor = support()
     cut = _cut_blockers(bodies, poses, [generated[k].asset for k in order], observed)
     if cut is not None:
         # What is under such a body was another's completion reaching around where it was seen
@@ -251,8 +255,7 @@ def solve_layout_with_stats(
         # cut apart where each was seen, and the support graph is built again from the start.
         bodies = [make_body(a, pose) for a, pose in zip(cut, poses)]
         solver = Solver(bodies, walls, config, seed)
-        edges, _ = build_support(bodies, walls, solver.vertical_clash, ground.height_under if background is not None else None, config.max_lower_m, hidden)
-        to_floor = unsupport_blocked_pads(bodies)
+        edges, to_floor = support()
     edges = [dataclasses.replace(e, parent="floor") if e.child in to_floor else e for e in edges]
     for i, b in enumerate(bodies):
         if b.legs_m > 0.0 and b.parent != UNSUPPORTED:

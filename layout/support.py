@@ -211,8 +211,10 @@ def build_support(
         min_face_area = DEFORMABLE_MIN_FACE_AREA * polygon_area(foot) if soft else 0.0
         lo_xy = foot.min(axis=0)
         hi_xy = foot.max(axis=0)
-        pad_blocked = [False]  # the background seen under it was found, but another body fills the pad
+        pad_blocked = False  # the background seen under it was found, but another body fills the pad
+
         def search(drop_m: float, objects: bool = True, min_background_m: float = 0.0) -> list[tuple[float, int, float, int, int]]:
+            nonlocal pad_blocked
             candidates: list[tuple[float, float, int, int]] = []  # (height, overlap, -body, surface)
             n_placed = len(placed)
             near = np.nonzero(
@@ -252,7 +254,7 @@ def build_support(
                 if h_bg is not None and _pad_is_clear(b, h_bg, [bodies[k] for k in placed]):
                     options.append((abs(h_bg - bottom), 1, h_bg, BACKGROUND, -1))
                 elif h_bg is not None:
-                    pad_blocked[0] = True
+                    pad_blocked = True
             if bottom <= drop_m:
                 options.append((abs(bottom), 2, 0.0, FLOOR, -1))
             return options
@@ -314,7 +316,7 @@ def build_support(
             parent_name = "room"
         else:
             b.parent = UNSUPPORTED
-            if pad_blocked[0]:
+            if pad_blocked:
                 b.unsupported_reason = BLOCKED_PAD_REASON
             else:
                 b.unsupported_reason = "hangs: the camera saw empty space under it" if seen_under else "nothing seen under it to rest on"
