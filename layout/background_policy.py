@@ -43,6 +43,17 @@ def _pad_blocked(b: Body, bodies: list[Body], legs_pending: bool = False) -> boo
     return clip_pad(rect, yaw, b.position_m, z_lo, z_hi, _obstacles(b, bodies), np.zeros(2), 0.0, probe=True) is None
 
 
+def _clipped_pad(b: Body, bodies: list[Body], legs_pending: bool = False) -> np.ndarray | None:
+    """The pad rectangle under ``b`` cut back clear of the other bodies' pieces with its centre
+    of mass still held over it (``layout.background.clip_pad``), or None where no cut does."""
+    from layout.support import support_inset_m
+
+    rect, yaw, z_lo, z_hi = _pad_frame(b, legs_pending)
+    c, s = np.cos(yaw), np.sin(yaw)
+    com = b.com_rel_m[:2] @ np.array([[c, -s], [s, c]])
+    return clip_pad(rect, yaw, b.position_m, z_lo, z_hi, _obstacles(b, bodies), com, support_inset_m(b))
+
+
 def pad_blockers(b: Body, bodies: list[Body]) -> list[int]:
     """Indices of the bodies whose pieces reach into the pad under ``b`` (legs still to be made):
     :func:`_pad_blocked` asked of each other body alone."""
@@ -57,17 +68,13 @@ def unsupport_blocked_pads(bodies: list[Body]) -> set[str]:
     seen under it); only then is it left where it was seen (``UNSUPPORTED``), like any object
     with nothing under it; what rests on it then rests on the background. Called before the legs
     are made (``Body.legs_m`` still to come). Returns the names of the bodies now on the floor."""
-    from layout.pushes import support_inset_m
     from layout.support import FLOOR, LEGS_MAX_DROP_M, STANDS_ON_LEGS
 
     to_floor = set()
     for b in bodies:
         if b.parent != BACKGROUND or not _pad_blocked(b, bodies, legs_pending=True):
             continue
-        rect, yaw, z_lo, z_hi = _pad_frame(b, legs_pending=True)
-        c, s = np.cos(yaw), np.sin(yaw)
-        com = b.com_rel_m[:2] @ np.array([[c, -s], [s, c]])
-        clipped = clip_pad(rect, yaw, b.position_m, z_lo, z_hi, _obstacles(b, bodies), com, support_inset_m(b))
+        clipped = _clipped_pad(b, bodies, legs_pending=True)
         if clipped is not None:
             b.pad_rect_m = clipped
             continue
@@ -151,9 +158,14 @@ def static_background(
         if b.parent != BACKGROUND:
             continue
         # The pad spans the object's whole plan extent (it rests on the surface seen around it,
-        # hidden under all of it); unsupport_blocked_pads made sure nothing else was there.
+        # hidden under all of it); unsupport_blocked_pads made sure nothing else was there, but
+        # the pushes since may have moved a neighbour into it (a pillow pushed out from under a
+        # bed's edge, sunrgbd_imvotenet_000005): it is cut back clear of it again.
         if _pad_blocked(b, bodies):
-            continue
+            clipped = _clipped_pad(b, bodies)
+            if clipped is None:
+                continue
+            b.pad_rect_m = clipped
         c, h, yaw = pad_box(b, b.bottom_m)
         centers.append(c[None])
         halves.append(h[None])

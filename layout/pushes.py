@@ -10,7 +10,7 @@ import numpy as np
 from layout.bodies import Body
 from layout.geometry import clip_half_plane, clip_to_slab_xy, closest_point_in_polygon, horizontal_mtv, placements_inside
 from layout.narrowphase import ConvexWorld
-from layout.support import UNSUPPORTED, is_ancestor, subtree
+from layout.support import SUPPORT_INSET_M, UNSUPPORTED, is_ancestor, subtree, support_inset_m
 from scene_builder.config import LayoutConfig
 from scene_builder.model import AssetKind, Plane
 
@@ -34,21 +34,10 @@ SHUFFLE_AFTER_ITERATIONS = 50
 RELOCATE_RADII_M = np.concatenate([np.arange(0.01, 0.5, 0.01), np.arange(0.5, 3.0, 0.05)])
 RELOCATE_ANGLES = 32
 _FAN = np.stack([np.cos(np.radians(np.arange(0.0, 180.0, 7.5))), np.sin(np.radians(np.arange(0.0, 180.0, 7.5)))], axis=1)
-# Centre of mass of a rigid object kept this far inside its supporting face: at least
-# SUPPORT_INSET_M, and SUPPORT_INSET_FRACTION of the object's narrowest footprint width (a lamp
-# whose centre of mass is 1 cm inside a sofa's back edge topples at the first nudge).
-SUPPORT_INSET_M = 0.01
-SUPPORT_INSET_FRACTION = 0.2
 # A soft body sags over an edge until it slides off: its whole footprint is kept on the face
 # (shrunk by SUPPORT_INSET_M); when it does not fit, its footprint is scaled about its centre by
 # these factors in turn (0: the footprint's centre over the face's).
 DEFORMABLE_FIT_SCALES = (1.0, 0.75, 0.5, 0.25, 0.0)
-
-
-def support_inset_m(b: Body) -> float:
-    """How far inside its supporting face a rigid body's centre of mass is kept (m)."""
-    extent = np.ptp(b.footprint_rel_m, axis=0) if len(b.footprint_rel_m) else np.zeros(2)
-    return max(SUPPORT_INSET_M, SUPPORT_INSET_FRACTION * float(np.min(extent)))
 
 
 def candidate_pairs(lo_m: np.ndarray, hi_m: np.ndarray, margin_m: float) -> np.ndarray:

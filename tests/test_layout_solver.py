@@ -456,25 +456,52 @@ def test_pushes_adding_up_past_max_push_leave_the_object_where_seen(seed):
 
 
 def test_a_body_whose_pad_is_blocked_says_so_and_not_that_it_hangs():
-    """A mug seen on a surface whose pad would reach into a cabinet beside it (the cabinet's top
-    under a tenth of the mug's footprint, too little to rest on) is left where seen because what
-    is under it is another object's: the report said "hangs: the camera saw empty space under
-    it" (open3d_TUM's mug, a box of sunrgbd_imvotenet_000003), which was not what happened."""
+    """A mug seen on a surface whose pad would reach into a board standing under its middle (the
+    board's top under a fifth of the mug's footprint, too little to rest on, and no cut of the
+    pad keeps the mug's centre of mass over it) is left where seen because what is under it is
+    another object's: the report said "hangs: the camera saw empty space under it"
+    (open3d_TUM's mug, a box of sunrgbd_imvotenet_000003), which was not what happened."""
     from layout.bodies import make_body
     from layout.support import BLOCKED_PAD_REASON, UNSUPPORTED, build_support
-
-    cabinet = make_body(box_asset("cabinet", (0.5, 0.5, 0.69)), pose(np.eye(3), (0.0, 0.0, 0.0)))
-    mug = make_body(box_asset("mug", (0.1, 0.1, 0.1)), pose(np.eye(3), (0.29, 0.0, 0.7)))  # 1 cm over the cabinet
 
     def seen_surface(foot, lo_m, hi_m):  # the surface seen around the mug, at 0.70 m
         return 0.7 if lo_m <= 0.7 <= hi_m else None
 
-    bodies = [cabinet, mug]
-    build_support(bodies, (), None, seen_surface, 0.02, lambda foot, bottom: False)
+    board = make_body(box_asset("board", (0.02, 0.5, 0.69)), pose(np.eye(3), (0.29, 0.0, 0.0)))
+    mug = make_body(box_asset("mug", (0.1, 0.1, 0.1)), pose(np.eye(3), (0.29, 0.0, 0.7)))  # 1 cm over the board
+    build_support([board, mug], (), None, seen_surface, 0.02, lambda foot, bottom: False)
     assert mug.parent == UNSUPPORTED and mug.unsupported_reason == BLOCKED_PAD_REASON
-    far = make_body(box_asset("mug", (0.1, 0.1, 0.1)), pose(np.eye(3), (0.6, 0.0, 0.7)))  # clear of the cabinet
-    build_support([make_body(box_asset("cabinet", (0.5, 0.5, 0.69)), np.eye(4)), far], (), None, seen_surface, 0.02, lambda foot, bottom: False)
+    far = make_body(box_asset("mug", (0.1, 0.1, 0.1)), pose(np.eye(3), (0.6, 0.0, 0.7)))  # clear of the board
+    build_support([make_body(box_asset("board", (0.02, 0.5, 0.69)), pose(np.eye(3), (0.29, 0.0, 0.0))), far], (), None, seen_surface, 0.02,
+                  lambda foot, bottom: False)
     assert far.parent != UNSUPPORTED
+
+
+def test_a_pad_stops_short_of_a_neighbour_reaching_under_its_edge():
+    """A cabinet's top reaching 1 cm under a mug's edge (a tenth of its footprint, too little to
+    rest on) cuts the pad under the mug back, with its centre of mass still over it, instead of
+    leaving the mug as background; a thin board lying diagonally beside a box (a mirror beside a
+    box on a dresser, sunrgbd_imvotenet_000003), whose extent in the box's axes covers the box's
+    pad but which misses it, leaves the pad whole."""
+    from layout.bodies import make_body
+    from layout.support import BACKGROUND, build_support, pad_box
+
+    def seen_surface(foot, lo_m, hi_m):
+        return 0.7 if lo_m <= 0.7 <= hi_m else None
+
+    cabinet = make_body(box_asset("cabinet", (0.5, 0.5, 0.69)), pose(np.eye(3), (0.0, 0.0, 0.0)))
+    mug = make_body(box_asset("mug", (0.1, 0.1, 0.1)), pose(np.eye(3), (0.29, 0.0, 0.7)))
+    build_support([cabinet, mug], (), None, seen_surface, 0.02, lambda foot, bottom: False)
+    assert mug.parent == BACKGROUND
+    centre, half, _ = pad_box(mug, 0.7)
+    assert centre[0] - half[0] == pytest.approx(0.25, abs=1e-6) and centre[0] + half[0] == pytest.approx(0.34, abs=1e-6)
+
+    c, s = np.cos(np.pi / 4), np.sin(np.pi / 4)
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    board = make_body(box_asset("mirror", (0.02, 1.0, 0.8)), pose(rot, (0.0, 0.0, 0.0)))  # along y = -x
+    box = make_body(box_asset("box", (0.2, 0.2, 0.2)), pose(np.eye(3), (0.2, 0.2, 0.7)))  # 0.14 m clear of it
+    build_support([board, box], (), None, seen_surface, 0.02, lambda foot, bottom: False)
+    assert box.parent == BACKGROUND and box.pad_rect_m is None
 
 
 def test_a_cut_under_a_small_thing_takes_only_the_blockers_pieces_around_it():
