@@ -38,6 +38,8 @@ MIN_PIECE_VOLUME_M3 = 1e-7
 MIN_OBSERVED_POINTS = 30
 #: A piece holding at least this share of its part's collision volume is never cut away whole.
 MAIN_PIECE_SHARE = 0.25
+#: A piece whose bottom lies within this of its object's lowest collision point is one it stands on.
+FOOT_TOL_M = 0.003
 
 
 def _face_normals(v: np.ndarray) -> np.ndarray:
@@ -50,11 +52,18 @@ def _face_normals(v: np.ndarray) -> np.ndarray:
     return eq / np.linalg.norm(eq, axis=1, keepdims=True)
 
 
-def separating_plane(va: np.ndarray, vb: np.ndarray) -> tuple[np.ndarray, float, float]:
+def separating_plane(va: np.ndarray, vb: np.ndarray, horizontal: bool = False) -> tuple[np.ndarray, float, float]:
     """The axis of least overlap of two convex vertex sets (N, 3), (M, 3) (world frame) among the
-    face normals of both: unit normal n (A on its negative side), mid-plane offset c (n . x = c)
-    and the overlap depth along n (<= 0 when they are apart)."""
+    face normals of both (``horizontal``: their horizontal components, a vertical cut plane): unit
+    normal n (A on its negative side), mid-plane offset c (n . x = c) and the overlap depth along
+    n (<= 0 when they are apart)."""
     axes = np.concatenate([_face_normals(va), _face_normals(vb)])
+    if horizontal:
+        axes = np.concatenate([axes[:, :2], np.zeros((len(axes), 1))], axis=1)
+        norm = np.linalg.norm(axes, axis=1)
+        axes = axes[norm > 1e-6] / norm[norm > 1e-6, None]
+        if not len(axes):
+            axes = np.eye(3)[:2]
     pa, pb = va @ axes.T, vb @ axes.T
     a_lo, a_hi, b_lo, b_hi = pa.min(0), pa.max(0), pb.min(0), pb.max(0)
     up = a_hi - b_lo  # overlap when A is below B along the axis
@@ -310,6 +319,20 @@ def trim_pair(
 
     vis_a = np.concatenate([_surface_points(_world(p.visual, ta), p.visual.faces) for p in a.parts])
     vis_b = np.concatenate([_surface_points(_world(p.visual, tb), p.visual.faces) for p in b.parts])
+    # Pieces reaching within FOOT_TOL_M of an object's lowest collision point are what it stands on.
+    foot_a = min(float(m.vertices_m[:, 2].min()) for p in a.parts for m in p.collision) + FOOT_TOL_M
+    foot_b = min(float(m.vertices_m[:, 2].min()) for p in b.parts for m in p.collision) + FOOT_TOL_M
+
+    def offset_for(n: np.ndarray, mid: float, depth: float, va: np.ndarray, vb: np.ndarray) -> float | None:
+        """Where the cut along ``n`` lies: between the visuals, else between what was seen."""
+        c = _cut_offset(n, mid, depth, vis_a, vis_b, va, vb, max_depth_m)
+        return _observed_offset(n, mid, va, vb, observed_a, observed_b) if c is None else c
+
+    def cut_along(n: np.ndarray, offset: float, ma: TriangleMesh, mb: TriangleMesh):
+        # Plane in each asset's frame: n . (R v + t) = c  ->  (R^T n) . v = c - n . t
+        na, nb = ta[:3, :3].T @ n, tb[:3, :3].T @ n
+        return (clip_convex(ma.vertices_m, na, offset - float(n @ ta[:3, 3]) - TRIM_CLEARANCE_M / 2),
+                clip_convex(mb.vertices_m, -nb, -(offset - float(n @ tb[:3, 3])) - TRIM_CLEARANCE_M / 2))
     cut_depth, left_depth = 0.0, 0.0
     for pa_name in pieces_a:
         for pb_name in pieces_b:
@@ -324,19 +347,26 @@ def trim_pair(
                     n, c, depth = separating_plane(va, vb)
                     if depth <= 0.0:
                         continue
-                    mid = c
-                    c = _cut_offset(n, mid, depth, vis_a, vis_b, va, vb, max_depth_m)
-                    if c is None:
-                        c = _observed_offset(n, mid, va, vb, observed_a, observed_b)
+                    c = offset_for(n, c, depth, va, vb)
+
+                    def loses_foot(cut_a, cut_b) -> bool:
+                        return (cut_a is None and ma.vertices_m[:, 2].min() <= foot_a) or (cut_b is None and mb.vertices_m[:, 2].min() <= foot_b)
+
+                    if c is not None and loses_foot(*cut_along(n, c, ma, mb)):
+                        # The cut would take away a piece an object stands on (a monitor's base
+                        # plate inside a cabinet's completed side, sunrgbd_imvotenet_000002: it
+                        # fell onto its stem and toppled): cut apart sideways instead where that
+                        # keeps it, else left to the solver's pushes.
+                        n, c, depth = separating_plane(va, vb, horizontal=True)
+                        c = offset_for(n, c, depth, va, vb) if depth > 0.0 else None
+                        if c is not None and loses_foot(*cut_along(n, c, ma, mb)):
+                            c = None
                     if c is None:
                         left_depth = max(left_depth, depth)
                         continue
-                    # Plane in each asset's frame: n . (R v + t) = c  ->  (R^T n) . v = c - n . t
-                    na, nb = ta[:3, :3].T @ n, tb[:3, :3].T @ n
 
                     def cut(offset: float):
-                        return (clip_convex(ma.vertices_m, na, offset - float(n @ ta[:3, 3]) - TRIM_CLEARANCE_M / 2),
-                                clip_convex(mb.vertices_m, -nb, -(offset - float(n @ tb[:3, 3])) - TRIM_CLEARANCE_M / 2))
+                        return cut_along(n, offset, ma, mb)
 
                     def loses_main_piece(cut_a, cut_b) -> bool:
                         return (cut_a is None and main_piece(ma, parts_a[pa_name])) or (cut_b is None and main_piece(mb, parts_b[pb_name]))

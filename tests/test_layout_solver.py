@@ -504,6 +504,28 @@ def test_a_pad_stops_short_of_a_neighbour_reaching_under_its_edge():
     assert box.parent == BACKGROUND and box.pad_rect_m is None
 
 
+def test_a_cut_never_takes_away_the_piece_an_object_stands_on():
+    """A monitor's 16 mm base plate inside a cabinet's completion reaching 2 cm under the floor:
+    the level cut of least overlap took the plate away whole and the monitor, left on its stem,
+    toppled (sunrgbd_imvotenet_000002). The pieces are cut apart sideways instead: the plate keeps
+    its bottom on the floor."""
+    from layout.trim import trim_pair
+
+    plate = box_mesh([-0.25, -0.05, 0.0], [0.25, 0.05, 0.016])
+    panel = box_mesh([-0.25, -0.15, 0.016], [-0.2, 0.15, 0.5])
+    monitor = asset_from_pieces("monitor", "monitor", [plate, panel])
+    cabinet = asset_from_pieces("cabinet", "cabinet", [box_mesh([0.2, -0.5, -0.02], [0.8, 0.5, 0.8])])
+    cut_monitor, cut_cabinet, depth, _ = trim_pair(monitor, np.eye(4), cabinet, np.eye(4))
+    assert depth > 0.0
+    pieces = cut_monitor.parts[0].collision
+    assert len(pieces) == 2
+    base = min(pieces, key=lambda m: float(m.vertices_m[:, 2].max()))
+    assert float(base.vertices_m[:, 2].min()) == pytest.approx(0.0, abs=1e-9)
+    # Cut at the mid-plane of the 5 cm overlap, the cabinet's side on the other side of it.
+    assert float(base.vertices_m[:, 0].max()) == pytest.approx(0.224, abs=1e-6)
+    assert float(cut_cabinet.parts[0].collision[0].vertices_m[:, 0].min()) == pytest.approx(0.226, abs=1e-6)
+
+
 def test_a_cut_under_a_small_thing_takes_only_the_blockers_pieces_around_it():
     """A book seen sunk 4 cm into a desk's completed top: cut against the whole convex top slab,
     the half-space lowered the whole top (everything on open3d_TUM's desk fell). Split along the
