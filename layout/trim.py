@@ -38,7 +38,8 @@ MIN_PIECE_VOLUME_M3 = 1e-7
 MIN_OBSERVED_POINTS = 30
 #: A piece holding at least this share of its part's collision volume is never cut away whole.
 MAIN_PIECE_SHARE = 0.25
-#: A piece whose bottom lies within this of its object's lowest collision point is one it stands on.
+#: A piece whose bottom lies within this of its object's lowest collision point is one it stands on
+#: (a cut never takes away the last of them).
 FOOT_TOL_M = 0.003
 
 
@@ -323,6 +324,12 @@ def trim_pair(
     foot_a = min(float(m.vertices_m[:, 2].min()) for p in a.parts for m in p.collision) + FOOT_TOL_M
     foot_b = min(float(m.vertices_m[:, 2].min()) for p in b.parts for m in p.collision) + FOOT_TOL_M
 
+    def last_foot(mesh: TriangleMesh, pieces: dict[str, list], foot: float) -> bool:
+        """Whether ``mesh`` is the only piece left that its object stands on (a sofa keeps its
+        other feet when a cut takes one away; a monitor on its base plate has none)."""
+        feet = [m for ms in pieces.values() for m in ms if m is not None and float(m.vertices_m[:, 2].min()) <= foot]
+        return len(feet) == 1 and feet[0] is mesh
+
     def offset_for(n: np.ndarray, mid: float, depth: float, va: np.ndarray, vb: np.ndarray) -> float | None:
         """Where the cut along ``n`` lies: between the visuals, else between what was seen."""
         c = _cut_offset(n, mid, depth, vis_a, vis_b, va, vb, max_depth_m)
@@ -350,7 +357,7 @@ def trim_pair(
                     c = offset_for(n, c, depth, va, vb)
 
                     def loses_foot(cut_a, cut_b) -> bool:
-                        return (cut_a is None and ma.vertices_m[:, 2].min() <= foot_a) or (cut_b is None and mb.vertices_m[:, 2].min() <= foot_b)
+                        return (cut_a is None and last_foot(ma, pieces_a, foot_a)) or (cut_b is None and last_foot(mb, pieces_b, foot_b))
 
                     if c is not None and loses_foot(*cut_along(n, c, ma, mb)):
                         # The cut would take away a piece an object stands on (a monitor's base
