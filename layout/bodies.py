@@ -58,9 +58,6 @@ class Body:
     # Welded to the room where seen: "wall" (a wall-mountable thing against a wall with nothing
     # under it) or "room" (a fixed-category thing with nothing under it); "" = not mounted.
     mounted: str = ""
-    # ``surfaces`` holds the top face of each piece first, then the merged tops
-    # (layout.geometry.merged_top_surfaces) from this index on.
-    merged_from: int = 0
 
     @property
     def bottom_m(self) -> float:
@@ -156,7 +153,6 @@ def make_body(asset: ObjectAsset, world_from_asset: np.ndarray) -> Body:
         initial_position_m=position.copy(),
         pieces=pieces,
         surfaces=(tops := top_surfaces(pieces)) + merged_top_surfaces(tops),
-        merged_from=len(tops),
         footprint_rel_m=footprint(pieces, band),
         lo_rel_m=lo,
         hi_rel_m=hi,

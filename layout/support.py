@@ -38,9 +38,6 @@ SUNK_FOOTPRINT_OVERLAP = 0.6
 # ... and a face under that much of its footprint is its support even when it leaves it this
 # deep in the rest of the supporter (layout.trim cuts such overlaps apart; layout.trim.MAX_TRIM_M).
 SUNK_CLASH_TOL_M = 0.06
-# A piece's top under at least this share of a body's footprint is one it rests on, within a
-# merged top (a step of a completed dresser's top).
-MERGED_PIECE_OVERLAP = 0.02
 # Faces lower than this are the floor's business.
 MIN_SURFACE_HEIGHT_M = 0.02
 # Background seen around an object lower than this (a rug, a carpet's pile, depth noise on the
@@ -200,23 +197,6 @@ def _clear_pad_rect(b: Body, height_m: float, others: list[Body], clearance_m: f
     return cut
 
 
-def _merged_height_under(s: Body, height_rel_m: float, foot: np.ndarray) -> float:
-    """World height at which a body with footprint ``foot`` (world) rests on ``s``'s merged top at
-    ``height_rel_m``: that of the highest of the merged piece tops under it. A merged top lies at
-    its highest piece's height, and a completed dresser's top steps by centimetres: a box set on
-    the merged top over its lower pieces hovered 2.4 cm above them, dropped and tipped
-    (sunrgbd_imvotenet_000002). The merged height where no piece top lies under it."""
-    from layout.geometry import MERGE_BAND_M
-
-    under = [
-        f.height_rel_m
-        for f in s.surfaces[: s.merged_from]
-        if height_rel_m - MERGE_BAND_M - 1e-9 <= f.height_rel_m <= height_rel_m + 1e-9
-        and _overlap_fraction(foot, f.polygon_rel_m + s.position_m[:2]) > MERGED_PIECE_OVERLAP
-    ]
-    return float(s.position_m[2] + (max(under) if under else height_rel_m))
-
-
 def build_support(
     bodies: list[Body],
     walls: tuple[Plane, ...],
@@ -291,8 +271,6 @@ def build_support(
                     frac = _overlap_fraction(foot, surf.polygon_rel_m + s.position_m[:2])
                     if frac < (MIN_FOOTPRINT_OVERLAP if h <= bottom + tol else SUNK_FOOTPRINT_OVERLAP):
                         continue
-                    if k >= s.merged_from:
-                        h = _merged_height_under(s, surf.height_rel_m, foot)
                     candidates.append((h, frac, -j, k))
             # The support nearest to the observed bottom wins (ties: an object's face, then the
             # background, then the floor): the object moves as little as it can.

@@ -526,25 +526,6 @@ def test_a_cut_never_takes_away_the_piece_an_object_stands_on():
     assert float(cut_cabinet.parts[0].collision[0].vertices_m[:, 0].min()) == pytest.approx(0.226, abs=1e-6)
 
 
-def test_a_thing_on_a_stepped_top_rests_on_the_step_under_it():
-    """A dresser's top completed as two pieces 2 cm apart in height is one merged top at the
-    higher one's height; a box standing over the lower piece only rested at the merged height,
-    2 cm over what held it, dropped at the start of the settle and tipped over the edge
-    (sunrgbd_imvotenet_000002). It rests on the piece under it."""
-    from layout.bodies import make_body
-    from layout.support import build_support
-
-    dresser = make_body(asset_from_pieces("dresser", "dresser", [box_mesh([-0.5, -0.25, 0.0], [0.0, 0.25, 0.82]),
-                                                                  box_mesh([0.0, -0.25, 0.0], [0.5, 0.25, 0.80])]), np.eye(4))
-    assert dresser.merged_from == 2 and len(dresser.surfaces) == 3  # two piece tops, one merged top
-    box = make_body(box_asset("box", (0.2, 0.2, 0.2)), pose(np.eye(3), (0.25, 0.0, 0.79)))  # seen 1 cm sunk into the lower piece
-    build_support([dresser, box], (), None, None, 0.02, None)
-    assert box.parent == 0 and box.bottom_m == pytest.approx(0.80)
-    on_both = make_body(box_asset("box", (0.2, 0.2, 0.2)), pose(np.eye(3), (0.0, 0.0, 0.81)))
-    build_support([dresser, on_both], (), None, None, 0.02, None)
-    assert on_both.parent == 0 and on_both.bottom_m == pytest.approx(0.82)
-
-
 def test_a_cut_under_a_small_thing_takes_only_the_blockers_pieces_around_it():
     """A book seen sunk 4 cm into a desk's completed top: cut against the whole convex top slab,
     the half-space lowered the whole top (everything on open3d_TUM's desk fell). Split along the
