@@ -79,7 +79,7 @@ def unsupport_blocked_pads(bodies: list[Body]) -> set[str]:
             b.pad_rect_m = clipped
             continue
         if b.asset.label in STANDS_ON_LEGS and 0.0 < b.bottom_m <= LEGS_MAX_DROP_M:
-            b.parent, b.support_surface, b.legs_m, b.pad_bottom_m, b.pad_rect_m = FLOOR, -1, b.bottom_m, None, None
+            b.parent, b.support_surface, b.legs_m, b.pad_bottom_m, b.pad_rect_m, b.step_face = FLOOR, -1, b.bottom_m, None, None, None
             to_floor.add(b.name)
             continue
         b.parent = UNSUPPORTED

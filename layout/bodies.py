@@ -58,6 +58,12 @@ class Body:
     # Welded to the room where seen: "wall" (a wall-mountable thing against a wall with nothing
     # under it) or "room" (a fixed-category thing with nothing under it); "" = not mounted.
     mounted: str = ""
+    # ``surfaces`` holds the top face of each piece first, then the merged tops
+    # (layout.geometry.merged_top_surfaces) from this index on.
+    merged_from: int = 0
+    # Resting on a merged top: the step of it under this body (layout.support.step_face), the
+    # face its support region is kept on; None otherwise.
+    step_face: SupportSurface | None = None
 
     @property
     def bottom_m(self) -> float:
@@ -119,6 +125,7 @@ def rebuilt(b: Body, asset: ObjectAsset) -> Body:
     new.pad_rect_m = b.pad_rect_m
     new.trimmed_with = set(b.trimmed_with)
     new.mounted = b.mounted
+    new.step_face = b.step_face
     return new
 
 
@@ -153,6 +160,7 @@ def make_body(asset: ObjectAsset, world_from_asset: np.ndarray) -> Body:
         initial_position_m=position.copy(),
         pieces=pieces,
         surfaces=(tops := top_surfaces(pieces)) + merged_top_surfaces(tops),
+        merged_from=len(tops),
         footprint_rel_m=footprint(pieces, band),
         lo_rel_m=lo,
         hi_rel_m=hi,

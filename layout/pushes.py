@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from layout.bodies import Body
-from layout.geometry import clip_half_plane, clip_to_slab_xy, closest_point_in_polygon, horizontal_mtv, placements_inside
+from layout.geometry import SupportSurface, clip_half_plane, clip_to_slab_xy, closest_point_in_polygon, horizontal_mtv, placements_inside
 from layout.narrowphase import ConvexWorld
 from layout.support import SUPPORT_INSET_M, UNSUPPORTED, is_ancestor, subtree, support_inset_m
 from scene_builder.config import LayoutConfig
@@ -318,17 +318,23 @@ class Solver:
                 moved = True
         return moved
 
+    def support_face(self, i: int) -> SupportSurface:
+        """The face body i rests on: the step of a merged top under it where it rests on one
+        (``Body.step_face``), else its supporting face."""
+        b = self.bodies[i]
+        return b.step_face or self.bodies[b.parent].surfaces[b.support_surface]
+
     def support_region(self, i: int) -> np.ndarray:
         """(K, 2) convex polygon, relative to the supporting body's position, of the positions
         (x, y) at which body i rests stably on its supporting face: a rigid body's centre of mass
         inside the face by its stability inset, a soft body's footprint on the face. Cached: it
         depends only on the two bodies' shapes."""
         b = self.bodies[i]
-        key = (b.parent, b.support_surface)
+        key = (b.parent, b.support_surface, id(b.step_face))
         cached = self._regions.get(i)
         if cached is not None and cached[0] == key:
             return cached[1]
-        face = self.bodies[b.parent].surfaces[b.support_surface].polygon_rel_m
+        face = self.support_face(i).polygon_rel_m
         region = np.zeros((0, 2))
         if b.asset.kind is AssetKind.DEFORMABLE:
             centre = b.footprint_rel_m.mean(axis=0)
@@ -371,23 +377,27 @@ class Solver:
             if len(region) == 0:
                 # Stable spots all lie in a wall: the wall wins, the settle simulation judges
                 # whether the object still stands (relaxed to its centre of mass over the face).
-                face = self.bodies[b.parent].surfaces[b.support_surface].polygon_rel_m + s.position_m[:2] - b.com_rel_m[:2]
+                face = self.support_face(i).polygon_rel_m + s.position_m[:2] - b.com_rel_m[:2]
                 region = self.inside_walls(i, face)
                 if len(region) == 0:
                     continue
             here = b.position_m[:2]
             target = region[0] if len(region) < 3 else closest_point_in_polygon(here, region, 0.0)
-            if float(np.linalg.norm(target - b.initial_position_m[:2])) > SUPPORT_SLIDE_MAX_M and b.asset.kind is not AssetKind.DEFORMABLE:
+            # How far it may end from where it was seen: SUPPORT_SLIDE_MAX_M, or as far as the
+            # pushes have already taken it (a bowl pushed 16 cm off its shelf board's edge by its
+            # neighbours is brought back onto the board, nearer where it was seen: promptda_arkit).
+            slide = max(SUPPORT_SLIDE_MAX_M, float(np.linalg.norm(here - b.initial_position_m[:2])))
+            if float(np.linalg.norm(target - b.initial_position_m[:2])) > slide and b.asset.kind is not AssetKind.DEFORMABLE:
                 # Seen nearer the face's edge than the stability inset (or over a face modelled
                 # smaller than the real top): the centre of mass only has to be over the face;
                 # farther than that from where it was seen it stays, and the settle simulation
                 # judges whether it stands.
-                face = s.surfaces[b.support_surface].polygon_rel_m + s.position_m[:2]
+                face = self.support_face(i).polygon_rel_m + s.position_m[:2]
                 relaxed = self.inside_walls(i, placements_inside(face - s.position_m[:2], b.com_rel_m[None, :2], SUPPORT_INSET_M) + s.position_m[:2])
                 if not len(relaxed):
                     continue
                 target = relaxed[0] if len(relaxed) < 3 else closest_point_in_polygon(here, relaxed, 0.0)
-                if float(np.linalg.norm(target - b.initial_position_m[:2])) > SUPPORT_SLIDE_MAX_M:
+                if float(np.linalg.norm(target - b.initial_position_m[:2])) > slide:
                     continue
             delta = target - here
             if float(np.linalg.norm(delta)) > 1e-6:

@@ -19,7 +19,7 @@ from typing import Callable
 import numpy as np
 
 from layout.bodies import Body
-from layout.geometry import clip_convex_polygons, polygon_area
+from layout.geometry import SupportSurface, clip_convex_polygons, convex_hull_2d, polygon_area
 from scene_builder.model import AssetKind, Plane, SupportEdge
 
 FLOOR, WALL, BACKGROUND, UNSUPPORTED = -1, -2, -3, -4
@@ -38,6 +38,13 @@ SUNK_FOOTPRINT_OVERLAP = 0.6
 # ... and a face under that much of its footprint is its support even when it leaves it this
 # deep in the rest of the supporter (layout.trim cuts such overlaps apart; layout.trim.MAX_TRIM_M).
 SUNK_CLASH_TOL_M = 0.06
+# A piece top under more than this share of a body's footprint is one of the steps of a merged
+# top it may rest on; the tops within STEP_LEVEL_M of the highest of those make its step.
+STEP_OVERLAP = 0.02
+STEP_LEVEL_M = 0.005
+# ... made into one step when they cover this share of their hull (a top's voxel columns), else
+# the one most under it alone.
+STEP_MIN_COVER = 0.9
 # Faces lower than this are the floor's business.
 MIN_SURFACE_HEIGHT_M = 0.02
 # Background seen around an object lower than this (a rug, a carpet's pile, depth noise on the
@@ -197,6 +204,37 @@ def _clear_pad_rect(b: Body, height_m: float, others: list[Body], clearance_m: f
     return cut
 
 
+def step_face(s: Body, height_rel_m: float, foot: np.ndarray) -> SupportSurface | None:
+    """The step of ``s``'s merged top at ``height_rel_m`` that a body with footprint ``foot``
+    (world) rests on: the hull of the piece tops at the height of the highest of them under it,
+    those under it. A merged top lies at its highest piece's height and spans its lower ones (a
+    completed night stand's top steps 0.77-0.82 m): a price card set on it over the lower pieces
+    hovered 2.4 cm over what held it, and the pushes kept its centre of mass anywhere in the
+    merged hull, past the lower pieces' edge (sunrgbd_imvotenet_000002: it dropped and tipped).
+    None when no piece top lies under it, or when the step is the merged top itself."""
+    from layout.geometry import MERGE_BAND_M
+
+    under = [
+        f for f in s.surfaces[: s.merged_from]
+        if height_rel_m - MERGE_BAND_M - 1e-9 <= f.height_rel_m <= height_rel_m + 1e-9
+        and _overlap_fraction(foot, f.polygon_rel_m + s.position_m[:2]) > STEP_OVERLAP
+    ]
+    if not under:
+        return None
+    import shapely
+
+    top = max(f.height_rel_m for f in under)
+    level = [f.polygon_rel_m for f in under if f.height_rel_m >= top - STEP_LEVEL_M and len(f.polygon_rel_m) >= 3]
+    hull = convex_hull_2d(np.concatenate(level))
+    if len(hull) < 3:
+        return None
+    if shapely.union_all([shapely.Polygon(q) for q in level]).area < STEP_MIN_COVER * polygon_area(hull):
+        # Tops apart (two boards of a shelf with a gap between them): the hull would hold it over
+        # the gap; it rests on the one most under it.
+        hull = max(level, key=lambda q: _overlap_fraction(foot - s.position_m[:2], q))
+    return SupportSurface(float(top), hull)
+
+
 def build_support(
     bodies: list[Body],
     walls: tuple[Plane, ...],
@@ -235,7 +273,7 @@ def build_support(
     edges: list[SupportEdge] = []
     placed: list[int] = []
     for b in bodies:
-        b.parent, b.support_surface, b.children, b.pad_bottom_m, b.pad_rect_m = FLOOR, -1, [], None, None
+        b.parent, b.support_surface, b.children, b.pad_bottom_m, b.pad_rect_m, b.step_face = FLOOR, -1, [], None, None, None
     # Plan boxes of the bodies placed so far (vectorised prefilter of candidate supports).
     placed_lo = np.zeros((len(bodies), 2))
     placed_hi = np.zeros((len(bodies), 2))
@@ -250,6 +288,7 @@ def build_support(
         hi_xy = foot.max(axis=0)
         pad_blocked = False  # the background seen under it was found, but another body fills the pad
         pad_rects: dict[float, np.ndarray] = {}  # background height -> the pad's rectangle there
+        steps: dict[tuple[int, int], SupportSurface] = {}  # (body, merged top) -> the step under it
 
         def search(drop_m: float, objects: bool = True, min_background_m: float = 0.0) -> list[tuple[float, int, float, int, int]]:
             nonlocal pad_blocked
@@ -271,6 +310,11 @@ def build_support(
                     frac = _overlap_fraction(foot, surf.polygon_rel_m + s.position_m[:2])
                     if frac < (MIN_FOOTPRINT_OVERLAP if h <= bottom + tol else SUNK_FOOTPRINT_OVERLAP):
                         continue
+                    if k >= s.merged_from:
+                        step = step_face(s, surf.height_rel_m, foot)
+                        if step is not None:
+                            steps[(j, k)] = step
+                            h = float(s.position_m[2] + step.height_rel_m)
                     candidates.append((h, frac, -j, k))
             # The support nearest to the observed bottom wins (ties: an object's face, then the
             # background, then the floor): the object moves as little as it can.
@@ -338,6 +382,8 @@ def build_support(
                 # another object, it stands on legs.
                 b.pad_bottom_m, h, j, k = h, bottom, BACKGROUND, -1
             b.parent, b.support_surface = j, k
+            # On a merged top, it rests on the step under it (the pushes keep it over that step).
+            b.step_face = steps.get((j, k))
             if j == BACKGROUND and b.pad_bottom_m is None:
                 full = _clear_pad_rect(b, h, [])
                 # Kept only where a neighbour cut it back (the whole rectangle follows the body's
