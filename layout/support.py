@@ -211,7 +211,9 @@ def step_face(s: Body, height_rel_m: float, foot: np.ndarray) -> SupportSurface 
     completed night stand's top steps 0.77-0.82 m): a price card set on it over the lower pieces
     hovered 2.4 cm over what held it, and the pushes kept its centre of mass anywhere in the
     merged hull, past the lower pieces' edge (sunrgbd_imvotenet_000002: it dropped and tipped).
-    None when no piece top lies under it, or when the step is the merged top itself."""
+    None when no piece top lies under it."""
+    import shapely
+
     from layout.geometry import MERGE_BAND_M
 
     under = [
@@ -219,12 +221,10 @@ def step_face(s: Body, height_rel_m: float, foot: np.ndarray) -> SupportSurface 
         if height_rel_m - MERGE_BAND_M - 1e-9 <= f.height_rel_m <= height_rel_m + 1e-9
         and _overlap_fraction(foot, f.polygon_rel_m + s.position_m[:2]) > STEP_OVERLAP
     ]
-    if not under:
-        return None
-    import shapely
-
-    top = max(f.height_rel_m for f in under)
+    top = max((f.height_rel_m for f in under), default=0.0)
     level = [f.polygon_rel_m for f in under if f.height_rel_m >= top - STEP_LEVEL_M and len(f.polygon_rel_m) >= 3]
+    if not level:
+        return None
     hull = convex_hull_2d(np.concatenate(level))
     if len(hull) < 3:
         return None
