@@ -40,7 +40,7 @@ from layout.background_policy import pad_blockers, static_background, uncage_bod
 from layout.bodies import Body, make_body, rebuilt, with_legs
 from layout.pushes import PENETRATION_TOL_M, Solver
 from layout.snapping import YawSnap, reference_yaw, snap_yaw
-from layout.support import BLOCKED_PAD_REASON, UNSUPPORTED, build_support
+from layout.support import BLOCKED_PAD_REASON, MAX_DROP_M, MIN_FOOTPRINT_OVERLAP, UNSUPPORTED, overlap_fraction, build_support, subtree
 from layout.trim import collision_volume_m3, split_around, trim_pair, trim_to_walls
 from scene_builder.config import LayoutConfig
 from scene_builder.errors import InputError
@@ -50,6 +50,8 @@ from scene_builder.model import AssetKind, GeneratedAsset, LayoutResult, Percept
 RELOCATE_ROUNDS = 3
 # Rounds of cutting overlapping collision pieces apart (layout.trim) before the pushes.
 TRIM_PASSES = 3
+# A child whose bottom lies within this of a face under it rests on it.
+REST_TOL_M = 0.002
 
 
 @dataclass(frozen=True)
@@ -98,12 +100,29 @@ def _trim_overlaps(solver: Solver, observed: dict[str, np.ndarray]) -> bool:
         bodies[j].trimmed_with.add(bodies[i].name)
     if changed:
         # Cut pieces may have changed a supporter's top faces: each child rests on the face at
-        # its bottom's height again (the nearest one).
-        for b in bodies:
-            if b.parent >= 0:
-                faces = bodies[b.parent].surfaces
-                heights = np.array([bodies[b.parent].position_m[2] + f.height_rel_m for f in faces])
-                b.support_surface = int(np.argmin(np.abs(heights - b.bottom_m))) if len(faces) else -1
+        # its bottom's height again (the nearest one); where the cut lowered the top under it (a
+        # thin device on a table's stepped completion, emsanet_sample: it hovered 3 cm and
+        # tipped), on the highest face under its footprint, lowered onto it with what rests on it.
+        for i, b in enumerate(bodies):
+            if b.parent < 0:
+                continue
+            s = bodies[b.parent]
+            heights = np.array([s.position_m[2] + f.height_rel_m for f in s.surfaces])
+            if not len(heights):
+                b.support_surface = -1
+                continue
+            b.support_surface = int(np.argmin(np.abs(heights - b.bottom_m)))
+            if b.step_face is not None or b.asset.kind is AssetKind.DEFORMABLE:
+                continue
+            foot = b.footprint_rel_m + b.position_m[:2]
+            under = [k for k, f in enumerate(s.surfaces) if heights[k] <= b.bottom_m + REST_TOL_M
+                     and overlap_fraction(foot, f.polygon_rel_m + s.position_m[:2]) >= MIN_FOOTPRINT_OVERLAP]
+            if under and not any(abs(heights[k] - b.bottom_m) <= REST_TOL_M for k in under):
+                k = max(under, key=lambda k: heights[k])
+                if b.bottom_m - heights[k] <= MAX_DROP_M:
+                    for t in subtree(bodies, i):
+                        bodies[t].position_m[2] -= b.bottom_m - heights[k]
+                    b.support_surface = k
     return changed
 
 

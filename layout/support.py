@@ -124,7 +124,7 @@ def _footprint_world(b: Body) -> np.ndarray:
     return b.footprint_rel_m + b.position_m[:2]
 
 
-def _overlap_fraction(foot: np.ndarray, poly: np.ndarray) -> float:
+def overlap_fraction(foot: np.ndarray, poly: np.ndarray) -> float:
     area = polygon_area(foot)
     if area <= 1e-8:
         # Degenerate footprint (a point or a line): inside or not, by its centroid.
@@ -219,7 +219,7 @@ def step_face(s: Body, height_rel_m: float, foot: np.ndarray) -> SupportSurface 
     under = [
         f for f in s.surfaces[: s.merged_from]
         if height_rel_m - MERGE_BAND_M - 1e-9 <= f.height_rel_m <= height_rel_m + 1e-9
-        and _overlap_fraction(foot, f.polygon_rel_m + s.position_m[:2]) > STEP_OVERLAP
+        and overlap_fraction(foot, f.polygon_rel_m + s.position_m[:2]) > STEP_OVERLAP
     ]
     top = max((f.height_rel_m for f in under), default=0.0)
     level = [f.polygon_rel_m for f in under if f.height_rel_m >= top - STEP_LEVEL_M and len(f.polygon_rel_m) >= 3]
@@ -231,7 +231,7 @@ def step_face(s: Body, height_rel_m: float, foot: np.ndarray) -> SupportSurface 
     if shapely.union_all([shapely.Polygon(q) for q in level]).area < STEP_MIN_COVER * polygon_area(hull):
         # Tops apart (two boards of a shelf with a gap between them): the hull would hold it over
         # the gap; it rests on the one most under it.
-        hull = max(level, key=lambda q: _overlap_fraction(foot - s.position_m[:2], q))
+        hull = max(level, key=lambda q: overlap_fraction(foot - s.position_m[:2], q))
     return SupportSurface(float(top), hull)
 
 
@@ -307,7 +307,7 @@ def build_support(
                     h = float(s.position_m[2] + surf.height_rel_m)
                     if h < max(MIN_SURFACE_HEIGHT_M, bottom - drop_m) or h > bottom + SINK_INTO_SUPPORT_M or polygon_area(surf.polygon_rel_m) < min_face_area:
                         continue
-                    frac = _overlap_fraction(foot, surf.polygon_rel_m + s.position_m[:2])
+                    frac = overlap_fraction(foot, surf.polygon_rel_m + s.position_m[:2])
                     if frac < (MIN_FOOTPRINT_OVERLAP if h <= bottom + tol else SUNK_FOOTPRINT_OVERLAP):
                         continue
                     if k >= s.merged_from:

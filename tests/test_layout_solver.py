@@ -556,6 +556,29 @@ def test_a_thing_on_a_stepped_top_rests_on_the_step_under_it_and_is_kept_on_it()
     assert card.position_m[0] + card.com_rel_m[0] <= 0.5 - 0.02 + 1e-9
 
 
+def test_a_thing_whose_step_a_cut_lowered_comes_down_onto_it():
+    """A cut between a table's completion and a book lowered the step of the table's top that a
+    thin device stood on (emsanet_sample): the device kept its height and hovered 3 cm over the
+    step, and dropped at the start of the settle. It comes down onto the highest face under it."""
+    from layout.bodies import make_body
+    from layout.pushes import Solver
+    from layout.solver import _trim_overlaps
+
+    table = make_body(asset_from_pieces("table", "table", [box_mesh([-0.5, -0.3, 0.0], [0.5, 0.3, 0.43]),
+                                                            box_mesh([0.0, -0.1, 0.43], [0.1, 0.1, 0.46])], fixed=True), np.eye(4))
+    book = make_body(box_asset("book", (0.275, 0.2, 0.04)), pose(np.eye(3), (0.1625, 0.0, 0.43)))  # into the step's side
+    device = make_body(box_asset("device", (0.04, 0.04, 0.05)), pose(np.eye(3), (0.0, 0.0, 0.46)))  # half over the step
+    for b, face in ((book, 0), (device, 1)):
+        b.parent, b.support_surface = 0, face
+    table.children = [1, 2]
+    bodies = [table, book, device]
+    solver = Solver(bodies, (), clutter_layout_config())
+    assert _trim_overlaps(solver, {})
+    step_top = max(float(m.vertices_m[:, 2].max()) for m in bodies[0].asset.parts[0].collision if m.vertices_m[:, 0].min() > -0.01)
+    assert step_top < 0.455  # the cut lowered the step
+    assert bodies[2].bottom_m == pytest.approx(step_top, abs=1e-6)  # and the device stands on it
+
+
 def test_a_cut_under_a_small_thing_takes_only_the_blockers_pieces_around_it():
     """A book seen sunk 4 cm into a desk's completed top: cut against the whole convex top slab,
     the half-space lowered the whole top (everything on open3d_TUM's desk fell). Split along the
