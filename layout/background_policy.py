@@ -11,24 +11,18 @@ import dataclasses
 
 import numpy as np
 
-from layout.background import CARVE_CLEARANCE_M, absorb, carve, clip_pad, column_boxes, observed_structure
+from layout.background import absorb, carve, clip_pad, column_boxes, observed_structure
 from layout.bodies import Body
 from layout.geometry import swept_part_boxes
 from layout.pushes import Solver
-from layout.support import BACKGROUND, BLOCKED_PAD_REASON, UNSUPPORTED, pad_box
+from layout.support import BACKGROUND, BLOCKED_PAD_REASON, UNSUPPORTED, pad_box, pad_frame
 from scene_builder.model import AssetKind, Background, Plane, TriangleMesh
 
 
-def _pad_frame(b: Body, legs_pending: bool = False) -> tuple[np.ndarray, float, float, float]:
-    """The pad under ``b``: its rectangle (lo_x, lo_y, hi_x, hi_y) in ``b``'s yawed axes relative
-    to its position, its yaw, and its height band (bottom, top less the carve clearance). The pad's
-    top is where ``b`` rests: its bottom, less its legs when they are still to be made
-    (``legs_pending``)."""
-    centre, half, yaw = pad_box(b, b.bottom_m - (b.legs_m if legs_pending else 0.0))
-    c, s = np.cos(yaw), np.sin(yaw)
-    mid = (centre[:2] - b.position_m[:2]) @ np.array([[c, -s], [s, c]])
-    rect = np.concatenate([mid - half[:2], mid + half[:2]])
-    return rect, yaw, float(centre[2] - half[2]), float(centre[2] + half[2] - CARVE_CLEARANCE_M)
+def _pad_frame(b: Body, legs_pending: bool = False) -> tuple[np.ndarray, float, float, float, np.ndarray]:
+    """The pad under ``b`` (``layout.support.pad_frame``) where ``b`` rests: at its bottom, less
+    its legs when they are still to be made (``legs_pending``)."""
+    return pad_frame(b, b.bottom_m - (b.legs_m if legs_pending else 0.0))
 
 
 def _obstacles(b: Body, bodies: list[Body]) -> list[np.ndarray]:
@@ -38,8 +32,8 @@ def _obstacles(b: Body, bodies: list[Body]) -> list[np.ndarray]:
 
 def _pad_blocked(b: Body, bodies: list[Body], legs_pending: bool = False) -> bool:
     """Whether the pad under ``b`` (resting on the background) reaches into another body's
-    pieces (their extent in the pad's axes, within its height band)."""
-    rect, yaw, z_lo, z_hi = _pad_frame(b, legs_pending)
+    pieces (their plan outlines, within its height band)."""
+    rect, yaw, z_lo, z_hi, _ = _pad_frame(b, legs_pending)
     return clip_pad(rect, yaw, b.position_m, z_lo, z_hi, _obstacles(b, bodies), np.zeros(2), 0.0, probe=True) is None
 
 
@@ -48,9 +42,7 @@ def _clipped_pad(b: Body, bodies: list[Body], legs_pending: bool = False) -> np.
     of mass still held over it (``layout.background.clip_pad``), or None where no cut does."""
     from layout.support import support_inset_m
 
-    rect, yaw, z_lo, z_hi = _pad_frame(b, legs_pending)
-    c, s = np.cos(yaw), np.sin(yaw)
-    com = b.com_rel_m[:2] @ np.array([[c, -s], [s, c]])
+    rect, yaw, z_lo, z_hi, com = _pad_frame(b, legs_pending)
     return clip_pad(rect, yaw, b.position_m, z_lo, z_hi, _obstacles(b, bodies), com, support_inset_m(b))
 
 

@@ -169,23 +169,32 @@ def pad_bounds(centre: np.ndarray, half: np.ndarray, yaw: float) -> tuple[np.nda
             np.array([centre[0] + ext[0], centre[1] + ext[1], centre[2] + half[2]]))
 
 
-def _clear_pad_rect(b: Body, height_m: float, others: list[Body], clearance_m: float = 0.002) -> np.ndarray | None:
-    """The pad under ``b`` at ``height_m`` (its rectangle (lo_x, lo_y, hi_x, hi_y) in ``b``'s yawed
-    axes relative to its position), cut back clear of the other bodies' pieces where their plan
-    hulls reach into it with ``b``'s centre of mass still held inside
-    (``layout.background.clip_pad``), or None where no cut does: then another object fills the
-    space under it, and that object is what it would rest on, not the background. A box on a
-    dresser whose pad a neighbour's top corner reaches 2 cm into (``sunrgbd_imvotenet_000003``)
-    rests on the rest of it."""
-    from layout.background import clip_pad
+def pad_frame(b: Body, height_m: float) -> tuple[np.ndarray, float, float, float, np.ndarray]:
+    """The pad under body ``b`` resting on the background at ``height_m``, in ``b``'s yawed axes
+    relative to its position: its rectangle (lo_x, lo_y, hi_x, hi_y), its yaw, its height band
+    (bottom, top less ``layout.background.CARVE_CLEARANCE_M``) and ``b``'s centre of mass (2,)."""
+    from layout.background import CARVE_CLEARANCE_M
 
     centre, half, yaw = pad_box(b, height_m)
-    lo, hi = pad_bounds(centre, half, yaw)
-    hi[2] -= clearance_m
     c, s = np.cos(yaw), np.sin(yaw)
     to_local = np.array([[c, -s], [s, c]])  # world offsets -> the pad's axes
     mid = (centre[:2] - b.position_m[:2]) @ to_local
     rect = np.concatenate([mid - half[:2], mid + half[:2]])
+    return rect, yaw, float(centre[2] - half[2]), float(centre[2] + half[2] - CARVE_CLEARANCE_M), b.com_rel_m[:2] @ to_local
+
+
+def _clear_pad_rect(b: Body, height_m: float, others: list[Body]) -> np.ndarray | None:
+    """The pad under ``b`` at ``height_m`` (its rectangle, :func:`pad_frame`), cut back clear of
+    the other bodies' pieces where their plan hulls reach into it with ``b``'s centre of mass
+    still held inside (``layout.background.clip_pad``), or None where no cut does: then another
+    object fills the space under it, and that object is what it would rest on, not the
+    background. A box on a dresser whose pad a neighbour's top corner reaches 2 cm into
+    (``sunrgbd_imvotenet_000003``) rests on the rest of it."""
+    from layout.background import clip_pad
+
+    rect, yaw, z_lo, z_hi, com = pad_frame(b, height_m)
+    lo, hi = pad_bounds(*pad_box(b, height_m))
+    hi[2] = z_hi
     near = [
         (o.asset.kind is AssetKind.DEFORMABLE, p.verts_rel_m + o.position_m)
         for o in others
@@ -194,11 +203,11 @@ def _clear_pad_rect(b: Body, height_m: float, others: list[Body], clearance_m: f
     ]
     if not near:
         return rect
-    if clip_pad(rect, yaw, b.position_m, lo[2], hi[2], [v for soft, v in near if soft], np.zeros(2), 0.0, probe=True) is None:
+    if clip_pad(rect, yaw, b.position_m, z_lo, z_hi, [v for soft, v in near if soft], np.zeros(2), 0.0, probe=True) is None:
         # A soft neighbour under it is not cut around: it spreads as it settles and tips what
         # stands beside it (sunrgbd_imvotenet_000005's mug by a pillow, toppled in the settle).
         return None
-    cut = clip_pad(rect, yaw, b.position_m, lo[2], hi[2], [v for _, v in near], b.com_rel_m[:2] @ to_local, support_inset_m(b))
+    cut = clip_pad(rect, yaw, b.position_m, z_lo, z_hi, [v for _, v in near], com, support_inset_m(b))
     if cut is not None and b.asset.kind is AssetKind.DEFORMABLE and np.prod(cut[2:] - cut[:2]) < DEFORMABLE_MIN_FACE_AREA * np.prod(rect[2:] - rect[:2]):
         return None  # a soft body keeps as much of its pad as it needs of a face (it drapes off less)
     return cut
@@ -385,7 +394,7 @@ def build_support(
             # On a merged top, it rests on the step under it (the pushes keep it over that step).
             b.step_face = steps.get((j, k))
             if j == BACKGROUND and b.pad_bottom_m is None:
-                full = _clear_pad_rect(b, h, [])
+                full = pad_frame(b, h)[0]
                 # Kept only where a neighbour cut it back (the whole rectangle follows the body's
                 # pieces when the layout trims them).
                 b.pad_rect_m = None if np.allclose(pad_rects[h], full) else pad_rects[h]

@@ -359,33 +359,32 @@ def trim_pair(
                     def loses_foot(cut_a, cut_b) -> bool:
                         return (cut_a is None and last_foot(ma, pieces_a, foot_a)) or (cut_b is None and last_foot(mb, pieces_b, foot_b))
 
-                    if c is not None and loses_foot(*cut_along(n, c, ma, mb)):
+                    new_a, new_b = cut_along(n, c, ma, mb) if c is not None else (None, None)
+                    if c is not None and loses_foot(new_a, new_b):
                         # The cut would take away a piece an object stands on (a monitor's base
                         # plate inside a cabinet's completed side, sunrgbd_imvotenet_000002: it
                         # fell onto its stem and toppled): cut apart sideways instead where that
                         # keeps it, else left to the solver's pushes.
                         n, c, depth = separating_plane(va, vb, horizontal=True)
                         c = offset_for(n, c, depth, va, vb) if depth > 0.0 else None
-                        if c is not None and loses_foot(*cut_along(n, c, ma, mb)):
-                            c = None
+                        if c is not None:
+                            new_a, new_b = cut_along(n, c, ma, mb)
+                            if loses_foot(new_a, new_b):
+                                c = None
                     if c is None:
                         left_depth = max(left_depth, depth)
                         continue
 
-                    def cut(offset: float):
-                        return cut_along(n, offset, ma, mb)
-
                     def loses_main_piece(cut_a, cut_b) -> bool:
                         return (cut_a is None and main_piece(ma, parts_a[pa_name])) or (cut_b is None and main_piece(mb, parts_b[pb_name]))
 
-                    new_a, new_b = cut(c)
                     if loses_main_piece(new_a, new_b):
                         # The cut would remove a main piece whole (a table top inside the bulged
                         # hull of a bed's piece, within the visuals' tolerance): cut exactly
                         # between the visuals instead where that keeps both main pieces.
                         strict = _cut_offset(n, c, depth, vis_a, vis_b, va, vb, max_depth_m, strict=True)
                         if strict is not None:
-                            kept = cut(strict)
+                            kept = cut_along(n, strict, ma, mb)
                             if not loses_main_piece(*kept):
                                 new_a, new_b = kept
                     alive_a = sum(m is not None for m in pieces_a[pa_name]) - 1 + (new_a is not None)
