@@ -423,6 +423,17 @@ def _is_wall(
     return bool((behind & ~through_hole & ~beyond_ends).sum() <= 0.5 * inl.sum())
 
 
+def _wall_behind(p: CameraPlane, planes: list[CameraPlane]) -> bool:
+    """Is there a wall parallel to ``p`` (within 5 deg) more than WALL_MERGE_M behind it, with more
+    inliers than ``p``? (Offsets are the planes' distances from the camera.)"""
+    cos = np.cos(np.radians(5.0))
+    return any(
+        q.kind == "wall" and q is not p and float(q.normal @ p.normal) > cos and q.offset_m > p.offset_m + WALL_MERGE_M
+        and int(q.inliers.sum()) > int(p.inliers.sum())
+        for q in planes
+    )
+
+
 def world_from_camera_for(up_cam: np.ndarray, height_m: float, wall_normals_cam: list[np.ndarray] = ()) -> np.ndarray:
     """(4, 4) world_from_camera for a camera whose up vector is ``up_cam`` at ``height_m`` above
     the floor; X is the horizontal optical axis snapped to the nearest wall direction.
@@ -562,6 +573,12 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0, up_h
             above = (pts @ n + d) < -thr
             cam_planes.append(CameraPlane(n, d, "ceiling", to_image(inl | above)))
 
+    # Walls are infinite planes (what lies behind one is left out of the room): a vertical plane
+    # with a wall parallel to it behind it that shows more of itself is no wall. Single-view
+    # depth stands a bed as a cuboid whose headboard is such a plane; with the ceiling band it
+    # crosses it passed `_is_wall`, and it left a dresser out of sunrgbd_imvotenet_000003 and cut
+    # the bed's headboard off.
+    cam_planes = [p for p in cam_planes if p.kind != "wall" or not _wall_behind(p, cam_planes)]
     # A partial wall that is a wall found in full is that wall.
     cam_planes = [
         p for p in cam_planes

@@ -46,6 +46,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from perception.box_clusters import box_slices as _box_slices, cuboid_faces, whole_cluster
 from perception.box_segment import HINT_BACKGROUND, HINT_FOREGROUND, HINT_PROBABLY_BACKGROUND, HINT_PROBABLY_FOREGROUND, keep_main_regions
 from perception.detection import CONFIDENT, box_iou, family, merge_detections
 from perception.extras import is_clear, point_normals, solidity
@@ -72,11 +73,6 @@ _SEMANTIC_COVER = 0.15
 _DEPTH_SEES = 0.25
 #: Pixels this far (metres) behind an object's median depth are probably background.
 _BEHIND_M = 0.6
-#: A depth cluster that an object's cut reaches into and that lies this much inside its box is
-#: part of it (:meth:`DetectionSegmenter._whole_cluster`).
-_WHOLE_INSIDE = 0.8
-#: ... and that holds at least this share of its in-box pixels in the cut.
-_WHOLE_CUT_SHARE = 0.2
 #: A person's box where the semantic map's people pixels fill this share is outlined by them.
 _PEOPLE_SEEN = 0.15
 #: A depth cluster that instances cover less than this share of is unexplained.
@@ -122,12 +118,6 @@ class _Candidate:
     mask: np.ndarray | None = None
     depth_sees: bool = False
     meta: dict = field(default_factory=dict)
-
-
-def _box_slices(box: np.ndarray, h: int, w: int) -> tuple[slice, slice]:
-    x0, y0 = int(np.clip(np.floor(box[0]), 0, w)), int(np.clip(np.floor(box[1]), 0, h))
-    x1, y1 = int(np.clip(np.ceil(box[2]), 0, w)), int(np.clip(np.ceil(box[3]), 0, h))
-    return slice(y0, max(y1, y0 + 1)), slice(x0, max(x1, x0 + 1))
 
 
 def _best_family(label_probs: dict[str, float]) -> tuple[str, float]:
@@ -439,7 +429,7 @@ class DetectionSegmenter:
             m = np.asarray(m, dtype=bool)
             if c.depth_sees and m.any() and valid[m].mean() >= 0.5:  # sparse depth: no 3D trim
                 m = self._trim_3d(m, points, off_room, focal)
-                m = m | self._whole_cluster(c, m, clusters, claimed)
+                m = m | whole_cluster(c.box, m, clusters, claimed)
             c.mask = m
 
     def _confident_outline(self, rgb, c: _Candidate, claimed: np.ndarray, others: list[np.ndarray]) -> np.ndarray:
@@ -485,6 +475,8 @@ class DetectionSegmenter:
                 inside[inside < 0.5 * np.maximum(total, 1)] = 0
                 mine = int(inside.argmax()) if inside.max() > 0 else 0
             own = (cl == mine) if mine > 0 else np.zeros_like(box_off)
+            if mine > 0 and not self._depth_measured:
+                own = own | cuboid_faces(own, cl, clusters, mine)
             if (own & box_off).any():
                 ref = float(np.median(d[own & box_off]))
                 sub[own] = HINT_PROBABLY_FOREGROUND
@@ -493,7 +485,10 @@ class DetectionSegmenter:
                 sub[(cl > 0) & ~own] = HINT_PROBABLY_BACKGROUND
             else:
                 ref = float(np.percentile(d[box_off], 30)) if box_off.any() else np.inf
-            sub[valid[rs, cs] & (d > ref + _BEHIND_M)] = HINT_PROBABLY_BACKGROUND
+            behind = valid[rs, cs] & (d > ref + _BEHIND_M)
+            if not self._depth_measured:
+                behind &= ~own  # an estimated cuboid's top and headboard recede behind its front
+            sub[behind] = HINT_PROBABLY_BACKGROUND
         if sem_labels is not None:
             sl = sem_labels[rs, cs]
             same = np.isin(sl, list(family(c.label)))
@@ -506,28 +501,6 @@ class DetectionSegmenter:
                 # Pixels the semantic map gives to another object class belong to that object.
                 sub[(sl != "") & ~same & (sub == 0)] = HINT_PROBABLY_BACKGROUND
         return hint
-
-    @staticmethod
-    def _whole_cluster(c: _Candidate, mask: np.ndarray, clusters: np.ndarray, claimed: np.ndarray) -> np.ndarray:
-        """The pixels of the depth clusters that make the box's object whole: each cluster that
-        the cut ``mask`` reaches into and that lies mostly (:data:`_WHOLE_INSIDE`) inside the
-        box, less what other instances ``claimed``. A box segmenter cuts by colour: a bed's dark
-        wooden footboard from its white mattress, a sofa's legs from its cushions; depth joins
-        them (a cluster reaching far out of the box is another thing, or things, touching it)."""
-        h, w = mask.shape
-        rs, cs = _box_slices(c.box, h, w)
-        ids, inside = np.unique(clusters[rs, cs][mask[rs, cs]], return_counts=True)
-        out = np.zeros_like(mask)
-        for cl, n in zip(ids, inside):
-            if cl == 0 or n < 0.05 * np.count_nonzero(mask):
-                continue
-            pix = clusters == cl
-            in_box = np.count_nonzero(pix[rs, cs])
-            # Mostly inside the box, and the cut holds a fair share of it (a cluster the cut
-            # only grazes is something the object touches: a wall's pillar behind a wardrobe).
-            if in_box >= _WHOLE_INSIDE * np.count_nonzero(pix) and n >= _WHOLE_CUT_SHARE * in_box:
-                out[rs, cs] |= pix[rs, cs]
-        return out & ~claimed
 
     def _trim_3d(self, mask: np.ndarray, points: np.ndarray, off_room: np.ndarray, focal: float) -> np.ndarray:
         """``mask`` less the pixels of its small 3D clusters (bleed onto what is behind or beside

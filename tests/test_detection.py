@@ -101,6 +101,10 @@ def test_family_refinement_follows_a_size_aware_posterior():
     # likely a bed), the chair's family has one member: it is not asked about.
     assert out == [("bed", 0.4), ("sofa", 0.7), ("chair", 0.9)]
     assert refine_in_family(object(), names, [crop] * 3, [(1.0, 1.0, 1.0)] * 3) == names
+    # A surer detection needs surer evidence: three times the posterior renames a sofa boxed at
+    # 0.5 (odds 1), not one boxed at 0.8 (odds 4: eight times would be needed).
+    assert refine_in_family(Posterior(), [("sofa", 0.5)], [crop], [(2.0, 1.5, 0.6)]) == [("bed", 0.5)]
+    assert refine_in_family(Posterior(), [("sofa", 0.8)], [crop], [(2.0, 1.5, 0.6)]) == [("sofa", 0.8)]
 
 
 def test_ssd_anchors_follow_the_object_detection_api_layout():
