@@ -307,7 +307,7 @@ def test_sam2_answers_box_prompts_when_its_weights_are_there(tiny_sam, tmp_path)
 
 def test_a_confident_box_whose_hinted_cut_is_empty_is_cut_again_without_the_hints():
     """The semantic map (or estimated depth laying the object flat on the wall) calls every pixel
-    of a confident microwave box something else: the hinted cut is empty, and the box would
+    of a confident bowl's box something else: the hinted cut is empty, and the box would
     vanish. On estimated depth a box at the detector's trust score is cut again with only other
     instances' pixels as probable background; a weak box is not (its witnesses were the hints),
     nor a box on a sensor's depth."""
@@ -328,7 +328,8 @@ def test_a_confident_box_whose_hinted_cut_is_empty_is_cut_again_without_the_hint
     background = np.ones((h, w), bool)
     box = np.array([40.0, 30.0, 120.0, 90.0])
     def outline(score, measured):
-        c = _Candidate(box.copy(), score, "microwave", "score" if score >= 0.5 else "semantic")
+        # (a bowl: the cut of a box-shaped thing, a microwave, would then be grown to its box)
+        c = _Candidate(box.copy(), score, "bowl", "score" if score >= 0.5 else "semantic")
         seg._depth_measured = measured
         seg._outline(rgb, [c], depth, valid, background, np.zeros((h, w), np.int64), sem, np.zeros((h, w, 3)), 100.0, np.zeros((h, w), bool))
         return c

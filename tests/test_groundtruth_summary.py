@@ -21,3 +21,34 @@ def test_summary_pools_penetration_and_rest_over_builds_and_the_readme_shows_the
     block = readme.BLOCKS["objects"][1]({"summary": {"real": s}, "meta": {}})
     assert "max penetration mm (every build) | builds not at rest |" in block
     assert "| 103.50 | 1 |" in block
+
+
+def test_mask_precision_leaves_out_what_the_annotation_is_too_small_to_judge():
+    """As COCO's own evaluation does with its area ranges: an object matching no scored instance
+    is left out of the precision when it is under the smallest scored size or matches an
+    annotated instance that small; a large object matching nothing is a false positive."""
+    import numpy as np
+
+    from scene_builder.bench.groundtruth import score_masks
+
+    h, w = 100, 100
+
+    def box(x0, y0, x1, y1):
+        m = np.zeros((h, w), dtype=bool)
+        m[y0:y1, x0:x1] = True
+        return m
+
+    true = [("couch", box(0, 0, 40, 40))]
+    small = [box(90, 90, 94, 94)]  # a 16 px mug: 0.16 % of the photo, under MIN_INSTANCE_SHARE
+    pred = {
+        "sofa_1": ("sofa", box(0, 0, 40, 38)),  # the couch
+        "mug_1": ("mug", box(90, 90, 95, 95)),  # 25 px, over the size, but the small mug: not judged
+        "speck_1": ("box", box(60, 10, 63, 13)),  # 9 px matching nothing: not judged
+        "table_1": ("table", box(50, 50, 80, 80)),  # large, matching nothing: a false positive
+    }
+    s = score_masks(pred, true, small)
+    assert (s.matched, s.matched_loose, s.n_pred, s.n_ignored) == (1, 1, 2, 2)
+    # Without the small annotation the mug is judged (and matches nothing).
+    assert score_masks(pred, true).n_pred == 3
+    # A large unmatched object stays counted however many small annotations there are.
+    assert score_masks({"table_1": pred["table_1"]}, true, small).n_pred == 1

@@ -11,7 +11,9 @@ build (movable bodies, and fixed furniture with joints) against annotations made
   each interactive object's silhouette rendered from ``input_camera`` (MuJoCo segmentation, so
   what stands in front hides it) against the furniture-like instances; recall at mask IoU >= 0.5
   (all furniture-like classes, large furniture and appliances, label right) and precision (objects
-  matching an instance at IoU >= 0.25 / interactive objects).
+  matching an instance at IoU >= 0.25 / interactive objects; as in COCO's own evaluation, an
+  object that matches no scored instance and is under the smallest scored size, or matches an
+  annotated instance that small, is not scored).
 * **What became of the perceived objects**: interactive (movable, or fixed with joints), fixed
   without joints, static background; crashes and refusals per input.
 
@@ -221,9 +223,10 @@ def score_boxes(pred, true) -> BoxScore:
 # ---------------------------------------------------------------------------------------------
 
 
-def coco_masks(sample_dir: Path, h: int, w: int) -> list[tuple[str, np.ndarray]]:
+def coco_masks(sample_dir: Path, h: int, w: int, small: bool = False) -> list[tuple[str, np.ndarray]]:
     """(COCO class, (H, W) bool) of the furniture-like, non-crowd instances of a photo (at least
-    :data:`MIN_INSTANCE_SHARE` of it)."""
+    :data:`MIN_INSTANCE_SHARE` of it; with ``small``, those under it instead: not scored, but an
+    object matching one is no false positive, see :func:`score_masks`)."""
     from skimage.draw import polygon as draw_polygon
 
     out = []
@@ -236,7 +239,7 @@ def coco_masks(sample_dir: Path, h: int, w: int) -> list[tuple[str, np.ndarray]]
             p = np.asarray(p, dtype=np.float64).reshape(-1, 2)
             rr, cc = draw_polygon(p[:, 1], p[:, 0], (h, w))
             m[rr, cc] = True
-        if m.sum() >= MIN_INSTANCE_SHARE * h * w:
+        if (m.sum() >= MIN_INSTANCE_SHARE * h * w) != small:
             out.append((g["label"], m))
     return out
 
@@ -280,8 +283,11 @@ def silhouettes(mjcf_path: Path, names, h: int, w: int) -> dict[str, np.ndarray]
 @dataclass(frozen=True)
 class MaskScore:
     """Instance matches of one photo: n_true instances (n_large of them large furniture), n_pred
-    interactive objects with a silhouette; matched at IoU >= 0.5 (label right, large), matched_loose
-    at IoU >= 0.25 (the precision's numerator)."""
+    interactive objects with a silhouette, less those left out of the precision as COCO's own
+    evaluation leaves out detections outside its area range (n_ignored: under
+    :data:`MIN_INSTANCE_SHARE`, or matching a furniture-like instance that small, and matching no
+    scored instance); matched at IoU >= 0.5 (label right, large), matched_loose at IoU >= 0.25
+    (the precision's numerator)."""
 
     n_true: int
     n_large: int
@@ -290,11 +296,22 @@ class MaskScore:
     matched_label: int
     matched_large: int
     matched_loose: int
+    n_ignored: int = 0
 
 
-def score_masks(pred: dict[str, tuple[str, np.ndarray]], true: list[tuple[str, np.ndarray]]) -> MaskScore:
+def _small_or_unscored(sil: np.ndarray, small: list[np.ndarray]) -> bool:
+    """Is a silhouette under :data:`MIN_INSTANCE_SHARE` of the photo, or a match (IoU >=
+    :data:`MASK_IOU_LOOSE`) of a furniture-like instance that small (a mug on a shelf)?"""
+    if sil.sum() < MIN_INSTANCE_SHARE * sil.size:
+        return True
+    return any(np.count_nonzero(sil & g) >= MASK_IOU_LOOSE * np.count_nonzero(sil | g) for g in small)
+
+
+def score_masks(pred: dict[str, tuple[str, np.ndarray]], true: list[tuple[str, np.ndarray]], small: list[np.ndarray] = ()) -> MaskScore:
     """Greedy one-to-one matching by mask IoU, best first, down to :data:`MASK_IOU_LOOSE`.
-    pred: name -> (label, silhouette)."""
+    pred: name -> (label, silhouette); small: masks of the instances too small to score. An
+    object that matches no scored instance and is that small itself, or matches a small one, is
+    left out of the precision (COCO's area ranges: the annotation cannot judge it)."""
     names = sorted(pred)
     cand = []
     for i, (_, g) in enumerate(true):
@@ -312,14 +329,16 @@ def score_masks(pred: dict[str, tuple[str, np.ndarray]], true: list[tuple[str, n
         used_p.add(j)
         match.append((v, i, j))
     strict = [x for x in match if x[0] >= MASK_IOU]
+    ignored = sum(1 for j, n in enumerate(names) if j not in used_p and _small_or_unscored(pred[n][1], list(small)))
     return MaskScore(
         n_true=len(true),
         n_large=sum(1 for c, _ in true if c in COCO_LARGE),
-        n_pred=len(names),
+        n_pred=len(names) - ignored,
         matched=len(strict),
         matched_label=sum(1 for _, i, j in strict if _label_ok(pred[names[j]][0], COCO_FURNITURE[true[i][0]])),
         matched_large=sum(1 for _, i, _ in strict if true[i][0] in COCO_LARGE),
         matched_loose=len(match),
+        n_ignored=ignored,
     )
 
 
@@ -413,11 +432,11 @@ def run_item(set_name: str, sample: Path, out_dir: Path, config, with_depth: boo
         )
     else:
         h, w = result.perception.observation.rgb_full.shape[:2] if result.perception.observation.rgb_full is not None else result.perception.observation.rgb.shape[:2]
-        true = coco_masks(sample, h, w)
+        true, small = coco_masks(sample, h, w), [m for _, m in coco_masks(sample, h, w, small=True)]
         sil = silhouettes(out_dir / "scene.xml", inter, h, w)
         labels = {o.name: o.asset.label for o in scene.objects}
         item = dataclasses.replace(
-            item, masks=score_masks({n: (labels[n], s) for n, s in sil.items()}, true), masks_control=score_masks({}, true)
+            item, masks=score_masks({n: (labels[n], s) for n, s in sil.items()}, true, small), masks_control=score_masks({}, true)
         )
     return item
 
@@ -500,6 +519,8 @@ def summarize(items: list[Item]) -> dict:
                 s[f"{key}mask_precision_iou25"] = sum(x.matched_loose for x in ms) / n_pred if n_pred else 0.0
             s["true_instances"] = n_true
             s["true_large_instances"] = n_large
+            s["scored_objects"] = sum(i.masks.n_pred for i in built if i.masks)  # the precision's denominator
+            s["unscored_small_objects"] = sum(i.masks.n_ignored for i in built if i.masks)
         out[set_name] = s
     return out
 
