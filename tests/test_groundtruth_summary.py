@@ -52,3 +52,22 @@ def test_mask_precision_leaves_out_what_the_annotation_is_too_small_to_judge():
     assert score_masks(pred, true).n_pred == 3
     # A large unmatched object stays counted however many small annotations there are.
     assert score_masks({"table_1": pred["table_1"]}, true, small).n_pred == 1
+
+
+def test_mask_scores_leave_out_the_pixels_of_the_people_the_twin_removed():
+    """A person sits on a sofa: the photo's annotation holds the sofa's visible pixels, the twin
+    (people removed) the whole sofa. Scored on the pixels no person covers, the sofa matches;
+    with the person's pixels scored it does not (IoU 0.4)."""
+    import numpy as np
+
+    from scene_builder.bench.groundtruth import score_masks
+
+    sofa = np.zeros((100, 100), dtype=bool)
+    sofa[40:80, 0:100] = True
+    person = np.zeros_like(sofa)
+    person[20:80, 20:80] = True
+    visible = sofa & ~person
+    pred = {"sofa_1": ("sofa", sofa)}
+    assert score_masks(pred, [("couch", visible)]).matched == 0
+    s = score_masks(pred, [("couch", visible)], removed=person)
+    assert (s.matched, s.matched_large, s.n_pred) == (1, 1, 1)

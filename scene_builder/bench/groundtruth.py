@@ -13,7 +13,9 @@ build (movable bodies, and fixed furniture with joints) against annotations made
   (all furniture-like classes, large furniture and appliances, label right) and precision (objects
   matching an instance at IoU >= 0.25 / interactive objects; as in COCO's own evaluation, an
   object that matches no scored instance and is under the smallest scored size, or matches an
-  annotated instance that small, is not scored).
+  annotated instance that small, is not scored). The pixels of annotated people and animals are
+  left out of both masks (the twin removes them and shows what they hid, which an annotation of
+  what was visible cannot score); ``people_scored_*`` gives the figures with them counted.
 * **What became of the perceived objects**: interactive (movable, or fixed with joints), fixed
   without joints, static background; crashes and refusals per input.
 
@@ -244,6 +246,27 @@ def coco_masks(sample_dir: Path, h: int, w: int, small: bool = False) -> list[tu
     return out
 
 
+#: COCO classes the twin removes (people and animals are not part of a room, issue 23): their
+#: pixels are left out of every mask comparison (see :func:`score_masks`).
+COCO_REMOVED = frozenset({"person", "bird", "cat", "dog", "horse", "sheep", "cow", "elephant", "bear", "zebra", "giraffe"})
+
+
+def coco_removed(sample_dir: Path, h: int, w: int) -> np.ndarray:
+    """(H, W) bool: the pixels of the photo's annotated people and animals (crowds included)."""
+    from skimage.draw import polygon as draw_polygon
+
+    out = np.zeros((h, w), dtype=bool)
+    for g in json.loads((Path(sample_dir) / "gt_instances.json").read_text()):
+        if g["label"] not in COCO_REMOVED or not isinstance(g.get("polygon"), (list, str)):
+            continue
+        polys = g["polygon"] if isinstance(g["polygon"], list) else json.loads(g["polygon"])
+        for p in polys:
+            p = np.asarray(p, dtype=np.float64).reshape(-1, 2)
+            rr, cc = draw_polygon(p[:, 1], p[:, 0], (h, w))
+            out[rr, cc] = True
+    return out
+
+
 def silhouettes(mjcf_path: Path, names, h: int, w: int) -> dict[str, np.ndarray]:
     """(H, W) bool silhouette of each object of ``names`` from ``input_camera`` of the MJCF at
     t = 0, hidden where anything else (background included) stands in front of it."""
@@ -307,11 +330,18 @@ def _small_or_unscored(sil: np.ndarray, small: list[np.ndarray]) -> bool:
     return any(np.count_nonzero(sil & g) >= MASK_IOU_LOOSE * np.count_nonzero(sil | g) for g in small)
 
 
-def score_masks(pred: dict[str, tuple[str, np.ndarray]], true: list[tuple[str, np.ndarray]], small: list[np.ndarray] = ()) -> MaskScore:
+def score_masks(pred: dict[str, tuple[str, np.ndarray]], true: list[tuple[str, np.ndarray]], small: list[np.ndarray] = (),
+                removed: np.ndarray | None = None) -> MaskScore:
     """Greedy one-to-one matching by mask IoU, best first, down to :data:`MASK_IOU_LOOSE`.
     pred: name -> (label, silhouette); small: masks of the instances too small to score. An
     object that matches no scored instance and is that small itself, or matches a small one, is
-    left out of the precision (COCO's area ranges: the annotation cannot judge it)."""
+    left out of the precision (COCO's area ranges: the annotation cannot judge it). removed:
+    (H, W) bool pixels of the people and animals, left out of both masks: the twin removes them
+    and shows what they hid (a sofa's seat under the person on it), which the photo's
+    annotation, of what was visible, cannot score."""
+    if removed is not None and removed.any():
+        pred = {n: (lab, m & ~removed) for n, (lab, m) in pred.items()}
+        true = [(lab, m & ~removed) for lab, m in true]
     names = sorted(pred)
     cand = []
     for i, (_, g) in enumerate(true):
@@ -378,6 +408,7 @@ class Item:
     boxes_control: BoxScore | None = None
     masks: MaskScore | None = None
     masks_control: MaskScore | None = None
+    masks_people_scored: MaskScore | None = None  # the same with people's pixels scored (the twin removed them)
     objects: tuple[tuple[str, str, bool], ...] = ()  # (name, label, interactive)
     inventory: object = None  # detect.InventoryScore of the interactive objects (set "real")
     inventory_perceived: object = None  # ... of every perceived object
@@ -436,7 +467,9 @@ def run_item(set_name: str, sample: Path, out_dir: Path, config, with_depth: boo
         sil = silhouettes(out_dir / "scene.xml", inter, h, w)
         labels = {o.name: o.asset.label for o in scene.objects}
         item = dataclasses.replace(
-            item, masks=score_masks({n: (labels[n], s) for n, s in sil.items()}, true, small), masks_control=score_masks({}, true)
+            item, masks=score_masks({n: (labels[n], s) for n, s in sil.items()}, true, small, coco_removed(sample, h, w)),
+            masks_control=score_masks({}, true),
+            masks_people_scored=score_masks({n: (labels[n], s) for n, s in sil.items()}, true, small),
         )
     return item
 
@@ -510,8 +543,11 @@ def summarize(items: list[Item]) -> dict:
         if any(i.masks for i in built):
             n_true = sum(i.masks.n_true for i in built if i.masks)
             n_large = sum(i.masks.n_large for i in built if i.masks)
-            for key, pick in (("", lambda i: i.masks), ("control_", lambda i: i.masks_control)):
+            picks = (("", lambda i: i.masks), ("control_", lambda i: i.masks_control), ("people_scored_", lambda i: i.masks_people_scored))
+            for key, pick in picks:
                 ms = [pick(i) for i in built if pick(i)]
+                if not ms:
+                    continue
                 n_pred = sum(x.n_pred for x in ms)
                 s[f"{key}mask_recall_iou50"] = sum(x.matched for x in ms) / n_true if n_true else None
                 s[f"{key}mask_recall_iou50_label"] = sum(x.matched_label for x in ms) / n_true if n_true else None

@@ -45,9 +45,16 @@ def _objects(data: dict) -> str:
         rows.append(f"| ... and the label right | {_f(plain['box_recall_iou25_label'])} | {_f(plain['control_box_recall_iou25_label'])} |")
     coco = s.get("coco")
     if coco:
-        rows.append(f"| COCO photos (no depth): instance recall at mask IoU >= 0.5, furniture-like classes (of {coco['true_instances']} instances in {coco['inputs']} photos) | {_f(coco['mask_recall_iou50'])} | {_f(coco['control_mask_recall_iou50'])} |")
+        people = "people_scored_mask_recall_iou50" in coco  # results before people's pixels were left out have one scoring
+        note = ", people's pixels left out" if people else ""
+        rows.append(f"| COCO photos (no depth): instance recall at mask IoU >= 0.5, furniture-like classes (of {coco['true_instances']} instances in {coco['inputs']} photos{note}) | {_f(coco['mask_recall_iou50'])} | {_f(coco['control_mask_recall_iou50'])} |")
         rows.append(f"| ... large furniture and appliances (of {coco['true_large_instances']}) | {_f(coco['mask_recall_iou50_large'])} | {_f(coco['control_mask_recall_iou50_large'])} |")
-        rows.append(f"| ... precision: interactive objects matching an instance at IoU >= 0.25 (of {coco['interactive_objects']} interactive objects) | {_f(coco['mask_precision_iou25'])} | - |")
+        scored = coco.get("scored_objects", coco["interactive_objects"])
+        small = f"; {coco['unscored_small_objects']} smaller than any scored instance left out" if "unscored_small_objects" in coco else ""
+        rows.append(f"| ... precision: interactive objects matching an instance at IoU >= 0.25 (of {scored} interactive objects{small}) | {_f(coco['mask_precision_iou25'])} | - |")
+        if people:
+            rows.append(f"| ... the same three with people's pixels scored (the twin removed them: recall, large, precision) | "
+                        f"{_f(coco['people_scored_mask_recall_iou50'])}, {_f(coco['people_scored_mask_recall_iou50_large'])}, {_f(coco['people_scored_mask_precision_iou25'])} | - |")
     real = s.get("real")
     if real:
         rows.append(f"| real RGB-D suite: things a person lists that are interactive objects (of {real.get('inventory_seen', '-')} listed in {real['built']} photos) | {_f(real.get('inventory_instance_recall'))} | 0.00 |")
