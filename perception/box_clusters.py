@@ -1,18 +1,22 @@
-"""Depth clusters that make a detector box's object whole (used by
-:mod:`perception.segment_detect`): a box segmenter cuts by colour, depth joins an object's parts.
+"""What makes a detector box's object whole (used by :mod:`perception.segment_detect`): a box
+segmenter cuts by colour; depth joins an object's parts, and a box-shaped thing is its box.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["WHOLE_CUT_SHARE", "WHOLE_INSIDE", "box_slices", "cuboid_faces", "whole_cluster"]
+__all__ = ["BOXY", "BOXY_FILL", "WHOLE_CUT_SHARE", "WHOLE_INSIDE", "box_slices", "cuboid_faces", "fill_box", "whole_cluster"]
 
 #: A depth cluster that an object's cut reaches into and that lies this much inside its box is
 #: part of it (:func:`whole_cluster`) ...
 WHOLE_INSIDE = 0.8
 #: ... and that holds at least this share of its in-box pixels in the cut.
 WHOLE_CUT_SHARE = 0.2
+#: Things whose outline is their box (seen from the front): a confident detection's cut that fills
+#: less than BOXY_FILL of its box is grown to the box on estimated depth (:func:`fill_box`).
+BOXY = frozenset({"tv", "monitor", "microwave", "oven", "refrigerator", "dishwasher"})
+BOXY_FILL = 0.6
 
 
 def box_slices(box: np.ndarray, h: int, w: int) -> tuple[slice, slice]:
@@ -71,3 +75,20 @@ def cuboid_faces(own: np.ndarray, cl: np.ndarray, clusters: np.ndarray, mine: in
                 inside.remove(i)
                 grown = True
     return out & ~own
+
+
+def fill_box(box: np.ndarray, mask: np.ndarray, claimed: np.ndarray, others: list[np.ndarray]) -> np.ndarray:
+    """``mask`` of a box-shaped thing, grown to its whole box (less what ``claimed`` and the
+    ``others`` hold) when it fills less than :data:`BOXY_FILL` of it: a colour cut keeps a CRT
+    television's bright screen and gives up its dark case (perceived mask IoU 0.50 with the
+    annotated set on coco128_000000000643; a confident detector's box is the set's outline)."""
+    h, w = mask.shape
+    rs, cs = box_slices(box, h, w)
+    if mask[rs, cs].mean() >= BOXY_FILL:
+        return mask
+    free = ~claimed[rs, cs]
+    for m in others:
+        free &= ~np.asarray(m, dtype=bool)[rs, cs]
+    out = mask.copy()
+    out[rs, cs] |= free
+    return out

@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from perception.box_clusters import box_slices as _box_slices, cuboid_faces, whole_cluster
+from perception.box_clusters import BOXY, box_slices as _box_slices, cuboid_faces, fill_box, whole_cluster
 from perception.box_segment import HINT_BACKGROUND, HINT_FOREGROUND, HINT_PROBABLY_BACKGROUND, HINT_PROBABLY_FOREGROUND, keep_main_regions
 from perception.detection import CONFIDENT, box_iou, family, merge_detections
 from perception.extras import is_clear, point_normals, solidity
@@ -96,10 +96,9 @@ _CLASSIFIER_AGREES = 0.3
 _RENAME_BELOW = 0.9
 _RENAME_SURE = 0.6
 _RENAME_FAMILY_MAX = 0.1
-#: Things whose outline is their box (seen from the front): a confident detection's cut that fills
-#: less than _BOXY_FILL of its box is grown to the box on estimated depth (:func:`_fill_box`).
-_BOXY = frozenset({"tv", "monitor", "microwave", "oven", "refrigerator", "dishwasher"})
-_BOXY_FILL = 0.6
+#: A confident box the colour cut gives up is cut around its centre only up to this share of the
+#: image (:meth:`DetectionSegmenter._confident_outline`).
+_CORE_MAX_AREA = 0.05
 #: Unclear depth clusters of at least this share of the image go to the classifier, the largest
 #: this many.
 _UNCLEAR_MIN_AREA = 0.01
@@ -124,23 +123,6 @@ class _Candidate:
     mask: np.ndarray | None = None
     depth_sees: bool = False
     meta: dict = field(default_factory=dict)
-
-
-def _fill_box(box: np.ndarray, mask: np.ndarray, claimed: np.ndarray, others: list[np.ndarray]) -> np.ndarray:
-    """``mask`` of a box-shaped thing, grown to its whole box (less what ``claimed`` and the
-    ``others`` hold) when it fills less than :data:`_BOXY_FILL` of it: a colour cut keeps a CRT
-    television's bright screen and gives up its dark case (perceived mask IoU 0.50 with the
-    annotated set on coco128_000000000643; a confident detector's box is the set's outline)."""
-    h, w = mask.shape
-    rs, cs = _box_slices(box, h, w)
-    if mask[rs, cs].mean() >= _BOXY_FILL:
-        return mask
-    free = ~claimed[rs, cs]
-    for m in others:
-        free &= ~np.asarray(m, dtype=bool)[rs, cs]
-    out = mask.copy()
-    out[rs, cs] |= free
-    return out
 
 
 def _best_family(label_probs: dict[str, float]) -> tuple[str, float]:
@@ -453,8 +435,8 @@ class DetectionSegmenter:
             # open3d_TUM the recut gave a desk's pixels to a confident box the depth called room).
             if not self._depth_measured and c.score >= CONFIDENT and not np.asarray(masks[i]).any():
                 masks[i] = self._confident_outline(rgb, c, claimed, [m for j, m in enumerate(masks) if j != i and m is not None])
-            if not self._depth_measured and c.score >= CONFIDENT and c.label in _BOXY:
-                masks[i] = _fill_box(c.box, np.asarray(masks[i], dtype=bool), claimed, [m for j, m in enumerate(masks) if j != i and m is not None])
+            if not self._depth_measured and c.score >= CONFIDENT and c.label in BOXY:
+                masks[i] = fill_box(c.box, np.asarray(masks[i], dtype=bool), claimed, [m for j, m in enumerate(masks) if j != i and m is not None])
         for c, m in zip(cands, masks):
             m = np.asarray(m, dtype=bool)
             if c.depth_sees and m.any() and valid[m].mean() >= 0.5:  # sparse depth: no 3D trim
@@ -469,8 +451,11 @@ class DetectionSegmenter:
         wall behind it, so its pixels were all "room"); a box the detector is sure of does not
         vanish for them. When colour alone gives the object up too (a glass bowl with a plant on a
         dark blue wall), the cut once more with the box's central ellipse (half its width and
-        height, free of other instances) as the object's: the detector found something there.
-        Empty when even that comes back empty."""
+        height, free of other instances) as the object's: the detector found something there. Only
+        for a small box (:data:`_CORE_MAX_AREA` of the image): a large one has pixels enough for
+        the colour models, and a cut that finds nothing in it says the box is wrong (COCO 164's
+        "chair" across a counter's edge, whose core merged into the real chair). Empty then, or
+        when even that comes back empty."""
         taken = claimed.copy()
         for m in others:
             taken |= np.asarray(m, dtype=bool)
@@ -484,6 +469,8 @@ class DetectionSegmenter:
             return m
         h, w = taken.shape
         x0, y0, x1, y1 = (float(v) for v in c.box)
+        if (x1 - x0) * (y1 - y0) > _CORE_MAX_AREA * h * w:
+            return m
         rs, cs = _box_slices(c.box, h, w)
         yy, xx = np.mgrid[rs, cs]
         rx, ry = max(0.5 * (x1 - x0), 1.0), max(0.5 * (y1 - y0), 1.0)

@@ -80,3 +80,12 @@ def test_a_plant_the_colour_cut_gives_up_is_cut_around_its_box_centre():
     colour cut returned nothing, with or without depth hints; cut around the box's centre it is
     an object again."""
     assert _perceived_iou("coco128_000000000446", "plant", "potted plant") >= 0.4
+
+
+@pytest.mark.slow
+def test_a_large_box_the_colour_cut_finds_nothing_in_is_no_object():
+    """COCO 164: the detector boxes a counter's edge as a chair at 0.52 across the bottom of the
+    photo; the colour cut finds nothing in it. Cut around its centre it became a strip that
+    merged into the real chair in front of it (mask IoU 0.70 -> 0.46); a large box is not cut
+    around its centre, and the chair keeps its outline."""
+    assert _perceived_iou("coco128_000000000164", "chair", "chair") >= 0.65
