@@ -169,13 +169,14 @@ def pad_bounds(centre: np.ndarray, half: np.ndarray, yaw: float) -> tuple[np.nda
             np.array([centre[0] + ext[0], centre[1] + ext[1], centre[2] + half[2]]))
 
 
-def pad_frame(b: Body, height_m: float) -> tuple[np.ndarray, float, float, float, np.ndarray]:
+def pad_frame(b: Body, height_m: float, box: tuple[np.ndarray, np.ndarray, float] | None = None) -> tuple[np.ndarray, float, float, float, np.ndarray]:
     """The pad under body ``b`` resting on the background at ``height_m``, in ``b``'s yawed axes
     relative to its position: its rectangle (lo_x, lo_y, hi_x, hi_y), its yaw, its height band
-    (bottom, top less ``layout.background.CARVE_CLEARANCE_M``) and ``b``'s centre of mass (2,)."""
+    (bottom, top less ``layout.background.CARVE_CLEARANCE_M``) and ``b``'s centre of mass (2,).
+    box: :func:`pad_box` of ``b`` at ``height_m`` when the caller has it already."""
     from layout.background import CARVE_CLEARANCE_M
 
-    centre, half, yaw = pad_box(b, height_m)
+    centre, half, yaw = pad_box(b, height_m) if box is None else box
     c, s = np.cos(yaw), np.sin(yaw)
     to_local = np.array([[c, -s], [s, c]])  # world offsets -> the pad's axes
     mid = (centre[:2] - b.position_m[:2]) @ to_local
@@ -192,8 +193,9 @@ def _clear_pad_rect(b: Body, height_m: float, others: list[Body]) -> np.ndarray 
     (``sunrgbd_imvotenet_000003``) rests on the rest of it."""
     from layout.background import clip_pad
 
-    rect, yaw, z_lo, z_hi, com = pad_frame(b, height_m)
-    lo, hi = pad_bounds(*pad_box(b, height_m))
+    box = pad_box(b, height_m)
+    rect, yaw, z_lo, z_hi, com = pad_frame(b, height_m, box)
+    lo, hi = pad_bounds(*box)
     hi[2] = z_hi
     near = [
         (o.asset.kind is AssetKind.DEFORMABLE, p.verts_rel_m + o.position_m)

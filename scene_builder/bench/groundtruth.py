@@ -44,10 +44,14 @@ import numpy as np
 __all__ = [
     "COCO_FURNITURE",
     "COCO_LARGE",
+    "COCO_REMOVED",
     "SUN_SYNONYMS",
     "BoxScore",
+    "CocoTruth",
     "MaskScore",
     "ObjectFates",
+    "coco_masks",
+    "coco_truth",
     "interactive_names",
     "object_fates",
     "score_boxes",
@@ -225,46 +229,63 @@ def score_boxes(pred, true) -> BoxScore:
 # ---------------------------------------------------------------------------------------------
 
 
-def coco_masks(sample_dir: Path, h: int, w: int, small: bool = False) -> list[tuple[str, np.ndarray]]:
-    """(COCO class, (H, W) bool) of the furniture-like, non-crowd instances of a photo (at least
-    :data:`MIN_INSTANCE_SHARE` of it; with ``small``, those under it instead: not scored, but an
-    object matching one is no false positive, see :func:`score_masks`)."""
-    from skimage.draw import polygon as draw_polygon
-
-    out = []
-    for g in json.loads((Path(sample_dir) / "gt_instances.json").read_text()):
-        if g["label"] not in COCO_FURNITURE or str(g.get("iscrowd", 0)) == "1":
-            continue
-        m = np.zeros((h, w), dtype=bool)
-        polys = g["polygon"] if isinstance(g["polygon"], list) else json.loads(g["polygon"])
-        for p in polys:
-            p = np.asarray(p, dtype=np.float64).reshape(-1, 2)
-            rr, cc = draw_polygon(p[:, 1], p[:, 0], (h, w))
-            m[rr, cc] = True
-        if (m.sum() >= MIN_INSTANCE_SHARE * h * w) != small:
-            out.append((g["label"], m))
-    return out
-
-
 #: COCO classes the twin removes (people and animals are not part of a room, issue 23): their
 #: pixels are left out of every mask comparison (see :func:`score_masks`).
 COCO_REMOVED = frozenset({"person", "bird", "cat", "dog", "horse", "sheep", "cow", "elephant", "bear", "zebra", "giraffe"})
 
 
-def coco_removed(sample_dir: Path, h: int, w: int) -> np.ndarray:
-    """(H, W) bool: the pixels of the photo's annotated people and animals (crowds included)."""
+def _polygon_mask(g: dict, h: int, w: int) -> np.ndarray | None:
+    """(H, W) bool of one annotation's polygons, or None where it has none (a crowd's RLE)."""
     from skimage.draw import polygon as draw_polygon
 
-    out = np.zeros((h, w), dtype=bool)
+    if not isinstance(g.get("polygon"), (list, str)):
+        return None
+    m = np.zeros((h, w), dtype=bool)
+    polys = g["polygon"] if isinstance(g["polygon"], list) else json.loads(g["polygon"])
+    for p in polys:
+        p = np.asarray(p, dtype=np.float64).reshape(-1, 2)
+        rr, cc = draw_polygon(p[:, 1], p[:, 0], (h, w))
+        m[rr, cc] = True
+    return m
+
+
+@dataclass(frozen=True)
+class CocoTruth:
+    """A photo's annotation as the bench scores it: scored: (COCO class, (H, W) bool) of the
+    furniture-like, non-crowd instances of at least :data:`MIN_INSTANCE_SHARE` of the photo;
+    small: the masks of those under it (not scored, but an object matching one is no false
+    positive, see :func:`score_masks`); removed: (H, W) bool pixels of the annotated people and
+    animals, crowds included."""
+
+    scored: list[tuple[str, np.ndarray]]
+    small: list[np.ndarray]
+    removed: np.ndarray
+
+
+def coco_truth(sample_dir: Path, h: int, w: int) -> CocoTruth:
+    """The :class:`CocoTruth` of a sample folder's ``gt_instances.json``, read once."""
+    scored, small, removed = [], [], np.zeros((h, w), dtype=bool)
     for g in json.loads((Path(sample_dir) / "gt_instances.json").read_text()):
-        if g["label"] not in COCO_REMOVED or not isinstance(g.get("polygon"), (list, str)):
-            continue
-        polys = g["polygon"] if isinstance(g["polygon"], list) else json.loads(g["polygon"])
-        for p in polys:
-            p = np.asarray(p, dtype=np.float64).reshape(-1, 2)
-            rr, cc = draw_polygon(p[:, 1], p[:, 0], (h, w))
-            out[rr, cc] = True
-    return out
+        crowd = str(g.get("iscrowd", 0)) == "1"
+        if g["label"] in COCO_REMOVED:
+            m = _polygon_mask(g, h, w)
+            if m is not None:
+                removed |= m
+        elif g["label"] in COCO_FURNITURE and not crowd:
+            m = _polygon_mask(g, h, w)
+            if m is None:
+                continue
+            if m.sum() >= MIN_INSTANCE_SHARE * h * w:
+                scored.append((g["label"], m))
+            else:
+                small.append(m)
+    return CocoTruth(scored, small, removed)
+
+
+def coco_masks(sample_dir: Path, h: int, w: int) -> list[tuple[str, np.ndarray]]:
+    """(COCO class, (H, W) bool) of the furniture-like, non-crowd instances of a photo (at least
+    :data:`MIN_INSTANCE_SHARE` of it): :attr:`CocoTruth.scored`."""
+    return coco_truth(sample_dir, h, w).scored
 
 
 def silhouettes(mjcf_path: Path, names, h: int, w: int) -> dict[str, np.ndarray]:
@@ -463,13 +484,14 @@ def run_item(set_name: str, sample: Path, out_dir: Path, config, with_depth: boo
         )
     else:
         h, w = result.perception.observation.rgb_full.shape[:2] if result.perception.observation.rgb_full is not None else result.perception.observation.rgb.shape[:2]
-        true, small = coco_masks(sample, h, w), [m for _, m in coco_masks(sample, h, w, small=True)]
+        truth = coco_truth(sample, h, w)
         sil = silhouettes(out_dir / "scene.xml", inter, h, w)
         labels = {o.name: o.asset.label for o in scene.objects}
+        pred = {n: (labels[n], s) for n, s in sil.items()}
         item = dataclasses.replace(
-            item, masks=score_masks({n: (labels[n], s) for n, s in sil.items()}, true, small, coco_removed(sample, h, w)),
-            masks_control=score_masks({}, true),
-            masks_people_scored=score_masks({n: (labels[n], s) for n, s in sil.items()}, true, small),
+            item, masks=score_masks(pred, truth.scored, truth.small, truth.removed),
+            masks_control=score_masks({}, truth.scored),
+            masks_people_scored=score_masks(pred, truth.scored, truth.small),
         )
     return item
 
