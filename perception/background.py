@@ -344,7 +344,12 @@ def observed_background(
     # behind and their faces dropped; edge pixels mix colours too).
     near_obj = ndimage.binary_dilation(obj_px, iterations=2 * s + 1) if np.any(obj_px) else obj_px
     drawn = np.where(near_obj, -1, shown)
-    extra = room_surfaces.plane_surfaces(tuple(planes), camera, drawn, depth, photo, footprint, top, np.where(depth > 0, drawn, -1))
+    # The sides of the room where no wall was found are closed just past what was seen (their
+    # planes come after the observed ones: no pixel is labelled with them).
+    forward_xy = camera.world_from_camera[:2, 2]
+    enclosing = room_surfaces.room_footprint(seen_pts, camera.world_from_camera[:2, 3], side, forward_xy, enclose=True)
+    closing = room_surfaces.closing_walls(enclosing, side, forward_xy)
+    extra = room_surfaces.plane_surfaces((*planes, *closing), camera, drawn, depth, photo, enclosing, top, np.where(depth > 0, drawn, -1))
     atlas, pos = room_surfaces.pack_atlas([painted] + [e.texture_rgb for e in extra])
     ah, aw = atlas.shape[:2]
 

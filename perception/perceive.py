@@ -310,6 +310,54 @@ def _cut_above_tops(
     return out_kept, out_points, cut
 
 
+#: An object whose plan is this many times its category's largest typical dimension took in
+#: what was seen past it; its clusters SEEN_THROUGH_M or more behind its largest one are cut.
+SEEN_THROUGH_SIZE_FACTOR = 2.0
+SEEN_THROUGH_M = 0.5
+
+
+def _seen_through(points_cam: np.ndarray, focal_px: float) -> np.ndarray:
+    """(N,) bool: the points of an object's Euclidean clusters whose median depth lies
+    :data:`SEEN_THROUGH_M` or more beyond the farthest (98th percentile) points of its largest
+    cluster."""
+    from perception.segment_depth import cluster_points
+
+    labels = cluster_points(points_cam, focal_px)
+    sizes = np.bincount(labels)
+    if len(sizes) < 2:
+        return np.zeros(len(points_cam), dtype=bool)
+    z = points_cam[:, 2]
+    far = float(np.percentile(z[labels == int(np.argmax(sizes))], 98))
+    order = np.argsort(labels, kind="stable")
+    medians = np.array([float(np.median(g)) for g in np.split(z[order], np.cumsum(sizes)[:-1])])
+    return medians[labels] > far + SEEN_THROUGH_M
+
+
+def _cut_seen_through(
+    kept: list[tuple[np.ndarray, np.ndarray]], points_world: list[np.ndarray], labels: list[str], points_cam: np.ndarray, focal_px: float
+) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[np.ndarray], int]:
+    """A mask (a detection's cut, a learned segmenter's) can take in what is seen through or past
+    the object: the sofa through a dining chair's open back made a "chair" 3.5 m deep
+    (multiview frame 3 of ../shared/data/multiview), whose shape prior then filled the room
+    between them. An object whose plan is :data:`SEEN_THROUGH_SIZE_FACTOR` times its category's
+    largest typical dimension or more loses the clusters lying well behind its largest one
+    (:func:`_seen_through`; points and mask pixels: they are what lies behind). A bed seen from
+    its foot, whose mattress lies behind a footboard, is within its size and untouched.
+    Returns the kept masks and pixels, the points and the number of objects cut."""
+    from scene_builder.vocabulary import category
+
+    out_kept, out_points, cut = list(kept), list(points_world), 0
+    for i, (label, pts) in enumerate(zip(labels, points_world)):
+        plan = max(gravity_aligned_size(pts)[:2])
+        if label == "object" or plan < SEEN_THROUGH_SIZE_FACTOR * max(category(label).typical_size_m):
+            continue
+        drop = _seen_through(points_cam[kept[i][1]], focal_px)
+        if drop.any() and not drop.all():
+            out_kept[i], out_points[i] = without_points(*kept[i], pts, drop)
+            cut += 1
+    return out_kept, out_points, cut
+
+
 def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step: Callable[[str], None] | None = None) -> Perception:
     """Load and check the input, find gravity, floor, walls and the objects.
 
@@ -448,6 +496,9 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     if merged:
         points_world = [transform_points(frame.world_from_camera, points_cam[pix]) for _, pix in kept]
         backends.append(BackendUse("fragments", "family-footprint", f"merged {merged} fragments into the object of one family they lie on (a mattress on its bed frame)"))
+    kept, points_world, through = _cut_seen_through(kept, points_world, [n for n, _ in names], points_cam, 0.5 * (k.fx_px + k.fy_px))
+    if through:
+        backends.append(BackendUse("seen-through", "depth-clusters", f"{through} objects far larger than their kind lost what was seen past them (clusters {SEEN_THROUGH_M} m or more behind)"))
     kept, points_world, cut = _cut_above_tops(kept, points_world, [n for n, _ in names])
     if cut:
         backends.append(BackendUse("table-tops", "height-layers", f"{cut} tables or desks kept to their top: what rose above it (a partition behind a desk) is background"))

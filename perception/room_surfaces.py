@@ -10,7 +10,9 @@ of it inside the room box seen (:func:`room_footprint`) that the photo-textured 
 1. **Extent.** The floor (and the ceiling, when one was found) is the box of the observed points
    and the camera's surroundings, cut by every wall's inner half-plane; each wall runs along the
    edge of that floor from the floor up to the ceiling (or the top of what was seen, at least
-   :data:`MIN_WALL_TOP_M`).
+   :data:`MIN_WALL_TOP_M`). The box encloses everything seen (:func:`room_footprint` with
+   ``enclose``); its sides that no wall was found on are closed by walls (:func:`closing_walls`)
+   just past the farthest point seen, except behind the camera.
 2. **Cells.** The plane is cut into :data:`CELL_M` squares. A cell is left out where the grid
    draws the plane already (all four corners project onto pixels that show this plane) and where
    the camera saw through the plane (a corner's pixel has depth beyond it: a doorway, a window
@@ -39,11 +41,13 @@ from scene_builder.frames import transform_points
 from scene_builder.model import Camera, CameraIntrinsics, Plane
 
 __all__ = [
+    "BEHIND_CAMERA_M",
     "BEHIND_M",
     "CELL_M",
     "MAX_TEXTURE_SIDE_PX",
     "MIN_WALL_TOP_M",
     "TEXEL_M",
+    "closing_walls",
     "PlaneSurface",
     "fill_unseen",
     "pack_atlas",
@@ -59,12 +63,23 @@ TEXEL_M = 0.01
 MAX_TEXTURE_SIDE_PX = 1024
 #: Completed planes lie this far behind the plane, under the grid where both draw it.
 BEHIND_M = 0.003
-#: The room holds the camera: the floor reaches at least this far around it (m).
+#: The room holds the camera: the floor reaches at least this far around it (m), and at least
+#: BEHIND_CAMERA_M behind it (photos of rooms are taken from inside them, rarely with the back
+#: against a wall; a second camera beside the first is usually a step or two behind it).
 CAMERA_MARGIN_M = 0.5
+BEHIND_CAMERA_M = 1.5
+#: A side of the room box with no wall found is closed by a wall there unless it lies behind the
+#: camera: its outward normal more than this angle from the camera's horizontal forward.
+CLOSE_MAX_ANGLE_DEG = 120.0
 #: Walls without a ceiling found run at least this high (a room's height; m).
 MIN_WALL_TOP_M = 2.4
-#: Quantiles of the observed points that bound the room box (robust to stray far points).
+#: Quantiles of the observed points that bound the room box where it limits what the room's
+#: planes fill in behind objects (robust to stray far points).
 BOX_QUANTILE = 0.005
+#: The enclosing room box (the completed surfaces, closed by walls on its sides without one)
+#: reaches this far past the farthest point seen along each axis: nothing seen, object or room,
+#: may stand outside it.
+BOX_CLEARANCE_M = 0.05
 #: A corner is "seen through" the plane when its pixel's depth lies this far beyond it, plus
 #: the depth noise (perception.room.inlier_threshold_m).
 THROUGH_MARGIN_M = 0.05
@@ -92,19 +107,35 @@ class PlaneSurface:
     seen_texels: int
 
 
-def room_footprint(points_world_m: np.ndarray, camera_xy_m: np.ndarray, walls: tuple[Plane, ...]):
+def room_footprint(points_world_m: np.ndarray, camera_xy_m: np.ndarray, walls: tuple[Plane, ...], forward_xy: np.ndarray | None = None,
+                   enclose: bool = False):
     """The room's floor polygon (a shapely Polygon in world XY): the box of the observed points
-    (quantiles :data:`BOX_QUANTILE`) and of the camera's surroundings, cut by every wall's inner
-    half-plane (walls' normals point into the room)."""
+    (their :data:`BOX_QUANTILE` quantiles; with ``enclose``, :data:`BOX_CLEARANCE_M` past the
+    farthest) and of the camera's surroundings (:data:`CAMERA_MARGIN_M` around it,
+    :data:`BEHIND_CAMERA_M` behind it along the room axis nearest ``forward_xy``, the camera's
+    horizontal viewing direction, when given), cut by every wall's inner half-plane (walls'
+    normals point into the room)."""
     import shapely
 
     xy = np.asarray(points_world_m, dtype=np.float64)[:, :2]
     cam = np.asarray(camera_xy_m, dtype=np.float64)
+    around = [cam - CAMERA_MARGIN_M, cam + CAMERA_MARGIN_M]
+    if forward_xy is not None and np.linalg.norm(forward_xy) > 1e-9:
+        # Along the room axis nearest the view direction (the box is the room's, axis-aligned:
+        # a camera looking into a corner does not push the side walls out).
+        f = np.asarray(forward_xy, dtype=np.float64)
+        axis = np.zeros(2)
+        axis[int(np.argmax(np.abs(f)))] = np.sign(f[int(np.argmax(np.abs(f)))])
+        around.append(cam - BEHIND_CAMERA_M * axis)
+    around = np.array(around)
+    lo, hi = around.min(axis=0), around.max(axis=0)
     if len(xy):
-        lo = np.minimum(np.quantile(xy, BOX_QUANTILE, axis=0), cam - CAMERA_MARGIN_M)
-        hi = np.maximum(np.quantile(xy, 1.0 - BOX_QUANTILE, axis=0), cam + CAMERA_MARGIN_M)
-    else:
-        lo, hi = cam - CAMERA_MARGIN_M, cam + CAMERA_MARGIN_M
+        if enclose:
+            lo = np.minimum(xy.min(axis=0) - BOX_CLEARANCE_M, lo)
+            hi = np.maximum(xy.max(axis=0) + BOX_CLEARANCE_M, hi)
+        else:
+            lo = np.minimum(np.quantile(xy, BOX_QUANTILE, axis=0), lo)
+            hi = np.maximum(np.quantile(xy, 1.0 - BOX_QUANTILE, axis=0), hi)
     poly = shapely.box(lo[0], lo[1], hi[0], hi[1])
     far = 4.0 * float(np.max(hi - lo)) + 10.0
     for w in walls:
@@ -120,6 +151,36 @@ def room_footprint(points_world_m: np.ndarray, camera_xy_m: np.ndarray, walls: t
         inside = [p for p in parts if p.contains(shapely.Point(*cam))]
         poly = inside[0] if inside else max(parts, key=lambda p: p.area)
     return poly
+
+
+def closing_walls(footprint, walls: tuple[Plane, ...], forward_xy: np.ndarray) -> tuple[Plane, ...]:
+    """Walls (world frame, normals into the room) along the sides of ``footprint`` that lie on no
+    wall found, except the sides behind the camera (outward normal more than
+    :data:`CLOSE_MAX_ANGLE_DEG` from ``forward_xy``): the room seen ends about where what was
+    seen ends, and a twin looked at from beside the photo's camera shows a wall there, not the
+    void. Only completed surfaces (no collision): nothing seen says where the wall stands."""
+    ring = np.asarray(footprint.exterior.coords)[:-1]
+    if footprint.exterior.is_ccw is False:
+        ring = ring[::-1]
+    fwd = np.asarray(forward_xy, dtype=np.float64)
+    fwd = fwd / max(float(np.linalg.norm(fwd)), 1e-12)
+    cos_max = np.cos(np.radians(CLOSE_MAX_ANGLE_DEG))
+    out = []
+    for a, b in zip(ring, np.roll(ring, -1, axis=0)):
+        edge = b - a
+        length = float(np.linalg.norm(edge))
+        if length < CELL_M:
+            continue
+        inward = np.array([-edge[1], edge[0]]) / length  # left of a counter-clockwise edge
+        n3 = np.array([inward[0], inward[1], 0.0])
+        offset = -float(inward @ a)
+        on_wall = any(
+            abs(float(w.normal[:2] @ a) + w.offset_m) < 1e-3 and abs(float(w.normal[:2] @ b) + w.offset_m) < 1e-3 for w in walls
+        )
+        if on_wall or float(-inward @ fwd) < cos_max:
+            continue
+        out.append(Plane(n3, offset, "wall", 0))
+    return tuple(out)
 
 
 def _plane_axes(plane: Plane) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -27,14 +27,34 @@ def _camera_coords(cam, verts):
 
 
 def _cast(mesh, origins, dirs):
-    """Distance along each (N, 3) unit ray to the first hit of the mesh (inf: none), by open3d's
-    RaycastingScene."""
+    """Distance along each (N, 3) unit ray to the first front-facing hit of the mesh (inf: none),
+    by open3d's RaycastingScene. Back faces are passed through, as MuJoCo's renderer, USD
+    (``doubleSided`` false) and glTF (``doubleSided`` false) viewers cull them: a room's closing
+    wall seen from outside the room is not drawn."""
     import open3d as o3d
 
     scene = o3d.t.geometry.RaycastingScene()
     scene.add_triangles(o3d.core.Tensor(mesh.vertices_m.astype(np.float32)), o3d.core.Tensor(mesh.faces.astype(np.uint32)))
-    rays = np.hstack([np.broadcast_to(origins, dirs.shape), dirs]).astype(np.float32)
-    return scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy().astype(np.float64)
+    start = np.broadcast_to(np.asarray(origins, dtype=np.float64), dirs.shape).copy()
+    travelled = np.zeros(len(dirs))
+    out = np.full(len(dirs), np.inf)
+    todo = np.arange(len(dirs))
+    for _ in range(8):
+        rays = np.hstack([start[todo], dirs[todo]]).astype(np.float32)
+        ans = scene.cast_rays(o3d.core.Tensor(rays))
+        t = ans["t_hit"].numpy().astype(np.float64)
+        normal = ans["primitive_normals"].numpy().astype(np.float64)
+        hit = np.isfinite(t)
+        front = hit & (np.einsum("ij,ij->i", normal, dirs[todo]) < 0.0)
+        out[todo[front]] = travelled[todo[front]] + t[front]
+        back = hit & ~front
+        step = t[back] + 1e-4
+        start[todo[back]] += dirs[todo[back]] * step[:, None]
+        travelled[todo[back]] += step
+        todo = todo[back]
+        if len(todo) == 0:
+            break
+    return out
 
 
 def _pixel_rays(cam, world_from_camera=None):
@@ -48,6 +68,50 @@ def _pixel_rays(cam, world_from_camera=None):
 def _true_surface_distance(points):
     """(N,) distance of world points to the nearest true surface of the fixture (floor, wall)."""
     return np.minimum(np.abs(points[:, 2]), np.abs(points[:, 0] - tf.WALL_X_M))
+
+
+def _closing_walls(obs, cam):
+    """The walls the completion closes the fixture's room with (it has one wall; its other
+    sides end where what was seen ends)."""
+    from perception import room_surfaces
+
+    seen = transform_points(cam.world_from_camera, cam.intrinsics.unproject(obs.depth_m)[obs.depth_m > 0])
+    fwd = cam.world_from_camera[:2, 2]
+    footprint = room_surfaces.room_footprint(seen, cam.world_from_camera[:2, 3], (tf.wall(),), fwd, enclose=True)
+    return room_surfaces.closing_walls(footprint, (tf.wall(),), fwd)
+
+
+def _room_distance(points, closing):
+    """(N,) distance to the nearest of the fixture's true surfaces and the closing walls (the
+    completed planes lie BEHIND_M behind their planes)."""
+    from perception.room_surfaces import BEHIND_M
+
+    d = _true_surface_distance(points)
+    for w in closing:
+        d = np.minimum(d, np.abs(w.signed_distance_m(points) + BEHIND_M))
+    return d
+
+
+def test_the_room_is_closed_where_what_was_seen_ends(built):
+    """The fixture's room has its wall ahead; its sides to the left and right are closed by walls
+    just past the farthest point seen there, and nothing closes it behind the camera. The photo's camera
+    sees none of them in front of what it saw (the cells its rays cross are left out)."""
+    obs, board, cam, bg = built
+    closing = _closing_walls(obs, cam)
+    normals = np.array([w.normal for w in closing])
+    assert len(closing) == 2 and np.allclose(np.sort(normals[:, 1]), [-1.0, 1.0]) and np.allclose(normals[:, [0, 2]], 0.0)
+    seen = transform_points(cam.world_from_camera, cam.intrinsics.unproject(obs.depth_m)[obs.depth_m > 0])
+    for w in closing:
+        s = w.signed_distance_m(seen)
+        assert 0.0 < s.min() < 0.1  # just past the farthest point seen
+    origin, dirs = _pixel_rays(cam)
+    t = _cast(bg.surface, origin, dirs)
+    hit = origin + dirs * t[:, None]
+    on_closing = np.zeros(len(hit), dtype=bool)
+    for w in closing:
+        on_closing |= np.abs(w.signed_distance_m(hit) + 0.003) < 1e-3
+    on_closing &= _true_surface_distance(hit) > 1e-3  # (not the floor at a closing wall's foot)
+    assert on_closing.sum() == 0 and np.isfinite(t[(obs.depth_m > 0).ravel()]).all()
 
 
 def test_observed_nodes_keep_the_observed_depth(built):
@@ -133,8 +197,9 @@ def test_no_rubber_sheets_across_occluding_edges(board_depth_m):
     on_board = to_board < 0.01
     # A sheet spanning the jump (20 or 35 cm) has points far from both sides; steps under
     # GRAZING_DEPTH_RATIO (4 %, 11 cm here: where the board stands on the floor) are surface.
-    stray = np.minimum(to_board, _true_surface_distance(hit)) > 0.06
-    on_room = _true_surface_distance(hit) < 0.01
+    room = _room_distance(hit, _closing_walls(obs, cam))
+    stray = np.minimum(to_board, room) > 0.06
+    on_room = room < 0.01
     assert not stray.any(), f"{stray.sum()} of {len(hit)} hits between the board and the room"
     # The board's edge was near the floor and the wall in the photo: the side view sees both.
     assert on_board.sum() > 1000 and on_room.sum() > 5000
@@ -156,7 +221,9 @@ def test_the_room_continues_beyond_the_photo(built):
     bare = observed_background(obs, cam, (tf.wall(),), (board,), max_nodes=tf.W * tf.H, complete_room=False)
     t_bare = _cast(bare.surface, origin, dirs)
     assert ok.mean() > np.isfinite(t_bare).mean() + 0.08
-    assert np.all(_true_surface_distance(hit) < 0.015)  # (the floor-wall corner is cut by a triangle)
+    room = _room_distance(hit, _closing_walls(obs, cam))
+    assert np.all(room < 0.015)  # (the floor-wall corner is cut by a triangle)
+    assert np.mean(_true_surface_distance(hit) < 0.015) > 0.5  # mostly the floor and the wall seen
 
 
 def test_texture_atlas_holds_the_photo_with_objects_inpainted(built):

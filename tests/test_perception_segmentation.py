@@ -8,8 +8,9 @@ import pytest
 from PIL import Image
 
 from perception import perceive
-from perception.perceive import _cut_above_tops, _fill_silhouettes, _merge_fragments
+from perception.perceive import _cut_above_tops, _cut_seen_through, _fill_silhouettes, _merge_fragments
 from scene_builder.config import InputSpec, PerceptionConfig
+from scene_builder.frames import transform_points
 from tests.test_perception_synthetic import F, H, W, _camera, _render
 
 CFG = PerceptionConfig(naming_backend="geometric-prior", segmentation_backend="depth-clusters")
@@ -187,3 +188,33 @@ def test_a_desk_ends_at_its_top_and_what_rises_behind_it_is_background():
     assert not out[0][1].ravel()[np.flatnonzero(gone)].any()  # the dropped points' pixels leave the mask
     for i in (1, 2, 3):
         assert points[i] is clouds[i] and out[i] is kept[i]
+
+
+def _through_fixture(far_z_m):
+    """A 60 x 80 px mask whose left part sees a chair-sized surface 2.4 m away and whose right
+    part sees something ``far_z_m`` away (camera level, 1.4 m high, f = 100 px)."""
+    h, w, f = 60, 80, 100.0
+    v, u = np.mgrid[0:h, 0:w].astype(np.float64)
+    z = np.where(u < 50, 2.4, far_z_m)
+    points_cam = np.dstack([(u - w / 2) / f * z, (v - h / 2) / f * z, z])
+    mask = np.zeros((h, w), dtype=bool)
+    mask[10:50, 20:60] = True
+    world_from_camera = np.array([[0.0, 0.0, 1.0, 0.0], [-1.0, 0.0, 0.0, 0.0], [0.0, -1.0, 0.0, 1.4], [0.0, 0.0, 0.0, 1.0]])
+    return [(mask, mask.copy())], transform_points(world_from_camera, points_cam[mask]), points_cam, f
+
+
+def test_what_was_seen_past_an_object_far_larger_than_its_kind_is_cut_off():
+    """A "chair" whose mask took in a sofa 2.6 m behind it (through its open back) is 3 m deep:
+    the far cluster leaves its points and its mask. The same mask named bed (2 m long) keeps it
+    all; so does a chair whose far part is only 30 cm behind (one object's depth)."""
+
+    kept, pts, points_cam, f = _through_fixture(5.0)
+    (mask, pix), = kept
+    out_kept, out_points, cut = _cut_seen_through(list(kept), [pts], ["chair"], points_cam, f)
+    assert cut == 1
+    new_mask, _ = out_kept[0]
+    assert new_mask[:, :50].sum() == mask[:, :50].sum() and not new_mask[:, 50:].any()
+    assert len(out_points[0]) == mask[:, :50].sum() and np.ptp(out_points[0][:, 0]) < 0.01
+    assert _cut_seen_through(list(kept), [pts], ["bed"], points_cam, f)[2] == 0
+    near = _through_fixture(2.7)
+    assert _cut_seen_through(list(near[0]), [near[1]], ["chair"], near[2], near[3])[2] == 0

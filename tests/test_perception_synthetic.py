@@ -302,3 +302,50 @@ def test_grid_normals_match_a_tilted_plane_and_face_the_camera():
     # No normal stands for a pixel inside the hole.
     f_u, f_v = q[:, 0] / q[:, 2] * f + w / 2, q[:, 1] / q[:, 2] * f + h / 2
     assert not np.any((f_u > 63) & (f_u < 96) & (f_v > 43) & (f_v < 76))
+
+
+def _two_walls_depth(world_from_camera, side_deg):
+    """Planar depth of the floor, a back wall x = 4.5 m and a side wall through (2, 1.6) turned
+    ``side_deg`` from the X axis (a Manhattan room has 0), ray cast exactly."""
+    u, v = np.meshgrid(np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64))
+    d = np.stack([(u - (W - 1) / 2) / F, (v - (H - 1) / 2) / F, np.ones_like(u)], axis=-1).reshape(-1, 3) @ world_from_camera[:3, :3].T
+    o = world_from_camera[:3, 3]
+    a = np.radians(side_deg)
+    n_side = np.array([np.sin(a), -np.cos(a), 0.0])  # into the room (towards -y)
+    off_side = -float(n_side @ np.array([2.0, 1.6, 0.0]))
+    t = np.full(len(d), np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for n, off in ((np.array([0.0, 0.0, 1.0]), 0.0), (np.array([-1.0, 0.0, 0.0]), 4.5), (n_side, off_side)):
+            tp = -(o @ n + off) / (d @ n)
+            t = np.where(tp > 0, np.minimum(t, tp), t)
+    t[~np.isfinite(t)] = 0.0
+    return t.reshape(H, W), n_side, off_side
+
+
+@pytest.mark.parametrize("side_deg, snapped", [(7.0, True), (25.0, False)])
+def test_a_wall_a_few_degrees_off_the_rooms_axes_is_turned_onto_them(side_deg, snapped):
+    """Rooms are Manhattan: a side wall fitted 7 degrees off the back wall's perpendicular (a
+    curtain's folds, a wall seen edge-on) is turned onto the room's axis about its inliers; one
+    25 degrees off is left as it was fitted."""
+    from perception.room import estimate_room
+
+    truth = _camera(1.4, 12.0, 0.0, 20.0)
+    depth, n_side, off_side = _two_walls_depth(truth, side_deg)
+    k_unproject = np.stack(np.meshgrid(np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64)), -1)
+    pts = np.dstack([(k_unproject[..., 0] - (W - 1) / 2) / F * depth, (k_unproject[..., 1] - (H - 1) / 2) / F * depth, depth])
+    frame = estimate_room(pts, depth > 0, 0)
+    walls = frame.room.walls
+    assert len(walls) == 2
+    back = max(walls, key=lambda w: w.inlier_count)
+    side = next(w for w in walls if w is not back)
+    # The world's X axis follows the best-supported wall: it is an axis exactly.
+    assert np.max(np.abs(back.normal)) == pytest.approx(1.0, abs=1e-9)
+    turn = np.degrees(np.arccos(np.clip(abs(side.normal @ back.normal), 0.0, 1.0)))
+    if snapped:
+        assert turn == pytest.approx(90.0, abs=1e-6)
+        # It stays where it was seen: its inliers lie on it in the median.
+        inl = next(p.inliers for p in frame.planes if p.kind == "wall" and np.allclose(frame.world_from_camera[:3, :3] @ p.normal, side.normal))
+        world = transform_points(frame.world_from_camera, pts[inl])
+        assert np.median(side.signed_distance_m(world)) == pytest.approx(0.0, abs=1e-6)
+    else:
+        assert turn == pytest.approx(90.0 - side_deg, abs=1.0)
