@@ -49,6 +49,10 @@ BASE_DEPTH_M = 0.6
 WALL_DEPTH_M = 0.35
 #: A base run's bottom lies this close to the floor (m) at most; its face reaches down to it.
 PLINTH_MAX_M = 0.35
+#: A run whose face centre lies this far behind a wall of the room is in the next room (seen
+#: through a doorway or a window): not this room's (perception.perceive leaves objects there out
+#: alike).
+BEHIND_WALL_M = 0.1
 #: A built front is at least this share on pixels no object explains.
 MIN_FREE_SHARE = 0.7
 #: Fronts of built-ins: 12 cm to 1.2 m wide, 10 cm to 2.3 m high.
@@ -214,6 +218,8 @@ def built_in_runs(
             if run is None:
                 continue
             fronts, world_quad = run
+            if any(float(wl.signed_distance_m(world_quad.mean(axis=0)[None])[0]) < -BEHIND_WALL_M for wl in walls):
+                continue  # (nyuv2_metric3d_00100: a "cabinet" 1.1 m behind the wall, welded there, 1.6 m into it)
             quad = _project(camera, world_quad)
             rr, cc = polygon(quad[:, 1], quad[:, 0], (h, w))
             mask = np.zeros((h, w), dtype=bool)

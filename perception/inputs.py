@@ -569,6 +569,47 @@ def load_input(inputs: InputSpec, config: PerceptionConfig) -> LoadedInput:
     return LoadedInput(Path(inputs.image_path), rgb, depth, k, scale, None if scale == 1.0 else full, upsampled_from)
 
 
+#: A photo's frame: its outermost lines of one flat extreme colour (undistorted Kinect and NYU
+#: frames are padded with 5-8 px of white; exports and scans pad black), at most this share of
+#: the side. A line is frame when FRAME_LINE_SHARE of its pixels are all channels >= FRAME_BRIGHT
+#: or all <= FRAME_DARK; the first line inside a frame is the resampling's blend and goes too.
+MAX_FRAME_SHARE = 0.03
+FRAME_LINE_SHARE = 0.9
+FRAME_BRIGHT = 235
+FRAME_DARK = 20
+
+
+def photo_frame(rgb: np.ndarray) -> tuple[int, int, int, int]:
+    """(top, bottom, left, right) widths in pixels of a flat frame around ``rgb`` (H, W, 3)
+    uint8 (0 where there is none)."""
+    h, w = rgb.shape[:2]
+
+    def flat(line: np.ndarray) -> bool:
+        return bool(np.mean(np.all(line >= FRAME_BRIGHT, axis=-1)) >= FRAME_LINE_SHARE or np.mean(np.all(line <= FRAME_DARK, axis=-1)) >= FRAME_LINE_SHARE)
+
+    def width(lines, cap: int) -> int:
+        n = 0
+        while n < cap and flat(lines(n)):
+            n += 1
+        return min(n + 1, cap) if n else 0
+
+    cap_v, cap_h = max(1, int(MAX_FRAME_SHARE * h)), max(1, int(MAX_FRAME_SHARE * w))
+    return (width(lambda i: rgb[i], cap_v), width(lambda i: rgb[h - 1 - i], cap_v),
+            width(lambda i: rgb[:, i], cap_h), width(lambda i: rgb[:, w - 1 - i], cap_h))
+
+
+def without_frame(rgb: np.ndarray, frame: tuple[int, int, int, int]) -> np.ndarray:
+    """``rgb`` with its frame (:func:`photo_frame`) replaced by the nearest pixels inside it (a
+    twin seen from elsewhere shows the photo's texture on the room, not a white line along the
+    photo's border). A new array; ``rgb`` itself when there is no frame."""
+    top, bottom, left, right = frame
+    if not any(frame):
+        return rgb
+    h, w = rgb.shape[:2]
+    inner = rgb[top : h - bottom, left : w - right]
+    return np.pad(inner, ((top, bottom), (left, right), (0, 0)), mode="edge")
+
+
 def _upsample_depth(depth_m: np.ndarray, w: int, h: int) -> np.ndarray:
     """``depth_m`` (h', w') float32 resized to (h, w): bilinear where the input is smooth (its
     3x3 neighbourhood spans under :data:`UPSAMPLE_SMOOTH` of the depth and holds no invalid

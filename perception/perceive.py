@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 
 from perception.backends import PerceptionRegistries, build_registries
-from perception.inputs import LoadedInput, check_depth, load_input
+from perception.inputs import LoadedInput, check_depth, load_input, photo_frame, without_frame
 from perception.lying_on import split_lying, top_height, without_points
 from perception.naming_prior import GeometricPriorNamer
 from perception.protocols import InstanceMasks
@@ -372,7 +372,14 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     step(f"depth, {size}" if loaded.depth_m is not None else f"estimating depth from the photo, {size}")
     depth_m, k, depth_source, backends, up_hint = _resolve_depth(loaded, registries, config)
     backends.insert(0, BackendUse("intrinsics", k.source, f"{k.fx_px:.1f} px focal length ({k.width_px}x{k.height_px})"))
-    observation = Observation(str(loaded.image_path), loaded.rgb, depth_m, k, depth_source, loaded.rgb_full)
+    # The photo's textures without its flat frame (undistortion padding); what is analysed keeps it.
+    frame_px = photo_frame(loaded.rgb)
+    if any(frame_px):
+        full = None if loaded.rgb_full is None else without_frame(loaded.rgb_full, photo_frame(loaded.rgb_full))
+        observation = Observation(str(loaded.image_path), without_frame(loaded.rgb, frame_px), depth_m, k, depth_source, full)
+        backends.append(BackendUse("photo-frame", "flat-border", f"a flat frame around the photo ({'/'.join(map(str, frame_px))} px top/bottom/left/right) textured with the pixels inside it"))
+    else:
+        observation = Observation(str(loaded.image_path), loaded.rgb, depth_m, k, depth_source, loaded.rgb_full)
 
     points_cam = k.unproject(depth_m)
     valid = (depth_m > 0) & (depth_m < config.max_depth_m)

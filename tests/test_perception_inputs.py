@@ -393,3 +393,30 @@ def test_a_bug_while_reading_is_not_reported_as_a_bad_file(tmp_path, monkeypatch
     monkeypatch.undo()
     with pytest.raises(InputError, match=r"cannot read .*cut\.png as an image"):
         inputs.load_rgb(tmp_path / "cut.png")
+
+
+def test_a_photos_flat_frame_is_found_and_textured_from_inside():
+    """An undistorted Kinect frame's white padding (5 px top and bottom, 6 left, 7 right, each
+    with a blended line inside) is found and replaced by the pixels next to it; a black border on
+    one side likewise; a photo whose edge is merely bright but varied has no frame."""
+    from perception.inputs import photo_frame, without_frame
+
+    rng = np.random.default_rng(0)
+    inner = rng.integers(40, 200, (300, 400, 3), dtype=np.uint8)  # frame caps: 9 rows, 12 columns
+    framed = inner.copy()
+    framed[5], framed[-6], framed[:, 6], framed[:, -8] = 215, 215, 215, 215  # the blended lines
+    framed[:5], framed[-5:], framed[:, :6], framed[:, -7:] = 255, 255, 255, 255
+    frame = photo_frame(framed)
+    assert frame == (6, 6, 7, 8)
+    out = without_frame(framed, frame)
+    assert out.shape == framed.shape and out.max() < 200  # no white, no blend left
+    np.testing.assert_array_equal(out[6:-6, 7:-8], framed[6:-6, 7:-8])
+    np.testing.assert_array_equal(out[0, 7:-8], framed[6, 7:-8])
+    np.testing.assert_array_equal(out[6:-6, -1], framed[6:-6, -9])
+    black = inner.copy()
+    black[:, :2] = 0
+    assert photo_frame(black) == (0, 0, 3, 0)
+    bright = inner.copy()
+    bright[:3] = rng.integers(180, 256, (3, 400, 3), dtype=np.uint8)
+    assert photo_frame(bright) == (0, 0, 0, 0)
+    assert without_frame(inner, (0, 0, 0, 0)) is inner

@@ -128,3 +128,21 @@ def test_plain_bedroom_photo_keeps_the_bed_whole_to_its_headboard():
             parallel = float(a.normal @ b.normal) > np.cos(np.radians(5.0))
             # (world walls: signed distance from the camera's position, normals into the room)
             assert not (a is not b and parallel and abs(a.offset_m - b.offset_m) > 0.5), walls
+
+
+def test_a_kinect_photos_frame_is_not_textured_and_nothing_stands_behind_its_walls():
+    """nyuv2_metric3d_00100 (white undistortion frame, 6-8 px): the observation's photo, which
+    textures the twin, has no frame left, and the report says so. Without it the fronts found on
+    the far side of the room's wall made a built-in "cabinet" 1.1 m behind the wall (welded there,
+    1.6 m into it): every object, built-ins included, stands in front of every wall."""
+    from perception.inputs import photo_frame
+    from tests.conftest import require
+
+    d = require(REAL_DATA / "nyuv2_metric3d_00100")
+    p = perceive(_spec(d), PerceptionConfig(), seed=0)
+    assert photo_frame(p.observation.rgb) == (0, 0, 0, 0)
+    assert any(b.task == "photo-frame" for b in p.backends)
+    assert p.room.walls
+    for o in p.objects:
+        for w in p.room.walls:
+            assert np.median(w.signed_distance_m(o.points_world_m)) > -0.1, o.name

@@ -349,3 +349,22 @@ def test_a_wall_a_few_degrees_off_the_rooms_axes_is_turned_onto_them(side_deg, s
         assert np.median(side.signed_distance_m(world)) == pytest.approx(0.0, abs=1e-6)
     else:
         assert turn == pytest.approx(90.0 - side_deg, abs=1.0)
+
+
+def test_walls_made_parallel_and_a_centimetre_apart_are_one_wall():
+    """Two wall fits the Manhattan turn left parallel 1 cm apart are one wall holding both
+    inlier sets; a parallel wall 2 m away and the floor stay."""
+    from perception.room import CameraPlane, _merge_parallel
+
+    def plane(kind, n, d, rows):
+        m = np.zeros((10, 10), dtype=bool)
+        m[rows] = True
+        return CameraPlane(np.asarray(n, dtype=np.float64), d, kind, m)
+
+    floor = plane("floor", [0.0, -1.0, 0.0], 1.4, slice(8, 10))
+    big, near, far = plane("wall", [0.0, 0.0, -1.0], 2.80, slice(0, 4)), plane("wall", [0.0, 0.0, -1.0], 2.81, slice(4, 5)), plane("wall", [0.0, 0.0, 1.0], 2.0, slice(5, 6))
+    out = _merge_parallel([floor, near, big, far])
+    assert [p.kind for p in out] == ["floor", "wall", "wall"]
+    merged = next(p for p in out if p.kind == "wall" and p.offset_m == 2.80)
+    assert merged.inliers[:5].all() and not merged.inliers[5:].any()
+    assert any(p.offset_m == 2.0 for p in out)
