@@ -441,7 +441,7 @@ def _manhattan(p: CameraPlane, world_from_camera: np.ndarray, points_cam: np.nda
     """A wall (or partial wall) within MANHATTAN_SNAP_DEG of the room's horizontal axes turned
     onto the nearest one, its offset the median over its inliers (so it stays where it was seen);
     others unchanged. A wall fitted on a curtain's folds or seen edge-on at the image's side is a
-    few degrees off (sunrgbd-style multiview frame 3 of ../shared/data/multiview: the window
+    few degrees off (the dining room of ../shared/data/multiview, frame 3: its curtained window
     wall 7.5 deg off the wall it faces, 0.7 m too near where frame 1 sees it)."""
     if p.kind not in ("wall", "partial-wall"):
         return p
