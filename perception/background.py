@@ -366,7 +366,7 @@ def observed_background(
         all_obs.append(np.zeros(len(e.vertices_m), dtype=bool))
         n += len(e.vertices_m)
     surface = TriangleMesh(np.concatenate(all_v), np.concatenate(all_f), uv=np.concatenate(all_uv), texture=Texture("background", atlas))
-    return Background(surface=surface, surface_observed=np.concatenate(all_obs))
+    return Background(surface=surface, surface_observed=np.concatenate(all_obs), closed_sides=len(closing))
 
 
 def _drop_unused(verts, faces, uv, observed):

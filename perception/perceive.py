@@ -542,5 +542,10 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
 
         bg = observed_background(observation, camera, room.walls, tuple(objects), config.max_depth_m, removed=removed, extra_planes=completion_planes(frame))
         room = Room(walls=room.walls, background=bg)
+        if bg.closed_sides:
+            from perception.room_surfaces import BOX_CLEARANCE_M, CAMERA_MARGIN_M
+
+            backends.append(BackendUse("room-closure", "room-box", f"{bg.closed_sides} sides of the room with no wall seen closed by a wall {BOX_CLEARANCE_M * 100:.0f} cm past the farthest point seen "
+                                       f"(at least {CAMERA_MARGIN_M} m beside the camera; a guess, drawn only)"))
     return Perception(observation, camera, room, tuple(objects), tuple(backends), removed_mask=removed)
 

@@ -343,6 +343,8 @@ class Background:
     static_pieces: convex collision pieces (world frame) of those objects.
     box_centers_m: (B, 3), box_half_extents_m: (B, 3) and box_yaws_rad: (B,) collision boxes
       (yaw about +Z): the voxelised observed surface and the pads seen under objects.
+    closed_sides: how many sides of the room box no wall was seen on were closed by a wall in
+      ``surface`` (``perception.room_surfaces.closing_walls``: a guess, drawn only, no collision).
     """
 
     surface: TriangleMesh
@@ -353,6 +355,7 @@ class Background:
     box_centers_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     box_half_extents_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     box_yaws_rad: np.ndarray = field(default_factory=lambda: np.zeros((0,)))
+    closed_sides: int = 0
 
     def __post_init__(self) -> None:
         _freeze(self, "surface_observed", np.bool_, (len(self.surface.vertices_m),))

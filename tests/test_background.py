@@ -100,6 +100,7 @@ def test_the_room_is_closed_where_what_was_seen_ends(built):
     closing = _closing_walls(obs, cam)
     normals = np.array([w.normal for w in closing])
     assert len(closing) == 2 and np.allclose(np.sort(normals[:, 1]), [-1.0, 1.0]) and np.allclose(normals[:, [0, 2]], 0.0)
+    assert bg.closed_sides == 2  # (perceive reports them: task "room-closure")
     seen = transform_points(cam.world_from_camera, cam.intrinsics.unproject(obs.depth_m)[obs.depth_m > 0])
     for w in closing:
         s = w.signed_distance_m(seen)
