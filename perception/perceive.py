@@ -320,6 +320,8 @@ def _seen_through(points_cam: np.ndarray, focal_px: float) -> np.ndarray:
     """(N,) bool: the points of an object's Euclidean clusters whose median depth lies
     :data:`SEEN_THROUGH_M` or more beyond the farthest (98th percentile) points of its largest
     cluster."""
+    from scipy import ndimage
+
     from perception.segment_depth import cluster_points
 
     labels = cluster_points(points_cam, focal_px)
@@ -328,8 +330,7 @@ def _seen_through(points_cam: np.ndarray, focal_px: float) -> np.ndarray:
         return np.zeros(len(points_cam), dtype=bool)
     z = points_cam[:, 2]
     far = float(np.percentile(z[labels == int(np.argmax(sizes))], 98))
-    order = np.argsort(labels, kind="stable")
-    medians = np.array([float(np.median(g)) for g in np.split(z[order], np.cumsum(sizes)[:-1])])
+    medians = np.asarray(ndimage.median(z, labels, np.arange(len(sizes))))
     return medians[labels] > far + SEEN_THROUGH_M
 
 
@@ -374,12 +375,12 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     backends.insert(0, BackendUse("intrinsics", k.source, f"{k.fx_px:.1f} px focal length ({k.width_px}x{k.height_px})"))
     # The photo's textures without its flat frame (undistortion padding); what is analysed keeps it.
     frame_px = photo_frame(loaded.rgb)
+    rgb, rgb_full = loaded.rgb, loaded.rgb_full
     if any(frame_px):
-        full = None if loaded.rgb_full is None else without_frame(loaded.rgb_full, photo_frame(loaded.rgb_full))
-        observation = Observation(str(loaded.image_path), without_frame(loaded.rgb, frame_px), depth_m, k, depth_source, full)
+        rgb = without_frame(rgb, frame_px)
+        rgb_full = None if rgb_full is None else without_frame(rgb_full, photo_frame(rgb_full))
         backends.append(BackendUse("photo-frame", "flat-border", f"a flat frame around the photo ({'/'.join(map(str, frame_px))} px top/bottom/left/right) textured with the pixels inside it"))
-    else:
-        observation = Observation(str(loaded.image_path), loaded.rgb, depth_m, k, depth_source, loaded.rgb_full)
+    observation = Observation(str(loaded.image_path), rgb, depth_m, k, depth_source, rgb_full)
 
     points_cam = k.unproject(depth_m)
     valid = (depth_m > 0) & (depth_m < config.max_depth_m)

@@ -465,8 +465,10 @@ def _merge_parallel(planes: list[CameraPlane]) -> list[CameraPlane]:
     joined: dict[int, np.ndarray] = {}
     for i in order:
         p = planes[i]
-        host = next((j for j in kept if p.kind in ("wall", "partial-wall") and planes[j].kind == p.kind
-                     and float(planes[j].normal @ p.normal) > cos and abs(planes[j].offset_m - p.offset_m) < WALL_MERGE_M), None)
+        host = None
+        if p.kind in ("wall", "partial-wall"):
+            host = next((j for j in kept if planes[j].kind == p.kind and float(planes[j].normal @ p.normal) > cos
+                         and abs(planes[j].offset_m - p.offset_m) < WALL_MERGE_M), None)
         if host is None:
             kept.append(i)
         else:
