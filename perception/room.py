@@ -87,6 +87,9 @@ _RANSAC_THRESHOLD_M = 0.025
 _MAX_PLANES = 8
 #: A plane must hold this fraction of the sampled points to count (floor, wall, ceiling).
 _MIN_PLANE_FRACTION = 0.03
+#: Wall candidates take the offsets of points up to this depth as uncertain by their depth noise
+#: (:func:`_offset_support`); farther ones count in their 2 cm bin only (sigma 5 cm at 6 m).
+FAR_WALL_MAX_M = 6.0
 
 
 def inlier_threshold_m(depth_m: np.ndarray) -> np.ndarray:
@@ -328,8 +331,7 @@ def vertical_plane_candidates(q: np.ndarray, nrm: np.ndarray, up: np.ndarray, mi
         d = _unit(nrm[sel].sum(axis=0) - (nrm[sel].sum(axis=0) @ up) * up)
         off = -(q[sel] @ d)  # plane d . p + off = 0; off > 0: the camera is on the normal's side
         bins = np.arange(off.min() - 0.02, off.max() + 0.04, 0.02)
-        h, edges = np.histogram(off, bins=bins)
-        hs = np.convolve(h, [1, 2, 1], mode="same") / 2.0
+        hs, edges = _offset_support(off, q[sel, 2], bins)
         for i in np.argsort(-hs):
             if hs[i] < min_voxels:
                 break
@@ -339,6 +341,34 @@ def vertical_plane_candidates(q: np.ndarray, nrm: np.ndarray, up: np.ndarray, mi
             if o > 0:
                 out.append((d, o, int(hs[i] * scale)))
     return out
+
+
+def _offset_support(off: np.ndarray, z_m: np.ndarray, bins: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Support of each 2 cm offset bin: how many of the points with offsets ``off`` ((N,) m, at
+    depths ``z_m``) may lie in it, and the bin edges.
+
+    A near point counts in its bin and half in each neighbour. A far point's offset is uncertain
+    by its depth noise (sigma = 1.425e-3 z^2, as :func:`inlier_threshold_m`): it counts in every
+    bin within 2 sigma. Kinect depth at 5.5 m comes in 9 cm steps, so a far wall's points fill
+    ten bins and no single 2 cm bin held enough of them (the dining room of
+    ../shared/data/multiview, frame 5: the wall behind the dresser was never a candidate, and the
+    detector's "wardrobe" box took it).
+    """
+    reach = np.floor(2.0 * 1.425e-3 * z_m * z_m / float(bins[1] - bins[0])).astype(np.int64)  # bins either side
+    # (Beyond FAR_WALL_MAX_M the noise is so wide that a plane at any angle through a far patch
+    # gathers inliers: frame 1 of the dining room, 8 m from its back wall, found three "walls"
+    # there at 30 deg to each other.)
+    far = (reach > 1) & (z_m <= FAR_WALL_MAX_M)
+    h, edges = np.histogram(off[~far], bins=bins)
+    hs = np.convolve(h, [1, 2, 1], mode="same") / 2.0
+    if far.any():
+        n = len(hs)
+        i = np.clip(np.searchsorted(bins, off[far], side="right") - 1, 0, n - 1)
+        diff = np.zeros(n + 1)
+        np.add.at(diff, np.clip(i - reach[far], 0, n), 1.0)
+        np.add.at(diff, np.clip(i + reach[far] + 1, 0, n), -1.0)
+        hs = hs + np.cumsum(diff)[:-1]
+    return hs, edges
 
 
 def _manhattan_up(planes: list[tuple[np.ndarray, float, int]], image_up: np.ndarray, cos_max: float) -> np.ndarray | None:
@@ -582,6 +612,7 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0, up_h
     min_wall = max(200, int(_MIN_PLANE_FRACTION * len(pts)))
     min_partial = max(200, int(PARTIAL_WALL_MIN_FRACTION * len(pts)))
     candidates = sorted(planes, key=lambda p: -p[2])
+    walls_flat = np.zeros(len(pts), dtype=bool)  # inliers of the walls and partial walls found
     if floor_found:
         gq, gn = grid_normals(points_cam, valid) if normals == "grid" else open3d_normals(pts)
         candidates += vertical_plane_candidates(gq, gn, up, min_wall, len(pts) / max(len(gq), 1))
@@ -608,6 +639,12 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0, up_h
             kind = "wall" if inl.sum() >= min_wall and width_m >= WALL_MIN_WIDTH_M else "partial-wall"
             if any(p.kind == kind and abs(p.normal @ n) > np.cos(np.radians(5.0)) and abs(p.offset_m - d) < WALL_MERGE_M for p in cam_planes):
                 continue
+            # A plane through a wall already found (most of its inliers are that wall's) is that
+            # wall seen at a slant: far away the inlier band is 20 cm thick, and a plane 15 deg
+            # off still gathers thousands of its points.
+            if inl.sum() and (inl & walls_flat).sum() > 0.5 * inl.sum():
+                continue
+            walls_flat |= inl
             cam_planes.append(CameraPlane(n, d, kind, to_image(inl)))
         elif -(n0 @ up) > cos_floor:
             # A horizontal plane whose normal (towards the camera) points down: the ceiling.

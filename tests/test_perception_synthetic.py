@@ -368,3 +368,41 @@ def test_walls_made_parallel_and_a_centimetre_apart_are_one_wall():
     merged = next(p for p in out if p.kind == "wall" and p.offset_m == 2.80)
     assert merged.inliers[:5].all() and not merged.inliers[5:].any()
     assert any(p.offset_m == 2.0 for p in out)
+
+
+def _kinect_steps(depth_m):
+    """Depth as a Kinect v1 reports it: disparity in 1/8 px steps (baseline x focal 43.5 px m),
+    so 1.5 cm steps at 2 m and 8.7 cm at 5.5 m."""
+    disparity = np.round(8.0 * 43.5 / np.where(depth_m > 0, depth_m, np.inf)) / 8.0
+    with np.errstate(divide="ignore"):
+        return np.where(disparity > 0, 43.5 / disparity, 0.0)
+
+
+def test_a_wall_5_6_m_away_in_kinect_depth_steps_is_found():
+    """The floor and a back wall 5.6 m away seen through Kinect-like depth quantisation (9 cm
+    steps there): the wall's offsets fill a dozen 2 cm bins, each point uncertain by its depth
+    noise; the wall is found, facing the camera, where it stands."""
+    from perception.room import estimate_room
+
+    truth = _camera(1.3, 15.0, 0.0, 20.0)
+    u, v = np.meshgrid(np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64))
+    rays = np.stack([(u - (W - 1) / 2) / F, (v - (H - 1) / 2) / F, np.ones_like(u)], axis=-1)
+    d = rays.reshape(-1, 3) @ truth[:3, :3].T
+    o = truth[:3, 3]
+    t = np.full(len(d), np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for n, off in ((np.array([0.0, 0.0, 1.0]), 0.0), (np.array([-1.0, 0.0, 0.0]), 5.6)):
+            tp = -(o @ n + off) / (d @ n)
+            t = np.where(tp > 0, np.minimum(t, tp), t)
+    t[~np.isfinite(t)] = 0.0
+    z = t.reshape(H, W)  # the depth (rays have unit z)
+    rng = np.random.default_rng(0)
+    depth = _kinect_steps(np.where(z > 0, z + rng.normal(0.0, 1.425e-3, z.shape) * z * z, 0.0))
+    pts = rays * depth[..., None]
+    frame = estimate_room(pts, depth > 0, 0)
+    walls = frame.room.walls
+    assert len(walls) == 1
+    # In the room's frame the wall is perpendicular to the floor and faces the camera 5.6 m away
+    # (the quantisation biases nothing by more than a step).
+    cam = frame.world_from_camera[:3, 3]
+    assert walls[0].signed_distance_m(cam[None])[0] == pytest.approx(5.6, abs=0.1)
