@@ -346,9 +346,12 @@ def _skew(emap: np.ndarray) -> float:
     return best_s
 
 
-def parse_face(face_rgb: np.ndarray, m_per_px: float) -> list[Panel]:
+def parse_face(face_rgb: np.ndarray, m_per_px: float, inside: np.ndarray | None = None) -> list[Panel]:
     """The door and drawer fronts of a rectified face image ((h, w, 3) uint8) at ``m_per_px``
-    metres per pixel (see the module docstring)."""
+    metres per pixel (see the module docstring). ``inside``: (h, w) bool, where the face shows
+    the object (its mask): where the cuts find fewer than two fronts, fronts outlined by edges
+    within the object's box are looked for (``perception.front_rects``) and taken when they are
+    more."""
     import cv2
     from skimage.color import rgb2gray
 
@@ -370,6 +373,18 @@ def parse_face(face_rgb: np.ndarray, m_per_px: float) -> list[Panel]:
     root = _Node((0, 0, w, h), (False, False, False, False))
     _cut(_Lines(horiz), _Lines(vert.T), root, min_piece)
     fronts = _fronts(root, handles, m_per_px)
+    if len(fronts) < 2:
+        from perception.front_rects import outlined_rectangles
+
+        box = (0, 0, w, h)
+        if inside is not None and inside.any():
+            ins = cv2.warpAffine(inside.astype(np.uint8), fwd, (w, h), flags=cv2.INTER_NEAREST) > 0 if (sh or sv) else inside
+            cols, rows = np.flatnonzero(ins.mean(axis=0) >= 0.5), np.flatnonzero(ins.mean(axis=1) >= 0.5)
+            if len(cols) and len(rows):
+                box = (int(cols[0]), int(rows[0]), int(cols[-1]) + 1, int(rows[-1]) + 1)
+        rects = outlined_rectangles(horiz, vert, box, m_per_px, lambda b: _handle_in(handles, b, m_per_px))
+        if len(rects) >= 2 and len(rects) > len(fronts):
+            fronts = [(rect, (True, True, True, True), hd) for rect, _, hd in rects]
     panels = []
     for (x0, y0, x1, y1), sides, hd in fronts:
         pw, ph = (x1 - x0) * m_per_px, (y1 - y0) * m_per_px

@@ -195,7 +195,7 @@ def fronts_on_face(rgb: np.ndarray, camera: Camera, face: Face, label: str = "",
     from perception.front_parse import parse_face
 
     img, inside, m = rectify(rgb, camera, face, mask)
-    panels = parse_face(img, m)
+    panels = parse_face(img, m, inside if mask is not None else None)
     h = img.shape[0]
     k = camera.intrinsics
     camera_from_world = np.linalg.inv(camera.world_from_camera)

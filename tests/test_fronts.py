@@ -40,6 +40,38 @@ def test_parse_face_finds_the_drawer_and_both_doors_hinged_outward():
         assert p.handle is not None
 
 
+def _night_stand_face() -> np.ndarray:
+    """A 0.8 m x 0.6 m night stand face at 5 mm/px (a wall either side of it): two drawers inset
+    in a face frame (10 cm stiles, a top moulding, a plinth), each outlined by a dark 1 cm
+    shadow line and with a centred knob. No line crosses the face from side to side."""
+    h, w = 120, 200
+    img = np.full((h, w, 3), 225, np.uint8)  # the wall
+    img[:, 20:180] = 120  # the carcass, 0.8 m wide
+    for y0, y1 in ((14, 56), (62, 104)):  # two drawers inset 10 cm from each side
+        img[y0:y1, 40:160] = 140
+        img[y0 : y0 + 2, 40:160] = img[y1 - 2 : y1, 40:160] = 60
+        img[y0:y1, 40:42] = img[y0:y1, 158:160] = 60
+        cy = (y0 + y1) // 2
+        img[cy - 2 : cy + 3, 97:103] = 230  # a bright knob
+    img[108:, 20:180] = 100  # the plinth
+    return img
+
+
+def test_parse_face_finds_drawers_inset_in_a_face_frame():
+    """The cuts find no line across the night stand (its drawers stop at the stiles); within the
+    object's box, the outlined rectangles with a knob are its two drawers."""
+    img = _night_stand_face()
+    inside = np.zeros(img.shape[:2], dtype=bool)
+    inside[:, 20:180] = True
+    panels = sorted(parse_face(img, M_PER_PX, inside), key=lambda p: p.box[1])
+    assert [p.kind for p in panels] == ["drawer", "drawer"]
+    for p, t in zip(panels, [(40, 14, 160, 56), (40, 62, 160, 104)]):
+        assert iou(p.box, t) > 0.7, (p.box, t)
+        assert p.handle is not None and abs(p.handle[0] - 100) < 4
+    # Without the object's mask the face's search box is the whole image: the same drawers.
+    assert len(parse_face(img, M_PER_PX)) == 2
+
+
 def test_parse_face_finds_no_front_on_a_blank_face():
     assert parse_face(np.full((160, 200, 3), 200, np.uint8), M_PER_PX) == []
 

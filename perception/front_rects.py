@@ -1,0 +1,133 @@
+"""Fronts as outlined rectangles: the fallback of ``perception.front_parse`` for faces whose
+fronts sit inside a frame.
+
+The XY-cut of ``front_parse`` splits a face along lines that run from one end of what is left to
+the other. A night stand's or a dresser's drawers are inset in a face frame (stiles down the
+sides, a top moulding, a plinth): their outlines stop at the stiles, no line crosses the face,
+and the cut finds one big panel (the SUN RGB-D bedrooms: 0 of 48 hand-counted fronts). Here the
+face's horizontal and vertical edge lines are paired instead: every rectangle whose four sides
+lie on edges along most of their length (:data:`RECT_MIN_COVER`), front-sized, with a handle
+inside, is a candidate; the best-outlined ones that do not overlap and repeat (a column of drawers
+of one width with their handles at one place, a row of doors of one height) are the fronts. (No library
+finds axis-aligned rectangles from two edge maps: OpenCV's contour approximation needs closed
+contours, which the gaps between a drawer and its frame rarely give.)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["RECT_MIN_COVER", "outlined_rectangles"]
+
+#: Each side of a front's rectangle lies on edges along at least this share of its length.
+RECT_MIN_COVER = 0.6
+#: Fronts' sizes (m): at least RECT_MIN_M on each side, at most RECT_MAX_M.
+RECT_MIN_M = 0.07
+RECT_MAX_M = 1.2
+#: Candidate lines: rows (columns) where edges run along at least this share of the searched
+#: box's width (height), local maxima, the LINES strongest.
+LINE_MIN_SHARE = 0.1
+LINES = 40
+#: Two rectangles overlapping by more than this share of the smaller are one front.
+MAX_OVERLAP = 0.2
+#: An outlined rectangle inside another and under this share of its area makes the other a frame.
+MIN_NESTED = 0.6
+#: Fronts repeat: sizes and edges within this share, handles within HANDLE_ALIGN of the size.
+ALIGN_SHARE = 0.1
+HANDLE_ALIGN = 0.1
+
+
+def _lines(emap: np.ndarray, lo: int, hi: int) -> np.ndarray:
+    """Indices (along axis 0) of candidate lines of ``emap`` ((n, m) bool, lines along axis 1)
+    over its columns lo..hi."""
+    prof = emap[:, lo:hi].mean(axis=1)
+    peak = (prof >= LINE_MIN_SHARE) & (prof >= np.roll(prof, 1)) & (prof >= np.roll(prof, -1))
+    idx = np.flatnonzero(peak)
+    return np.sort(idx[np.argsort(-prof[idx], kind="stable")[:LINES]])
+
+
+def _cover(cum: np.ndarray, line: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Share of [a, b) on edges along each ``line`` (prefix sums ``cum`` (n, m + 1) along the
+    line direction); line, a, b broadcast together."""
+    return (cum[line, b] - cum[line, a]) / np.maximum(b - a, 1)
+
+
+def outlined_rectangles(horiz: np.ndarray, vert: np.ndarray, box: tuple[int, int, int, int], m_per_px: float, handle_in) -> list[tuple[tuple[int, int, int, int], float, object]]:
+    """Fronts outlined by edges inside ``box`` (x0, y0, x1, y1) of a face: [(rectangle (x0, y0,
+    x1, y1), the least cover of its sides, its handle)], best outlined first, none overlapping
+    (:data:`MAX_OVERLAP`). horiz, vert: (h, w) bool edge maps; handle_in(box) -> the handle
+    inside a rectangle or None (rectangles without one are left out)."""
+    x0, y0, x1, y1 = box
+    rows = _lines(horiz, x0, x1)
+    cols = _lines(vert.T, y0, y1)
+    rows = rows[(rows >= y0) & (rows < y1)]
+    cols = cols[(cols >= x0) & (cols < x1)]
+    if len(rows) < 2 or len(cols) < 2:
+        return []
+    ch = np.concatenate([np.zeros((horiz.shape[0], 1)), np.cumsum(horiz, axis=1)], axis=1)
+    cv = np.concatenate([np.zeros((vert.shape[1], 1)), np.cumsum(vert.T, axis=1)], axis=1)
+    lo_px, hi_px = RECT_MIN_M / m_per_px, RECT_MAX_M / m_per_px
+    ri, rj = np.triu_indices(len(rows), 1)
+    ci, cj = np.triu_indices(len(cols), 1)
+    r0, r1 = rows[ri], rows[rj]
+    c0, c1 = cols[ci], cols[cj]
+    okr = (r1 - r0 >= lo_px) & (r1 - r0 <= hi_px)
+    okc = (c1 - c0 >= lo_px) & (c1 - c0 <= hi_px)
+    r0, r1, c0, c1 = r0[okr], r1[okr], c0[okc], c1[okc]
+    if len(r0) == 0 or len(c0) == 0:
+        return []
+    top = _cover(ch, r0[:, None], c0[None, :], c1[None, :])
+    bottom = _cover(ch, r1[:, None], c0[None, :], c1[None, :])
+    left = _cover(cv, c0[None, :], r0[:, None], r1[:, None])
+    right = _cover(cv, c1[None, :], r0[:, None], r1[:, None])
+    score = np.minimum(np.minimum(top, bottom), np.minimum(left, right))
+    a, b = np.nonzero(score >= RECT_MIN_COVER)
+    rects = np.stack([c0[b], r0[a], c1[b], r1[a]], axis=1)
+    handles = [handle_in(tuple(int(v) for v in r)) for r in rects]
+    keep = np.array([h is not None for h in handles], dtype=bool)
+    rects, cover, handles = rects[keep], score[a, b][keep], [h for h in handles if h is not None]
+    # A rectangle holding a smaller outlined one with a handle (under MIN_NESTED of its area) is
+    # the frame around fronts, not a front: two drawers and the rails between them.
+    area = (rects[:, 2] - rects[:, 0]) * (rects[:, 3] - rects[:, 1])
+    tol = 2
+    inside = ((rects[None, :, 0] >= rects[:, None, 0] - tol) & (rects[None, :, 1] >= rects[:, None, 1] - tol)
+              & (rects[None, :, 2] <= rects[:, None, 2] + tol) & (rects[None, :, 3] <= rects[:, None, 3] + tol)
+              & (area[None, :] < MIN_NESTED * area[:, None]))
+    minimal = ~inside.any(axis=1)
+    order = [k for k in np.lexsort((-area, -cover)) if minimal[k]]  # best outlined, then larger
+    out: list[tuple[tuple[int, int, int, int], float, object]] = []
+    for k in order:
+        rect = tuple(int(v) for v in rects[k])
+        hd = handles[k]
+        if any(h is hd for _, _, h in out):
+            continue
+        area = (rect[2] - rect[0]) * (rect[3] - rect[1])
+        clash = False
+        for (q0, p0, q1, p1), _, _ in out:
+            inter = max(0, min(rect[2], q1) - max(rect[0], q0)) * max(0, min(rect[3], p1) - max(rect[1], p0))
+            if inter > MAX_OVERLAP * min(area, (q1 - q0) * (p1 - p0)):
+                clash = True
+                break
+        if not clash:
+            out.append((rect, float(cover[k]), hd))
+    return _repeated(out)
+
+
+def _repeated(rects: list[tuple[tuple[int, int, int, int], float, object]]) -> list[tuple[tuple[int, int, int, int], float, object]]:
+    """The rectangles that repeat: stacked in a column with another (widths and left edges
+    within ALIGN_SHARE of the width, handles at the same place across them, within HANDLE_ALIGN
+    of the width: a chest's drawers) or side by side in a row (heights and tops within
+    ALIGN_SHARE of the height, handles at the same height: a pair of doors). A lone outlined
+    rectangle with a handle-like blob in it is as often a cane panel, a picture or a moulding."""
+    keep = set()
+    for i, ((a0, b0, a1, b1), _, hi) in enumerate(rects):
+        for j in range(i + 1, len(rects)):
+            (c0, d0, c1, d1), _, hj = rects[j]
+            w, h = max(a1 - a0, c1 - c0), max(b1 - b0, d1 - d0)
+            column = (abs((a1 - a0) - (c1 - c0)) <= ALIGN_SHARE * w and abs(a0 - c0) <= ALIGN_SHARE * w
+                      and abs((hi.centre[0] - a0) / (a1 - a0) - (hj.centre[0] - c0) / (c1 - c0)) <= HANDLE_ALIGN)
+            row = (abs((b1 - b0) - (d1 - d0)) <= ALIGN_SHARE * h and abs(b0 - d0) <= ALIGN_SHARE * h
+                   and abs((hi.centre[1] - b0) / (b1 - b0) - (hj.centre[1] - d0) / (d1 - d0)) <= HANDLE_ALIGN)
+            if column or row:
+                keep.update((i, j))
+    return [r for i, r in enumerate(rects) if i in keep]
