@@ -14,8 +14,9 @@ Each visual-mesh face, placed at the pose where the object was seen
 * **near-seen**: hidden or seen edge-on (a grazing top, the jittered faces of a shell made from
   sensor depth), but a seen (or mirrored) face of the same part within :data:`DONOR_RADIUS_M`
   turns the same way (normals within :data:`DONOR_MAX_DEG`): it takes the photo's colour at the
-  centre of the nearest such face, one texel for the whole face (no stretching), so the hidden
-  half of a mattress's top stays the mattress's white instead of the swatch of the dark frame.
+  centre of the nearest such face, averaged over :data:`DONOR_SPOT_M` around it (a blurred
+  copy of the crop), one texel for the whole face (no stretching), so the hidden half of a
+  mattress's top stays the mattress's white instead of the swatch of the dark frame.
 * **material**: the rest (backs, undersides, faces seen edge-on, whose projection would smear
   the silhouette's boundary pixels along them: the "streaked flank"). They carry a swatch of the
   object's own texture: the largest square seen inside the mask, scaled to its size in metres
@@ -23,7 +24,7 @@ Each visual-mesh face, placed at the pose where the object was seen
   scale on every side.
 
 The texture is one image per object: the crop (pixels outside the mask filled from the nearest
-mask pixel, for filtering at the silhouette) beside the swatch. The coordinates are fixed at the
+mask pixel, for filtering at the silhouette) beside the swatch and the blurred crop. The coordinates are fixed at the
 observed pose (the texture moves with the object). The crop keeps the photo's full resolution
 (``Observation.photo_rgb``).
 """
@@ -37,7 +38,7 @@ import numpy as np
 from scene_builder.frames import transform_points
 from scene_builder.model import Camera, GeneratedAsset, Observation, PerceivedObject, Texture
 
-__all__ = ["CROP_MARGIN_PX", "MAX_VIEW_DEG", "SWATCH_PX", "face_sources", "material_swatch", "near_seen_donors", "object_texture", "photo_textured"]
+__all__ = ["CROP_MARGIN_PX", "MAX_VIEW_DEG", "SWATCH_PX", "donor_colours", "face_sources", "material_swatch", "near_seen_donors", "object_texture", "photo_textured"]
 
 #: The crop reaches this many pixels past the mask's bounding box (texture filtering reads a
 #: little around each texel).
@@ -64,6 +65,10 @@ SEEN_SHARE = 0.75
 DONOR_RADIUS_M = 0.5
 DONOR_MAX_DEG = 40.0
 DONOR_NEIGHBOURS = 16
+#: A near-seen face's colour is the photo averaged over about this much of the object (metres, the
+#: sigma of a Gaussian) around its donor's centre: one photo pixel there is a speck of the grain,
+#: a highlight or a seam, and faces taking single pixels made a patchwork of flat colours.
+DONOR_SPOT_M = 0.03
 
 
 def object_texture(rgb: np.ndarray, mask: np.ndarray, name: str) -> tuple[Texture, tuple[int, int]]:
@@ -86,6 +91,21 @@ def object_texture(rgb: np.ndarray, mask: np.ndarray, name: str) -> tuple[Textur
     _, (ri, ci) = ndimage.distance_transform_edt(~source, return_indices=True)
     filled = crop[ri, ci]
     return Texture(name, filled), (int(r0), int(c0))
+
+
+def donor_colours(crop_rgb: np.ndarray, metres_per_px: float) -> tuple[np.ndarray, int]:
+    """The crop blurred over :data:`DONOR_SPOT_M` (Gaussian sigma, at ``metres_per_px``, the
+    photo's pixel size on the object) and shrunk by the returned factor (about a third of the
+    sigma: the blur leaves nothing finer), as (h, w, 3) uint8."""
+    import cv2
+
+    sigma = max(1.0, DONOR_SPOT_M / max(metres_per_px, 1e-9))
+    sigma = min(sigma, 0.25 * max(crop_rgb.shape[:2]))
+    blurred = cv2.GaussianBlur(np.ascontiguousarray(crop_rgb), (0, 0), sigma, borderType=cv2.BORDER_REFLECT)
+    factor = max(1, int(sigma / 3.0))
+    h, w = crop_rgb.shape[:2]
+    small = cv2.resize(blurred, (max(1, -(-w // factor)), max(1, -(-h // factor))), interpolation=cv2.INTER_AREA)
+    return small, factor
 
 
 def material_swatch(crop_rgb: np.ndarray, crop_mask: np.ndarray, metres_per_px: float, extent_m: float, size_px: int = SWATCH_PX) -> np.ndarray:
@@ -221,14 +241,19 @@ def photo_textured(generated: GeneratedAsset, obj: PerceivedObject, observation:
     z_obj = obs_depth[obj.mask & (obs_depth > 0)]
     z_med = float(np.median(z_obj)) if len(z_obj) else float(np.median(transform_points(camera_from_asset, all_v)[:, 2]))
     swatch = material_swatch(crop, mask[r0 : r0 + th, c0 : c0 + tw], z_med / k.fx_px, extent)
+    spots, factor = donor_colours(crop, z_med / k.fx_px)
     s = swatch.shape[0]
-    height, width = max(th, s), tw + GAP_PX + s
+    bx0 = tw + GAP_PX + s + GAP_PX  # the blurred crop's first column
+    height, width = max(th, s), bx0 + spots.shape[1]
     image = np.zeros((height, width, 3), dtype=np.uint8)
     image[:th, :tw] = crop
     image[th:, :tw] = crop[-1:]
     image[:, tw : tw + GAP_PX] = image[:, tw - 1 : tw]
-    image[:s, tw + GAP_PX :] = swatch
-    image[s:, tw + GAP_PX :] = swatch[-1:]
+    image[:s, tw + GAP_PX : bx0 - GAP_PX] = swatch
+    image[s:, tw + GAP_PX : bx0 - GAP_PX] = swatch[-1:]
+    image[:, bx0 - GAP_PX : bx0] = image[:, bx0 - GAP_PX - 1 : bx0 - GAP_PX]
+    image[: spots.shape[0], bx0:] = spots
+    image[spots.shape[0] :, bx0:] = spots[-1:]
     texture = Texture(generated.asset.name, image)
     parts = []
     for part in generated.asset.parts:
@@ -246,7 +271,10 @@ def photo_textured(generated: GeneratedAsset, obj: PerceivedObject, observation:
         uv = np.where((source == MATERIAL)[:, None, None], uv_swatch, uv_photo)
         donor = near_seen_donors(corners, source)
         takes = donor >= 0
-        uv[takes] = uv_photo[donor[takes]].mean(axis=1, keepdims=True)
+        # The donor's centre in the crop (texels from its left and top) -> the blurred crop.
+        centre = uv_photo[donor[takes]].mean(axis=1) * [width, height] / factor
+        centre = np.clip(centre, 0.5, [spots.shape[1] - 0.5, spots.shape[0] - 0.5])
+        uv[takes] = ((centre + [bx0, 0.0]) / [width, height])[:, None, :]
         uv = uv.reshape(-1, 2)
         # One corner per (vertex, texture coordinate) pair.
         key = np.concatenate([f.reshape(-1, 1).astype(np.float64), np.round(uv * 1e7)], axis=1)

@@ -98,3 +98,44 @@ def test_hidden_faces_take_the_colour_of_the_nearest_seen_face_turned_the_same_w
     # Every hidden top face takes a seen top face, the nearest one (faces 2-3 are at x 0.1-0.2).
     assert np.all(np.isin(donor[4:12], [2, 3]))
     assert np.all(donor[12:14] == -1) and np.all(donor[14:] == -1)
+
+
+def test_hidden_faces_take_the_seen_colour_around_their_donor_not_one_speck():
+    """The board's surface runs on 0.35 m past its mask (hidden: a finely triangulated plane, as
+    a shell made from sensor depth is). The seen board is red and black in alternate pixels
+    (a fine grain): each hidden face takes the colour around its donor's centre, the same dark
+    red for all, not the one pixel under it (black or red, half and half)."""
+    import dataclasses
+
+    from generation.texture import MATERIAL, face_sources
+
+    obs, board = tf.observation()
+    rgb = obs.rgb.copy()
+    rr, cc = np.nonzero(board.mask)
+    speck = (rr + cc) % 2 == 0
+    rgb[rr[speck], cc[speck]] = 0
+    obs = dataclasses.replace(obs, rgb=rgb)
+    board = dataclasses.replace(board, colors_rgb=rgb[board.mask])
+    cam = tf.camera()
+    # The plane z = 2 m of the camera frame (the board's), 2 cm triangles, from inside the mask
+    # (x -0.45..0.49 m) to 0.35 m past its right edge; the asset frame is the camera's.
+    xs, ys = np.arange(-0.45, 0.85, 0.02), np.arange(0.05, 0.65, 0.02)
+    gx, gy = np.meshgrid(xs, ys)
+    v = np.stack([gx.ravel(), gy.ravel(), np.full(gx.size, tf.BOARD_DEPTH_M)], axis=1)
+    i = np.arange(gx.size).reshape(gx.shape)[:-1, :-1].ravel()
+    nx = len(xs)
+    faces = np.concatenate([np.stack([i, i + nx, i + 1], 1), np.stack([i + 1, i + nx, i + nx + 1], 1)])  # facing -z, the camera
+    asset = box_asset("board_1", (0.1, 0.1, 0.1))
+    part = asset.parts[0]
+    part = dataclasses.replace(part, visual=dataclasses.replace(part.visual, vertices_m=v, faces=faces.astype(np.int64), uv=None, texture=None, vertex_colors_rgba=None))
+    asset = dataclasses.replace(asset, parts=(part,))
+    generated = GeneratedAsset(asset, cam.world_from_camera, board.points_world_m)
+    source = face_sources(v, faces, np.eye(4), cam.intrinsics, board.mask, obs.depth_m.astype(np.float64))
+    hidden_before = v[faces].mean(axis=1)[:, 0] > 0.55
+    assert np.all(source[hidden_before] == MATERIAL) and (source == SEEN).sum() > 100
+    out = photo_textured(generated, board, obs, cam).asset.parts[0].visual
+    tri = out.vertices_m[out.faces]
+    hidden = tri.mean(axis=1)[:, 0] > 0.55
+    colours = _texels_on_faces(out, np.flatnonzero(hidden), n=5)
+    seen_mean = rgb[board.mask].mean(axis=0)  # (105, 15, 15): red and black, half and half
+    assert np.all(np.abs(colours - seen_mean).max(axis=1) < 25)
