@@ -192,6 +192,24 @@ def test_pooled_view_figures_weigh_each_view_by_its_pixels():
     assert p["absrel_median"] == pytest.approx(0.2) and p["within10_outside"] is None
 
 
+def test_photo_scores_leave_out_the_photos_flat_frame():
+    """A render equal to the photo inside its 7 px white frame (undistortion padding) and dark on
+    the frame (the twin paints the border from the pixels inside) matches the photo exactly:
+    PSNR infinite, SSIM 1; the same render off by 40 grey levels inside scores below 20 dB."""
+    from scene_builder.bench.viewpoints import View, score_view
+
+    rng = np.random.default_rng(0)
+    photo = rng.integers(0, 200, (480, 640, 3)).astype(np.uint8)
+    photo[:7], photo[-7:], photo[:, :7], photo[:, -7:] = 255, 255, 255, 255
+    render = photo.copy()
+    render[:7], render[-7:], render[:, :7], render[:, -7:] = 30, 30, 30, 30
+    depth = np.ones((480, 640), dtype=np.float32)
+    same = score_view(View(render, depth), depth, photo)
+    assert same.psnr_db == np.inf and same.ssim == pytest.approx(1.0)
+    off = score_view(View(np.clip(render.astype(int) + 40, 0, 255).astype(np.uint8), depth), depth, photo)
+    assert off.psnr_db < 20.0
+
+
 def test_bench_novel_view_refuses_a_missing_data_folder_in_one_line(tmp_path: Path, capsys):
     from scene_builder.cli import main
 

@@ -245,8 +245,9 @@ class ViewScore:
 
 
 def score_view(view: View, true_depth_m: np.ndarray, true_rgb: np.ndarray | None = None, labels: np.ndarray | None = None) -> ViewScore:
-    """Score ``view`` against the true depth (0 = invalid) and photo of the same camera;
-    ``labels``: :func:`visibility` of the true view from the input camera."""
+    """Score ``view`` against the true depth (0 = invalid) and photo of the same camera (PSNR and
+    SSIM inside the photo's flat frame, ``perception.inputs.photo_frame``); ``labels``:
+    :func:`visibility` of the true view from the input camera."""
     valid = np.asarray(true_depth_m) > 0
     n = int(valid.sum())
     pred = view.depth_m.astype(np.float64)
@@ -258,9 +259,15 @@ def score_view(view: View, true_depth_m: np.ndarray, true_rgb: np.ndarray | None
     if true_rgb is not None:
         from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
+        from perception.inputs import photo_frame
+
         photo = np.asarray(true_rgb)[..., :3]
-        psnr = float(peak_signal_noise_ratio(photo, view.rgb, data_range=255))
-        ssim = float(structural_similarity(photo, view.rgb, channel_axis=2, data_range=255))
+        # Inside the photo's flat frame (Kinect / NYU undistortion pads 6-8 px of white): those
+        # pixels show no scene, and the twin paints its border from the pixels inside.
+        top, bottom, left, right = photo_frame(photo)
+        inner = (slice(top, photo.shape[0] - bottom), slice(left, photo.shape[1] - right))
+        psnr = float(peak_signal_noise_ratio(photo[inner], view.rgb[inner], data_range=255))
+        ssim = float(structural_similarity(photo[inner], view.rgb[inner], channel_axis=2, data_range=255))
     extra = {}
     if labels is not None:
         for name, label in (("seen", SEEN), ("hidden", HIDDEN), ("outside", OUTSIDE)):
