@@ -131,3 +131,68 @@ def _repeated(rects: list[tuple[tuple[int, int, int, int], float, object]]) -> l
             if column or row:
                 keep.update((i, j))
     return [r for i, r in enumerate(rects) if i in keep]
+
+
+#: Handles of one column of drawers: centres within COLUMN_SHARE of the searched box's width of
+#: each other across, sizes within a factor HANDLE_SIZE_RATIO, spacings within SPACING_SHARE of
+#: their mean and at least RECT_MIN_M.
+COLUMN_SHARE = 0.06
+HANDLE_SIZE_RATIO = 1.5
+SPACING_SHARE = 0.25
+#: ... and at least this share of the strongest handle's score, and no taller than KNOB_ASPECT
+#: times their width.
+HANDLE_STRONG = 0.5
+KNOB_ASPECT = 1.2
+
+
+def handle_column(handles: list, box: tuple[int, int, int, int], m_per_px: float, mask: np.ndarray | None = None) -> list[tuple[tuple[int, int, int, int], float, object]]:
+    """Drawers told by their handles alone, for a face too dark or too blurred to show its
+    fronts' outlines (sunrgbd_imvotenet_000004's night stand: its two pulls stand out, its
+    drawers' edges are under the JPEG noise): two or more handles ``handles`` (the parser's, each
+    with .box and .centre) one above the other at one place across ``box``, of one size and evenly
+    spaced, are that many drawers as wide as the box, each centred on its handle and as tall as
+    the spacing. ``mask``: (h, w) bool, the object on the face; handles off it do not count (a
+    bed's edge beside a night stand). [(rectangle, 0.0, handle)], top to bottom; [] when no such
+    column stands out (or two do)."""
+    x0, y0, x1, y1 = box
+    w = x1 - x0
+    # (drawer pulls lie or are knobs: a standing bar is a door's, beside the gap of a pair)
+    inside = [hd for hd in handles if x0 <= hd.centre[0] < x1 and y0 <= hd.centre[1] < y1
+              and (mask is None or mask[int(hd.centre[1]), int(hd.centre[0])])
+              and hd.box[3] - hd.box[1] <= KNOB_ASPECT * (hd.box[2] - hd.box[0])]
+    if not inside:
+        return []
+    # The strong ones only (JPEG blocks and grain give many weak blobs), and of blobs one above
+    # the other closer than the smallest front, the stronger (a pull's bar and its backplate).
+    strongest = max(hd.score for hd in inside)
+    inside = sorted((hd for hd in inside if hd.score >= HANDLE_STRONG * strongest), key=lambda hd: -hd.score)
+    near = RECT_MIN_M / m_per_px
+    kept: list = []
+    for hd in inside:
+        if not any(abs(hd.centre[0] - k.centre[0]) <= COLUMN_SHARE * w and abs(hd.centre[1] - k.centre[1]) < near for k in kept):
+            kept.append(hd)
+    inside = kept
+    best: list = []
+    for i, a in enumerate(inside):
+        size_a = max(a.box[2] - a.box[0], a.box[3] - a.box[1])
+        col = [hd for hd in inside if abs(hd.centre[0] - a.centre[0]) <= COLUMN_SHARE * w
+               and 1.0 / HANDLE_SIZE_RATIO <= max(hd.box[2] - hd.box[0], hd.box[3] - hd.box[1]) / max(size_a, 1) <= HANDLE_SIZE_RATIO]
+        col.sort(key=lambda hd: hd.centre[1])
+        if len(col) < 2:
+            continue
+        gaps = np.diff([hd.centre[1] for hd in col])
+        if gaps.min() * m_per_px < RECT_MIN_M or np.max(np.abs(gaps - gaps.mean())) > SPACING_SHARE * gaps.mean():
+            continue
+        if len(col) > len(best):
+            best = col
+        elif len(col) == len(best) and {id(h) for h in col} != {id(h) for h in best}:
+            return []  # two columns as good: no telling which
+    if not best:
+        return []
+    step = float(np.mean(np.diff([hd.centre[1] for hd in best])))
+    out = []
+    for hd in best:
+        top = max(float(y0), hd.centre[1] - 0.5 * step)
+        bottom = min(float(y1), hd.centre[1] + 0.5 * step)
+        out.append(((int(x0), int(round(top)), int(x1), int(round(bottom))), 0.0, hd))
+    return out

@@ -33,6 +33,8 @@ FRONT_LABELS = frozenset({"cabinet", "wardrobe", "drawer_unit", "refrigerator", 
 #: Categories that may hold drawers (a night stand named a table, a desk, a low shelf unit):
 #: their fronts count when at least MIN_HANDLED_FRONTS of them show a handle.
 MAYBE_FRONT_LABELS = frozenset({"table", "desk", "shelf", "box"})
+#: Furniture whose drawers may sit in a face frame (``perception.front_rects``).
+CASE_GOODS = frozenset({"cabinet", "wardrobe", "drawer_unit"})
 MIN_HANDLED_FRONTS = 2
 #: A face's axes snap to the walls' directions within this angle.
 SNAP_DEG = 12.0
@@ -195,7 +197,9 @@ def fronts_on_face(rgb: np.ndarray, camera: Camera, face: Face, label: str = "",
     from perception.front_parse import parse_face
 
     img, inside, m = rectify(rgb, camera, face, mask)
-    panels = parse_face(img, m, inside if mask is not None else None)
+    # (the fallbacks for fronts in a face frame, for case goods only: on a shelf two boxes one
+    # above the other, on a microwave its keypad's buttons, are no column of drawers)
+    panels = parse_face(img, m, inside if mask is not None and label in CASE_GOODS else None)
     h = img.shape[0]
     k = camera.intrinsics
     camera_from_world = np.linalg.inv(camera.world_from_camera)

@@ -68,8 +68,29 @@ def test_parse_face_finds_drawers_inset_in_a_face_frame():
     for p, t in zip(panels, [(40, 14, 160, 56), (40, 62, 160, 104)]):
         assert iou(p.box, t) > 0.7, (p.box, t)
         assert p.handle is not None and abs(p.handle[0] - 100) < 4
-    # Without the object's mask the face's search box is the whole image: the same drawers.
-    assert len(parse_face(img, M_PER_PX)) == 2
+    # Without the object's mask (not a case good) the cuts alone: one panel over the face.
+    assert len(parse_face(img, M_PER_PX)) == 1
+
+
+def test_parse_face_tells_drawers_by_a_column_of_pulls_when_no_outline_shows():
+    """A dark night stand face whose drawers' outlines do not show (under the JPEG noise of a
+    dark photo), two pulls one above the other: two drawers, each centred on its pull. The bright
+    corner of a bed in the face's box but off the object's mask, with two dark bars on it one
+    above the other (a column as good as the pulls'), is no column of drawers."""
+    h, w = 120, 200
+    img = np.full((h, w, 3), 40, np.uint8)  # the dark face, no outline on it
+    img[30:34, 80:120] = 120  # top pull (20 cm bar)
+    img[80:84, 80:120] = 120  # bottom pull, 25 cm lower
+    img[70:, 150:] = 230  # the bed's corner, bright, in the face's box
+    img[78:82, 152:192] = img[108:112, 152:192] = 0  # two dark bars on it, one above the other
+    inside = np.ones((h, w), dtype=bool)
+    inside[70:, 150:] = False
+    panels = sorted(parse_face(img, M_PER_PX, inside), key=lambda p: p.box[1])
+    assert [p.kind for p in panels] == ["drawer", "drawer"]
+    for p, cy in zip(panels, (32, 82)):
+        assert p.handle is not None and abs(p.handle[1] - cy) < 3 and abs(p.handle[0] - 100) < 4
+        assert abs(0.5 * (p.box[1] + p.box[3]) - cy) < 3  # centred on its pull
+        assert abs((p.box[3] - p.box[1]) - 50) < 10  # as tall as the pulls' spacing (the deskew's shear aside)
 
 
 def test_parse_face_finds_no_front_on_a_blank_face():

@@ -239,3 +239,27 @@ def test_a_shelf_column_holds_what_stands_inside_it_but_not_what_lies_on_top_or_
     assert not _inside_column(thing(0.05, 0.0, 2.0), column)  # a vase on the top
     assert not _inside_column(thing(0.05, 1.2, 0.8), column)  # a lamp beside it
     assert not _inside_column(thing(-0.5, 0.0, 0.8), column)  # a chair in front of it
+
+
+class _SeenUpTo:
+    """Seen free space above ``top_m`` (world z), everywhere: what a silhouette whose top edge is
+    at that height says of a box's top face."""
+
+    def __init__(self, top_m: float) -> None:
+        self.top_m = top_m
+
+    def free(self, points_world_m: np.ndarray) -> np.ndarray:
+        return np.asarray(points_world_m)[:, 2] > self.top_m + 1e-9
+
+
+@pytest.mark.parametrize("seen_top_m, expected_m", [(0.66, 0.66), (0.62, 0.62), (0.60, 0.60), (0.55, 0.66)])
+def test_a_front_layouts_top_comes_down_onto_the_silhouette_by_at_most_8_cm(seen_top_m, expected_m):
+    """A night stand read 0.66 m tall (a lamp's base on it): its top comes down in 5 mm steps
+    until its top face lies within what was seen, by 8 cm at most; a silhouette 11 cm lower says
+    something else is wrong and the height stays as measured."""
+    from generation.shape_prior import top_within_silhouette
+    from scene_builder.frames import pose
+
+    world_from_box = pose(np.eye(3), [2.0, 0.5, 0.0])
+    top = top_within_silhouette(_SeenUpTo(seen_top_m), world_from_box, np.array([0.4, 0.7, 0.66]))
+    assert top == pytest.approx(expected_m, abs=1e-6)
