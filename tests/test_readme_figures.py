@@ -40,4 +40,4 @@ def test_novel_view_block_says_met_only_when_the_figures_reach_the_targets(tmp_p
         twin["within10"], twin["absrel_median"] = within10, absrel
         (tmp_path / "novel_view.json").write_text(json.dumps(data))
         line = next(x for x in readme.render("novel-view", tmp_path).splitlines() if x.startswith("Targets of issue 25"))
-        assert line.split(";")[0].endswith(f"{verdict} ({within10:.3f}, {absrel:.3f})")
+        assert line.split(";")[0].endswith(f"{verdict} ({within10:.4f}, {absrel:.4f})")

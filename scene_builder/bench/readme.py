@@ -124,7 +124,7 @@ def _novel_view(data: dict) -> str:
             both = sum(pw >= 0.70 and pa <= 0.04 for pw, pa in per)
             each = (f"; pair by pair {' / '.join(_f(pw, 2) for pw, _ in per)} within 10 % and AbsRel {' / '.join(_f(pa, 3) for _, pa in per)}: "
                     f"{both} of {len(per)} pairs meet both on their own")
-        targets.append(f"real multi-view pairs within 10 % >= 0.70 and median AbsRel <= 0.04, pooled over the pairs: **{'met' if ok else 'not met'}** ({_f(w, 3)}, {_f(a, 3)}){each}")
+        targets.append(f"real multi-view pairs within 10 % >= 0.70 and median AbsRel <= 0.04, pooled over the pairs: **{'met' if ok else 'not met'}** ({_f(w, 4)}, {_f(a, 4)}){each}")
     if pr:
         w = pr["twin"]["within10"]
         targets.append(f"procedural orbit views within 10 % >= 0.85: **{'met' if w >= 0.85 else 'not met'}** ({_f(w, 3)})")
