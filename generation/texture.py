@@ -24,8 +24,8 @@ Each visual-mesh face, placed at the pose where the object was seen
   scale on every side.
 
 The texture is one image per object: the crop (pixels outside the mask filled from the nearest
-mask pixel, for filtering at the silhouette) beside the swatch and the blurred crop. The coordinates are fixed at the
-observed pose (the texture moves with the object). The crop keeps the photo's full resolution
+mask pixel, for filtering at the silhouette) beside the swatch and the blurred crop. The
+coordinates are fixed at the observed pose (the texture moves with the object). The crop keeps the photo's full resolution
 (``Observation.photo_rgb``).
 """
 

@@ -1,5 +1,5 @@
-"""Fronts as outlined rectangles: the fallback of ``perception.front_parse`` for faces whose
-fronts sit inside a frame.
+"""Fronts inside a face frame, the fallbacks of ``perception.front_parse`` for case goods:
+outlined rectangles, and a column of drawer pulls.
 
 The XY-cut of ``front_parse`` splits a face along lines that run from one end of what is left to
 the other. A night stand's or a dresser's drawers are inset in a face frame (stiles down the
@@ -10,14 +10,16 @@ lie on edges along most of their length (:data:`RECT_MIN_COVER`), front-sized, w
 inside, is a candidate; the best-outlined ones that do not overlap and repeat (a column of drawers
 of one width with their handles at one place, a row of doors of one height) are the fronts. (No library
 finds axis-aligned rectangles from two edge maps: OpenCV's contour approximation needs closed
-contours, which the gaps between a drawer and its frame rarely give.)
+contours, which the gaps between a drawer and its frame rarely give.) Where no outline shows (a
+dark face under JPEG noise), a column of evenly spaced pulls of one size is a stack of drawers
+(:func:`handle_column`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["RECT_MIN_COVER", "outlined_rectangles"]
+__all__ = ["RECT_MIN_COVER", "handle_column", "outlined_rectangles"]
 
 #: Each side of a front's rectangle lies on edges along at least this share of its length.
 RECT_MIN_COVER = 0.6
@@ -172,8 +174,8 @@ def handle_column(handles: list, box: tuple[int, int, int, int], m_per_px: float
         if not any(abs(hd.centre[0] - k.centre[0]) <= COLUMN_SHARE * w and abs(hd.centre[1] - k.centre[1]) < near for k in kept):
             kept.append(hd)
     inside = kept
-    best: list = []
-    for i, a in enumerate(inside):
+    columns: dict[frozenset, list] = {}
+    for a in inside:
         size_a = max(a.box[2] - a.box[0], a.box[3] - a.box[1])
         col = [hd for hd in inside if abs(hd.centre[0] - a.centre[0]) <= COLUMN_SHARE * w
                and 1.0 / HANDLE_SIZE_RATIO <= max(hd.box[2] - hd.box[0], hd.box[3] - hd.box[1]) / max(size_a, 1) <= HANDLE_SIZE_RATIO]
@@ -183,12 +185,12 @@ def handle_column(handles: list, box: tuple[int, int, int, int], m_per_px: float
         gaps = np.diff([hd.centre[1] for hd in col])
         if gaps.min() * m_per_px < RECT_MIN_M or np.max(np.abs(gaps - gaps.mean())) > SPACING_SHARE * gaps.mean():
             continue
-        if len(col) > len(best):
-            best = col
-        elif len(col) == len(best) and {id(h) for h in col} != {id(h) for h in best}:
-            return []  # two columns as good: no telling which
-    if not best:
-        return []
+        columns[frozenset(id(h) for h in col)] = col
+    longest = max((len(c) for c in columns.values()), default=0)
+    best = [c for c in columns.values() if len(c) == longest]
+    if len(best) != 1:
+        return []  # none, or two columns as good: no telling which
+    best = best[0]
     step = float(np.mean(np.diff([hd.centre[1] for hd in best])))
     out = []
     for hd in best:
