@@ -548,5 +548,5 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
 
             backends.append(BackendUse("room-closure", "room-box", f"{bg.closed_sides} sides of the room with no wall seen closed by a wall {BOX_CLEARANCE_M * 100:.0f} cm past the farthest point seen "
                                        f"(at least {CAMERA_MARGIN_M} m beside the camera; a guess, drawn only)"))
-    return Perception(observation, camera, room, tuple(objects), tuple(backends), removed_mask=removed)
+    return Perception(observation, camera, room, tuple(objects), tuple(backends), removed_mask=removed, left_out_behind_walls=behind_walls)
 

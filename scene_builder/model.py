@@ -425,7 +425,10 @@ class Perception:
     """Everything perception found: the observation, the gravity-aligned camera, room and objects.
 
     removed_mask: None, or (H, W) bool pixels of people and animals seen in the photo: not part of
-    the room, in no object, filled in the background with what they hid."""
+    the room, in no object, filled in the background with what they hid.
+    left_out_behind_walls: how many of the segmenter's instances were left out for lying mostly
+    behind a wall (in the next room, or past the end of a wall where the room turns a corner):
+    not among ``objects``, counted so that reports can say so."""
 
     observation: Observation
     camera: Camera
@@ -433,6 +436,7 @@ class Perception:
     objects: tuple[PerceivedObject, ...]
     backends: tuple[BackendUse, ...] = ()
     removed_mask: np.ndarray | None = None
+    left_out_behind_walls: int = 0
 
     def __post_init__(self) -> None:
         if self.removed_mask is not None:

@@ -10,7 +10,7 @@ from scene_builder.bench.groundtruth import Item, ObjectFates, summarize
 
 def test_summary_pools_penetration_and_rest_over_builds_and_the_readme_shows_them():
     items = [
-        Item("real", "a", "built", 10.0, fates=ObjectFates(5, 4, 0, 1), max_penetration_m=0.0004, stable=True),
+        Item("real", "a", "built", 10.0, fates=ObjectFates(5, 4, 0, 1, (), 2), max_penetration_m=0.0004, stable=True),
         Item("real", "b", "built", 12.0, fates=ObjectFates(3, 3, 0, 0), max_penetration_m=0.1035, stable=False),
         Item("real", "c", "refused", 0.1, "bad depth"),
     ]
@@ -21,6 +21,9 @@ def test_summary_pools_penetration_and_rest_over_builds_and_the_readme_shows_the
     block = readme.BLOCKS["objects"][1]({"summary": {"real": s}, "meta": {}})
     assert "max penetration mm (every build) | builds not at rest |" in block
     assert "| 103.50 | 1 |" in block
+    # Instances left out behind walls are no perceived object, but they are counted and shown.
+    assert s["left_out_behind_walls"] == 2
+    assert block.splitlines()[-1].endswith("| 103.50 | 1 | 2 |")
 
 
 def test_mask_precision_leaves_out_what_the_annotation_is_too_small_to_judge():
@@ -71,3 +74,14 @@ def test_mask_scores_leave_out_the_pixels_of_the_people_the_twin_removed():
     assert score_masks(pred, [("couch", visible)]).matched == 0
     s = score_masks(pred, [("couch", visible)], removed=person)
     assert (s.matched, s.matched_large, s.n_pred) == (1, 1, 1)
+
+
+def test_the_builds_fates_line_says_how_many_instances_were_left_out_behind_walls():
+    """The CLI's one-line summary of report.json's object fates names the instances perception
+    left out behind walls (the next room, or past a wall's end), and says nothing when none were."""
+    from scene_builder.report import fates_line
+
+    f = {"perceived": 9, "movable": 5, "fixed_with_joints": 0, "fixed": 0, "background": 4,
+         "background_by_reason": {"hangs": 1}, "left_out_behind_walls": 2}
+    assert fates_line(f) == "9 perceived: 5 movable, 0 fixed with joints, 0 fixed, 4 background (hangs 1); 2 left out behind walls"
+    assert fates_line({**f, "left_out_behind_walls": 0}).endswith("4 background (hangs 1)")

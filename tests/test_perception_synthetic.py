@@ -213,6 +213,7 @@ def test_wall_with_a_doorway_is_a_wall_and_the_wardrobe_in_front_stays(tmp_path)
     # The chair in the next room is not part of this room's scene; nothing is behind a wall.
     assert not any(abs(t - 0.9) < 0.03 for t in tops)
     assert "left out 1 objects behind them" in next(b.reason for b in p.backends if b.task == "walls")
+    assert p.left_out_behind_walls == 1  # counted for report.json's object fates
     for o in p.objects:
         for w in p.room.walls:
             assert w.signed_distance_m(o.points_world_m).min() > -0.1

@@ -66,6 +66,10 @@ def _objects(data: dict) -> str:
     if physics:  # results written before the bench recorded each build's physics check have none
         head += " max penetration mm (every build) | builds not at rest |"
         rule += "---:|---:|"
+    behind = any("left_out_behind_walls" in (s.get(n) or {}) for n in ("sun-rgbd", "sun-plain", "coco", "real"))
+    if behind:  # (results written before perception counted them have none)
+        head += " left out behind walls (not perceived) |"
+        rule += "---:|"
     fates = [head, rule]
     for name in ("sun-rgbd", "sun-plain", "coco", "real"):
         v = s.get(name)
@@ -75,6 +79,8 @@ def _objects(data: dict) -> str:
                f"{v['fixed_objects']} | {v['background_objects']} | {_f(v['interactive_share_of_perceived'])} | {_f(v['build_s_median'], 1)} |")
         if physics:
             row += f" {_f(v.get('max_penetration_mm'), 2)} | {v.get('builds_not_at_rest', '-')} |"
+        if behind:
+            row += f" {v.get('left_out_behind_walls', '-')} |"
         fates.append(row)
     lines.append("\n".join(fates))
     meta = data.get("meta", {})
