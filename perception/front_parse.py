@@ -240,6 +240,13 @@ def _handles(gray: np.ndarray, m_per_px: float) -> list[_Handle]:
     return out
 
 
+def _credible_handles(gray: np.ndarray, m_per_px: float) -> list[_Handle]:
+    """:func:`_handles` of ``gray`` that are credible: a fifth (HANDLE_MIN_SHARE) of the strongest's
+    score at least, strongest first."""
+    handles = _handles(gray, m_per_px)
+    return [hd for hd in handles if hd.score >= HANDLE_MIN_SHARE * handles[0].score] if handles else []
+
+
 def _merge_handles(boxes: np.ndarray, scores: np.ndarray, gap: int, long_max: float, short_max: float) -> list[_Handle]:
     """Handles ((N, 4) boxes x0, y0, x1, y1 and (N,) scores) whose boxes lie within ``gap`` pixels
     of each other, chained, merged into one (a knob split by its highlight, a bar by its
@@ -367,9 +374,7 @@ def parse_face(face_rgb: np.ndarray, m_per_px: float, inside: np.ndarray | None 
         gray = cv2.warpAffine(gray, fwd, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         horiz, vert = _edges(gray, sigma=1.2)
     back = cv2.invertAffineTransform(fwd)
-    handles = _handles(gray, m_per_px)
-    if handles:  # credible handles: a fifth of the strongest at least
-        handles = [hd for hd in handles if hd.score >= HANDLE_MIN_SHARE * handles[0].score]
+    handles = _credible_handles(gray, m_per_px)
     min_piece = max(3, int(round(MIN_PANEL_M / m_per_px)))
     root = _Node((0, 0, w, h), (False, False, False, False))
     _cut(_Lines(horiz), _Lines(vert.T), root, min_piece)
@@ -390,10 +395,7 @@ def parse_face(face_rgb: np.ndarray, m_per_px: float, inside: np.ndarray | None 
             # handles changed on the cabinet photos (fronts matched 34 -> 32 of 52).
             own = cv2.warpAffine(raw, fwd, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE) if (sh or sv) else raw
             lo, hi = np.percentile(own[ins], [1.0, 99.9])
-            own_handles = _handles(np.clip((own - lo) / max(hi - lo, 0.05), 0.0, 1.0), m_per_px)
-            if own_handles:
-                own_handles = [hd for hd in own_handles if hd.score >= HANDLE_MIN_SHARE * own_handles[0].score]
-            rects = handle_column(own_handles, box, m_per_px, ins)
+            rects = handle_column(_credible_handles(np.clip((own - lo) / max(hi - lo, 0.05), 0.0, 1.0), m_per_px), box, m_per_px, ins)
         if len(rects) >= 2 and len(rects) > len(fronts):
             fronts = [(rect, (True, True, True, True), hd) for rect, _, hd in rects]
     panels = []

@@ -103,11 +103,10 @@ def outlined_rectangles(horiz: np.ndarray, vert: np.ndarray, box: tuple[int, int
         hd = handles[k]
         if any(h is hd for _, _, h in out):
             continue
-        area = (rect[2] - rect[0]) * (rect[3] - rect[1])
         clash = False
         for (q0, p0, q1, p1), _, _ in out:
             inter = max(0, min(rect[2], q1) - max(rect[0], q0)) * max(0, min(rect[3], p1) - max(rect[1], p0))
-            if inter > MAX_OVERLAP * min(area, (q1 - q0) * (p1 - p0)):
+            if inter > MAX_OVERLAP * min(int(area[k]), (q1 - q0) * (p1 - p0)):
                 clash = True
                 break
         if not clash:
