@@ -108,6 +108,7 @@ def fit_box(
     min_size_m: float = 0.01,
     typical_size_m: tuple[float, float, float] | None = None,
     walls=(),
+    face_normal: np.ndarray | None = None,
 ) -> BoxFit:
     """Gravity-aligned box around observed points (world frame, Z up, floor z = 0).
 
@@ -125,6 +126,12 @@ def fit_box(
 
     ``walls``: the room's wall planes. Points that are one seen face near a wall, turned from it
     by less than :data:`FACE_TO_WALL_MAX_DEG`, take the wall's direction (:func:`_wall_angle`).
+
+    ``face_normal``: (3,) the horizontal normal of a face whose doors and drawers were seen
+    (``perception.fronts``, its direction read on the photo's lines and snapped to the walls): the
+    box's axes follow it. The smallest rectangle of a dresser's points (its front, part of its top
+    and a mirror behind) was 8 degrees off its face; the layout then turned it to its wall about
+    its centre, and its fronts moved off the drawers they were seen on.
     """
     pts = np.asarray(points_world_m, dtype=np.float64)
     if len(pts) < 3:
@@ -133,6 +140,8 @@ def fit_box(
     r = np.linalg.norm(xy - np.median(xy, axis=0), axis=1)
     keep = r <= np.quantile(r, 1.0 - trim_fraction)
     angle, lo_r, hi_r = min_area_rectangle(xy[keep])
+    if face_normal is not None:
+        angle = float(np.arctan2(face_normal[1], face_normal[0]))
     angle = _wall_angle(pts[keep], angle, hi_r - lo_r, walls)
     axes = np.array([[np.cos(angle), np.sin(angle)], [-np.sin(angle), np.cos(angle)]])  # rows: box axes in plan
     uv = xy @ axes.T

@@ -99,14 +99,14 @@ def complete_box(fit, label: str, walls=()):
 
 
 def fitted_box(points_world_m: np.ndarray, camera_position_m: np.ndarray, label: str, walls=(), *, floor_snap_m: float,
-               typical_size_m: tuple[float, float, float] | None = None):
+               typical_size_m: tuple[float, float, float] | None = None, face_normal: np.ndarray | None = None):
     """An object's box: :func:`generation.pose.fit_box` (a face seen near one of ``walls`` turned
     parallel to it, except for :data:`FLAT_LABELS`, whose seen rectangle is what they are),
-    completed by :func:`complete_box` (never past ``walls``)."""
+    completed by :func:`complete_box` (never past ``walls``). ``face_normal``: see ``fit_box``."""
     from generation.pose import fit_box
 
     fit = fit_box(points_world_m, camera_position_m, floor_snap_m=floor_snap_m, typical_size_m=typical_size_m,
-                  walls=() if label in FLAT_LABELS else walls)
+                  walls=() if label in FLAT_LABELS else walls, face_normal=face_normal)
     return complete_box(fit, label, walls)
 
 
@@ -233,6 +233,69 @@ def top_within_silhouette(space, world_from_box: np.ndarray, size_m: np.ndarray)
     return float(size_m[2])
 
 
+#: A front layout that fills seen free space has its sides, top and front moved inward by up to
+#: this share of each extent (TRIM_STEP_M at a time) before it is given up.
+MAX_TRIM_SHARE = 0.3
+TRIM_STEP_M = 0.01
+#: Sample grid per face (cells along each of its two directions) for the trim.
+TRIM_GRID = 10
+
+
+def box_within_free_space(space, world_from_box: np.ndarray, size_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(world_from_box, size_m) of the box (bottom centre, depth x width x height) with its faces
+    moved inward until none has more than MAX_FREE_SPACE_SHARE of its surface in seen free space or
+    off the object's silhouette (``space``: a ``FreeSpace`` with its mask): the worst face first,
+    TRIM_STEP_M at a time, each by at most MAX_TRIM_SHARE of its extent. The two sides, the top
+    and the front move; the back (hidden) and the bottom (on what holds it) stay.
+
+    A box measured on a mask that took in a sliver of the neighbour (sunrgbd_imvotenet_000003's
+    dresser, its mask 15 cm over the night stand beside it) showed its side over what was seen
+    there, and the whole front layout was given up for the observed shell."""
+    size = np.asarray(size_m, dtype=np.float64)
+    lo = np.array([-size[0] / 2, -size[1] / 2, 0.0])
+    hi = np.array([size[0] / 2, size[1] / 2, size[2]])
+    limit_lo, limit_hi = lo + MAX_TRIM_SHARE * size, hi - MAX_TRIM_SHARE * size
+    g = (np.arange(TRIM_GRID) + 0.5) / TRIM_GRID
+    faces = [(1, False), (1, True), (2, True), (0, True)]  # (axis, upper bound) of the faces that move
+    stuck = set()
+    for _ in range(int(np.ceil(MAX_TRIM_SHARE * size.max() / TRIM_STEP_M)) * len(faces)):
+        shares = []
+        for i, (axis, upper) in enumerate(faces):
+            if i in stuck:
+                shares.append(-1.0)
+                continue
+            a, b = [k for k in range(3) if k != axis]
+            ga, gb = np.meshgrid(lo[a] + g * (hi[a] - lo[a]), lo[b] + g * (hi[b] - lo[b]))
+            pts = np.empty((ga.size, 3))
+            pts[:, axis] = hi[axis] if upper else lo[axis]
+            pts[:, a], pts[:, b] = ga.ravel(), gb.ravel()
+            shares.append(float(np.mean(space.free(transform_points(world_from_box, pts)))))
+        i = int(np.argmax(shares))
+        if shares[i] <= MAX_FREE_SPACE_SHARE:
+            break
+        axis, upper = faces[i]
+        if upper and hi[axis] - TRIM_STEP_M >= limit_hi[axis]:
+            hi[axis] -= TRIM_STEP_M
+        elif not upper and lo[axis] + TRIM_STEP_M <= limit_lo[axis]:
+            lo[axis] += TRIM_STEP_M
+        else:
+            stuck.add(i)
+    shift = pose(np.eye(3), [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, 0.0])
+    return world_from_box @ shift, hi - lo
+
+
+def fronts_normal(fronts) -> np.ndarray | None:
+    """(3,) the horizontal unit normal (world) of the face ``fronts`` were seen on (facing the
+    camera), or None when there are none."""
+    n = np.zeros(3)
+    for f in fronts:
+        c = f.corners_world_m  # bl, br, tr, tl
+        n += np.cross(c[1] - c[0], c[3] - c[0])
+    n[2] = 0.0
+    length = float(np.linalg.norm(n))
+    return n / length if length > 0 else None
+
+
 def _median_rgba(colors_rgb: np.ndarray) -> tuple[float, float, float, float]:
     c = np.median(np.asarray(colors_rgb, dtype=np.float64), axis=0) / 255.0
     return (float(c[0]), float(c[1]), float(c[2]), 1.0)
@@ -265,7 +328,8 @@ class ShapePriorGenerator:
         # The plan orientation of large furniture follows the category's proportions (a sofa
         # seen end-on), unless fronts seen on a face say which face is the front.
         typical = cat.typical_size_m if label in PLAN_BY_PROPORTIONS and not obj.fronts else None
-        fit = fitted_box(obj.points_world_m, cam_world, label, perception.room.walls, floor_snap_m=snap_m, typical_size_m=typical)
+        fit = fitted_box(obj.points_world_m, cam_world, label, perception.room.walls, floor_snap_m=snap_m, typical_size_m=typical,
+                         face_normal=fronts_normal(obj.fronts))
         box_from_world = np.linalg.inv(fit.world_from_box)
         pts = transform_points(box_from_world, obj.points_world_m)
         cam = transform_points(box_from_world, cam_world[None])[0]
@@ -331,7 +395,8 @@ class ShapePriorGenerator:
             return GeneratedAsset(asset, fit.world_from_box @ pose(np.eye(3), -shift), obj.points_world_m)
 
         structure_mass_kg = None  # the mass of the category's structure, when its prior is not used
-        if specs is not None:
+        untrimmed, trimmed = fit, False
+        while specs is not None:
             generated = assemble(specs, kind, soft, description, cfg)
             samples = transform_points(generated.world_from_asset, surface_samples([q.visual for q in generated.asset.parts], VIOLATION_SAMPLES, seed))
             share = space.violation(samples)
@@ -340,12 +405,30 @@ class ShapePriorGenerator:
                 # (a built-in run stands where its fronts put it, in front of depth that an
                 # estimate painted onto the wall behind it: that depth's free space is no evidence)
                 return generated
+            if rects and not trimmed:  # a box over what was seen beside the object: trimmed to the free space once
+                trimmed = True
+                world_from_box, size = box_within_free_space(space, fit.world_from_box, size)
+                fit = replace(fit, world_from_box=world_from_box, size_m=size.copy())
+                box_from_world = np.linalg.inv(fit.world_from_box)
+                pts = transform_points(box_from_world, obj.points_world_m)
+                from generation.front_parts import front_parts, front_rectangles, fronts_clear_of_walls
+
+                rects = fronts_clear_of_walls(front_rectangles(obj.fronts, box_from_world, size), fit.world_from_box, size, perception.room.walls)
+                if rects:
+                    specs = front_parts(label, size, rects, rgba)
+                    description = f"{description.split('; ')[0]}; {len(rects)} fronts seen in the photo; box trimmed to the seen free space, " \
+                                  f"{size[0]:.2f} x {size[1]:.2f} x {size[2]:.2f} m"
+                    continue
             what = "front layout" if rects else "articulation template" if label in ARTICULATED_LABELS else "shape prior"
             why = f"filled {share:.0%} seen free space" if share > MAX_FREE_SPACE_SHARE else f"reached {behind * 100:.0f} cm into a wall"
             description = f"{label}: the {what} {why}; " + description.split("; ")[0]
             structure_mass_kg = generated.asset.mass_kg
             kind, soft = None, None
+            fit = untrimmed
+            box_from_world = np.linalg.inv(fit.world_from_box)
+            pts = transform_points(box_from_world, obj.points_world_m)
             size = fit.size_m.copy()
+            break
 
         voxel_m = float(size.max()) / config.voxel_resolution
         owned = [_ownership(o) for o in other_objects]

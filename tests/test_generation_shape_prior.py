@@ -263,3 +263,60 @@ def test_a_front_layouts_top_comes_down_onto_the_silhouette_by_at_most_8_cm(seen
     world_from_box = pose(np.eye(3), [2.0, 0.5, 0.0])
     top = top_within_silhouette(_SeenUpTo(seen_top_m), world_from_box, np.array([0.4, 0.7, 0.66]))
     assert top == pytest.approx(expected_m, abs=1e-6)
+
+
+class _SeenFreeBeyond:
+    """Seen free space: everything at world y > ``y_m`` (what was seen beside the object, say the
+    wall past a dresser's side, lies behind where its over-wide box would stand)."""
+
+    def __init__(self, y_m: float) -> None:
+        self.y_m = y_m
+
+    def free(self, points_world_m: np.ndarray) -> np.ndarray:
+        return np.asarray(points_world_m)[:, 1] > self.y_m + 1e-9
+
+
+def test_a_front_layouts_box_over_what_was_seen_beside_it_is_trimmed_to_the_free_space():
+    """A dresser's box 1.0 m wide, measured on a mask that took in 20 cm of what stands beside
+    it: its side moves in (1 cm steps) until no face has more than a tenth of its surface in seen
+    free space; the other side, the height and the depth stay, the box's origin follows."""
+    from generation.shape_prior import box_within_free_space
+    from scene_builder.frames import pose, rot_z
+
+    yaw = np.radians(90.0)  # the box's width (its y) along world -x: rotated, to test the frames
+    world_from_box = pose(rot_z(yaw), [2.0, 0.0, 0.0])
+    # world y = box x after the turn; free space beyond world y = 0.15 cuts the front (box +x)
+    new_pose, size = box_within_free_space(_SeenFreeBeyond(0.15), world_from_box, np.array([0.5, 1.0, 0.9]))
+    assert size[1] == pytest.approx(1.0) and size[2] == pytest.approx(0.9)
+    assert 0.40 - 0.011 <= size[0] <= 0.40 + 1e-9  # the front moved back 10 cm, to 1 cm
+    front = new_pose @ np.array([size[0] / 2, 0.0, 0.0, 1.0])
+    back = new_pose @ np.array([-size[0] / 2, 0.0, 0.0, 1.0])
+    assert back[1] == pytest.approx(-0.25)  # the back stays
+    assert front[1] <= 0.15 + 1e-9
+    # The side: free space beyond world y = 0.35 with the box unturned (its width along world y).
+    new_pose, size = box_within_free_space(_SeenFreeBeyond(0.35), pose(np.eye(3), [2.0, 0.0, 0.0]), np.array([0.5, 1.0, 0.9]))
+    assert size[0] == pytest.approx(0.5) and size[2] == pytest.approx(0.9)
+    assert size[1] == pytest.approx(0.85, abs=0.011)
+    left = new_pose @ np.array([0.0, -size[1] / 2, 0.0, 1.0])
+    assert left[1] == pytest.approx(-0.5)
+    # At most 30 % of an extent: free space past y = 0.0 is more than a trim, the side stops at 0.2
+    _, size = box_within_free_space(_SeenFreeBeyond(0.0), pose(np.eye(3), [2.0, 0.0, 0.0]), np.array([0.5, 1.0, 0.9]))
+    assert size[1] == pytest.approx(0.7, abs=0.011)
+
+
+def test_a_face_with_fronts_gives_the_box_its_axes():
+    """Points of a dresser whose smallest plan rectangle is turned 8 degrees (its front, a strip of
+    its top, a mirror standing at the back): without a face the box takes the rectangle's turn;
+    with the normal of the face its drawers were seen on, the face's."""
+    from scene_builder.frames import rot_z
+
+    rng = np.random.default_rng(3)
+    front = np.column_stack([np.full(600, 0.25), rng.uniform(-0.5, 0.5, 600), rng.uniform(0.0, 0.9, 600)])
+    top = np.column_stack([rng.uniform(-0.25, 0.25, 300), rng.uniform(-0.5, 0.5, 300), np.full(300, 0.9)])
+    pts = np.vstack([front, top]) @ rot_z(np.radians(8.0)).T
+    camera = np.array([3.0, 0.0, 1.3])
+    free = fit_box(pts, camera)
+    assert np.degrees(np.arccos(free.world_from_box[0, 0])) == pytest.approx(8.0, abs=0.5)
+    faced = fit_box(pts, camera, face_normal=np.array([1.0, 0.0, 0.0]))
+    assert faced.world_from_box[:3, 0] == pytest.approx([1.0, 0.0, 0.0], abs=1e-9)  # its front faces the camera
+    assert faced.size_m[1] > free.size_m[1]  # the turned points span more across the face's axes
