@@ -219,17 +219,20 @@ def _strongest(profile: np.ndarray, lo: float, hi: float) -> int | None:
     return i if profile[i] >= LINE_MIN_SHARE else None
 
 
-#: A "handle" with horizontal edges running on along at least this share of its own width on
-#: both sides is a piece of a lit edge (a drawer's bevel catching the light), not a handle.
+#: A "handle" with horizontal edges running on along at least ON_LINE_SHARE of ON_LINE_REACH (its
+#: own width twice, at least ON_LINE_MIN_M) on both sides is a piece of a lit edge (a drawer's
+#: bevel catching the light), not a handle (a bail pull's post beside its bar is one).
 ON_LINE_SHARE = 0.7
+ON_LINE_REACH = 2.0
+ON_LINE_MIN_M = 0.1
 
 
-def _on_line(hd, horiz: np.ndarray) -> bool:
+def _on_line(hd, horiz: np.ndarray, m_per_px: float) -> bool:
     """The handle ``hd`` lies on a horizontal edge line that runs on past both its ends."""
     a0, b0, a1, b1 = (int(v) for v in hd.box)
-    w = max(a1 - a0, 1)
+    reach = max(int(ON_LINE_REACH * max(a1 - a0, 1)), int(round(ON_LINE_MIN_M / m_per_px)))
     band = horiz[max(0, b0 - 1):b1 + 1].any(axis=0)
-    left, right = band[max(0, a0 - w):a0], band[a1:a1 + w]
+    left, right = band[max(0, a0 - reach):a0], band[a1:a1 + reach]
     return len(left) > 0 and len(right) > 0 and left.mean() >= ON_LINE_SHARE and right.mean() >= ON_LINE_SHARE
 
 
@@ -254,7 +257,7 @@ def handle_grid(handles: list, horiz: np.ndarray, vert: np.ndarray, box: tuple[i
     inside = [hd for hd in handles if x0 <= hd.centre[0] < x1 and y0 <= hd.centre[1] < y1
               and (mask is None or mask[int(hd.centre[1]), int(hd.centre[0])])
               and hd.box[3] - hd.box[1] <= KNOB_ASPECT * (hd.box[2] - hd.box[0])]
-    inside = [hd for hd in inside if not _on_line(hd, horiz)]
+    inside = [hd for hd in inside if not _on_line(hd, horiz, m_per_px)]
     if len(inside) < 2:
         return []
     strongest = max(hd.score for hd in inside)

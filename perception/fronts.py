@@ -13,8 +13,8 @@ photo and the world through the same plane (:class:`scene_builder.model.Front`).
 An object of a category that may hold drawers without being made of them (a table that is a
 night stand, a desk) keeps its fronts only when at least ``MIN_HANDLED_FRONTS`` of them show a
 handle; ovens and dishwashers get their largest front as a flap hinged at the bottom. On sensor
-depth, a panel whose middle lies ``OPENING_RECESS_M`` (``HANDLED_RECESS_M`` with a handle) or more behind the face is an opening, not a
-front (the cubbies of an open bookcase).
+depth, a panel whose middle lies ``OPENING_RECESS_M`` (``HANDLED_RECESS_M`` for a case good's panel with a
+handle) or more behind the face is an opening, not a front (the cubbies of an open bookcase).
 """
 
 from __future__ import annotations
@@ -52,8 +52,9 @@ MIN_FRONT_M = 0.07
 #: an opening (an open shelf's cubby, 7-33 cm deep on promptda_arkit's bookcase), not a door or a
 #: drawer. Not on estimated depth, whose relief inside a face is not measured well enough.
 OPENING_RECESS_M = 0.05
-#: ... and one with a handle this far: a structured-light sensor's depth at 4 m comes in steps of
-#: about 5 cm and leaks from a top seen from above onto the face below it (the top drawer of
+#: ... and one of a case good (:data:`CASE_GOODS`, not an open shelf's cubby with a thing in it
+#: that looks like a handle: promptda_arkit) with a handle this far: a sensor's depth at 4 m
+#: leaks from a top seen from above onto the face below it (the top drawer of
 #: sunrgbd_imvotenet_000003's night stand read 12 cm behind its face, its bottom drawer 2 cm).
 HANDLED_RECESS_M = 0.15
 
@@ -225,7 +226,8 @@ def fronts_on_face(rgb: np.ndarray, camera: Camera, face: Face, label: str = "",
         if p.handle is not None:
             hw = face.points(np.array(p.handle[0] * m), np.array((h - p.handle[1]) * m))
             handle = k.project(transform_points(camera_from_world, hw[None]))[0]
-        if depth is not None and _recess_m(px, world, depth, camera) >= (OPENING_RECESS_M if p.handle is None else HANDLED_RECESS_M):
+        deep = HANDLED_RECESS_M if p.handle is not None and label in CASE_GOODS else OPENING_RECESS_M
+        if depth is not None and _recess_m(px, world, depth, camera) >= deep:
             continue
         score = 0.5 * float(p.handle is not None) + 0.5 * p.support
         out.append(Front(p.kind, p.hinge, px, world, handle, float(np.clip(score, 0.0, 1.0))))

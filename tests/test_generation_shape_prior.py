@@ -272,8 +272,8 @@ class _SeenFreeBeyond:
     def __init__(self, y_m: float) -> None:
         self.y_m = y_m
 
-    def free(self, points_world_m: np.ndarray) -> np.ndarray:
-        return np.asarray(points_world_m)[:, 1] > self.y_m + 1e-9
+    def violation(self, points_world_m: np.ndarray) -> float:
+        return float(np.mean(np.asarray(points_world_m)[:, 1] > self.y_m + 1e-9))
 
 
 def test_a_front_layouts_box_over_what_was_seen_beside_it_is_trimmed_to_the_free_space():
