@@ -96,3 +96,72 @@ def test_the_pillows_of_a_real_bed_are_objects_on_it():
     assert len(on_bed) == 2, [(o.name, o.label) for o in p.objects]
     assert np.percentile(bed.points_world_m[:, 2], 99) < top + 0.1  # the bed no longer holds them
     assert any(b.task == "lying-on" for b in p.backends)
+
+
+def _bed_with_foot(bench: bool, headboard: bool = True, footboard_top_m: float = 0.6):
+    """Points of a 2 m bed along x (its mattress top 0.6 m high over x in [0, 2], y in [-0.8,
+    0.8]), a headboard at x = 2.05 rising to 1.2 m, a foot panel at x = -0.02 up to
+    ``footboard_top_m``, and with ``bench`` a 0.5 m bench at its foot (x in [-0.6, -0.1], its
+    seat 0.45 m high, its front face toward -x): (N, 3) points, (N,) True on the bench's."""
+    g = np.linspace(0.0, 1.0, 41)
+    a, b = np.meshgrid(g, g)
+    a, b = a.ravel(), b.ravel()
+    parts = [np.column_stack([2.0 * a, -0.8 + 1.6 * b, np.full(a.size, 0.6)])]
+    if headboard:
+        parts.append(np.column_stack([np.full(a.size, 2.05), -0.8 + 1.6 * b, 0.6 + 0.6 * a]))
+    parts.append(np.column_stack([np.full(a.size, -0.02), -0.8 + 1.6 * b, 0.2 + (footboard_top_m - 0.2) * a]))
+    on = [np.zeros(len(p), dtype=bool) for p in parts]
+    if bench:
+        seat = np.column_stack([-0.6 + 0.5 * a, -0.75 + 1.5 * b, np.full(a.size, 0.45)])
+        front = np.column_stack([np.full(a.size, -0.6), -0.75 + 1.5 * b, 0.45 * a])
+        parts += [seat, front]
+        on += [np.ones(len(seat), dtype=bool), np.ones(len(front), dtype=bool)]
+    return np.concatenate(parts), np.concatenate(on)
+
+
+def test_a_bench_at_a_beds_foot_is_cut_out_of_it():
+    """The bed's height profile, away from its headboard, steps down 15 cm past the mattress's
+    end and stays down for 0.5 m: that is a bench, the bed is what is left (its foot panel
+    included). No bench, a sleigh bed's footboard higher than its top, or no headboard to tell the
+    foot by: nothing is cut."""
+    from perception.lying_on import foot_part
+
+    pts, truth = _bed_with_foot(bench=True)
+    sel = foot_part(pts)
+    assert sel is not None and np.array_equal(sel, truth)
+    assert foot_part(_bed_with_foot(bench=False)[0]) is None
+    assert foot_part(_bed_with_foot(bench=False, footboard_top_m=0.9)[0]) is None
+    assert foot_part(_bed_with_foot(bench=True, headboard=False)[0]) is None
+
+
+def test_split_lying_makes_the_bench_at_a_beds_foot_an_object():
+    from perception.lying_on import split_lying
+
+    pts, truth = _bed_with_foot(bench=True)
+    pix = np.zeros((len(pts) // 100 + 1, 100), dtype=bool)
+    pix.ravel()[: len(pts)] = True
+    out_kept, out_points, names, added = split_lying([(pix.copy(), pix.copy())], [pts], [("bed", 0.9)])
+    assert added == 1 and [n for n, _ in names] == ["bed", "bench"]
+    assert len(out_points[1]) == np.count_nonzero(truth) and len(out_points[0]) == len(pts) - np.count_nonzero(truth)
+    assert not (out_kept[0][0] & out_kept[1][0]).any()
+
+
+@pytest.mark.slow
+def test_the_bench_at_a_real_beds_foot_is_an_object_of_its_own():
+    """sunrgbd_imvotenet_000004: a storage bench against the footboard was part of a 2.8 m "bed".
+    Now it is a bench of its own, lower than the mattress, and the bed is a bed's length."""
+    from perception import perceive
+    from perception.perceive import gravity_aligned_size
+    from scene_builder.config import InputSpec, PerceptionConfig
+    from tests.conftest import require
+
+    d = require(REAL_DATA / "sunrgbd_imvotenet_000004")
+    import json
+
+    cam = json.loads((d / "camera.json").read_text())
+    p = perceive(InputSpec(d / "rgb.jpg", d / "depth.png", 0.001, (cam["fx"], cam["fy"], cam["cx"], cam["cy"])), PerceptionConfig(), seed=0)
+    (bed,) = [o for o in p.objects if o.label == "bed"]
+    (bench,) = [o for o in p.objects if o.label == "bench"]
+    assert max(gravity_aligned_size(bed.points_world_m)[:2]) < 2.4
+    assert np.percentile(bench.points_world_m[:, 2], 98) < top_height(bed.points_world_m[:, 2]) - 0.1
+    assert not (bed.mask & bench.mask).any()
