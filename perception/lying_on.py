@@ -17,21 +17,14 @@ What lies on a mattress is found from the bed's own points:
    image) is split where its height profile dips between two pillows, near equal widths of
    :data:`PILLOW_WIDTH_M` (a bolster, with no dip, stays whole).
 
-Each part becomes a ``pillow`` and leaves the bed's mask and points.
-
-What stands at a bed's foot (:func:`foot_part`): a bench or an ottoman against the footboard is
-taken into the bed's mask by the same cut (sunrgbd_imvotenet_000004: a 2.8 m "bed", its storage
-bench in it). Along the mattress's long axis, away from the headboard (the end where points rise
-:data:`HEADBOARD_ABOVE_M` over the top), the bed's height profile steps down by
-:data:`FOOT_STEP_M` or more past the mattress's end and stays down for :data:`FOOT_MIN_M` or
-more to the object's end: that run is a ``bench`` of its own. Deterministic: no sampling.
+Each part becomes a ``pillow`` and leaves the bed's mask and points. Deterministic: no sampling.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["top_height", "split_lying", "lying_parts", "foot_part", "without_points", "HOSTS"]
+__all__ = ["top_height", "split_lying", "lying_parts", "without_points", "HOSTS"]
 
 #: A top is the highest TOP_BAND_M band of heights holding at least TOP_SHARE of the object's
 #: points, at least MIN_TOP_M above the floor.
@@ -161,60 +154,6 @@ def _one_per_pillow(p: np.ndarray) -> list[np.ndarray]:
     return [s for s in segments if np.count_nonzero(s) >= MIN_POINTS]
 
 
-#: A headboard rises this far over the top (m) beyond one end of the mattress.
-HEADBOARD_ABOVE_M = 0.2
-#: What stands at the foot: its height profile (90th percentile per FOOT_BIN_M along the bed)
-#: FOOT_STEP_M or more under the top, from past the mattress's end to the object's end, over
-#: FOOT_MIN_M at least, with a top FOOT_MIN_TOP_M or more above the floor (a seat, not a rug).
-FOOT_STEP_M = 0.1
-FOOT_MIN_M = 0.3
-FOOT_BIN_M = 0.05
-FOOT_MIN_TOP_M = 0.25
-
-
-def foot_part(points_world_m: np.ndarray) -> np.ndarray | None:
-    """(N,) bool selection of a bed's points that are a bench or an ottoman standing at its foot
-    (see the module docstring), or None."""
-    pts = np.asarray(points_world_m, dtype=np.float64)
-    if len(pts) < 2 * MIN_POINTS:
-        return None
-    z = pts[:, 2]
-    top = top_height(z)
-    if top is None:
-        return None
-    on_top = np.abs(z - top) <= TOP_BAND_M / 2
-    if np.count_nonzero(on_top) < MIN_POINTS:
-        return None
-    centre = pts[on_top, :2].mean(axis=0)
-    _, _, vt = np.linalg.svd(pts[on_top, :2] - centre, full_matrices=False)
-    along = (pts[:, :2] - centre) @ vt[0]
-    m0, m1 = np.percentile(along[on_top], [2, 98])
-    high = z > top + HEADBOARD_ABOVE_M
-    head_low, head_high = np.count_nonzero(high & (along < 0.0)), np.count_nonzero(high & (along > 0.0))
-    if max(head_low, head_high) < MIN_POINTS or min(head_low, head_high) >= 0.5 * max(head_low, head_high):
-        return None  # no headboard at one end only: no telling the foot
-    if head_high > head_low:
-        along, m1 = -along, -m0  # the foot toward +along
-    end = float(np.percentile(along, 99.5))
-    if end - m1 < FOOT_MIN_M:
-        return None
-    bins = np.arange(m1, end + FOOT_BIN_M, FOOT_BIN_M)
-    which = np.digitize(along, bins) - 1
-    start = None
-    for b in range(len(bins) - 2, -1, -1):  # from the far end back toward the mattress
-        sel = which == b
-        if np.count_nonzero(sel) < 10:
-            continue
-        z90 = float(np.percentile(z[sel], 90))
-        if z90 > top - FOOT_STEP_M or z90 < FOOT_MIN_TOP_M:
-            break
-        start = bins[b]
-    if start is None or end - start < FOOT_MIN_M:
-        return None
-    part = along >= start
-    return part if np.count_nonzero(part) >= MIN_POINTS else None
-
-
 def without_points(mask: np.ndarray, pix: np.ndarray, points: np.ndarray, drop: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
     """An object's (mask, pixels with points) and points (raster order) without the points
     ``drop`` (N,) bool selects and their pixels (new arrays; the inputs are left as they are)."""
@@ -228,27 +167,16 @@ def without_points(mask: np.ndarray, pix: np.ndarray, points: np.ndarray, drop: 
 def split_lying(
     kept: list[tuple[np.ndarray, np.ndarray]], points_world: list[np.ndarray], names: list[tuple[str, float]], confidence: float = 0.5
 ) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[np.ndarray], list[tuple[str, float]], int]:
-    """Cut the pillows lying on each bed or sofa out of it (:func:`lying_parts`), and what stands
-    at a bed's foot (:func:`foot_part`): each becomes a ``pillow`` (a ``bench``) at ``confidence``
-    with its own (mask, pixels) and points, appended after the others; its pixels leave the host. ``kept``: (mask, pixels with points) per object;
+    """Cut the pillows lying on each bed or sofa out of it (:func:`lying_parts`): each becomes a
+    ``pillow`` (at ``confidence``) with its own (mask, pixels) and points, appended after the
+    others; its pixels leave the host. ``kept``: (mask, pixels with points) per object;
     ``points_world``: their points in raster order; ``names``: (label, confidence). Returns the
-    three lists and the number of pillows and benches cut out."""
+    three lists and the number of pillows cut out."""
     out_kept, out_points, out_names = list(kept), list(points_world), list(names)
     added = 0
     for i, ((mask, pix), pts, (label, _)) in enumerate(zip(kept, points_world, names)):
         if label not in HOSTS:
             continue
-        foot = foot_part(pts) if label == "bed" else None
-        if foot is not None:
-            flat = np.flatnonzero(pix.ravel())
-            part_pix = np.zeros_like(pix)
-            part_pix.ravel()[flat[foot]] = True
-            out_kept.append((part_pix.copy(), part_pix))
-            out_points.append(pts[foot])
-            out_names.append(("bench", confidence))
-            (mask, pix), pts = without_points(mask, pix, pts, foot)
-            out_kept[i], out_points[i] = (mask, pix), pts
-            added += 1
         parts = lying_parts(pix, pts)
         if not parts:
             continue
