@@ -461,8 +461,7 @@ class ShapePriorGenerator:
                 fit, size = face_fitted_box(obj, space, cam_world, perception.room.walls, snap_m)
                 box_from_world = np.linalg.inv(fit.world_from_box)
                 pts = transform_points(box_from_world, obj.points_world_m)
-                from generation.front_parts import front_parts, front_rectangles, fronts_clear_of_walls
-
+                # (front_parts and the rest were imported above: there are rects, so fronts)
                 rects = fronts_clear_of_walls(front_rectangles(obj.fronts, box_from_world, size), fit.world_from_box, size, perception.room.walls)
                 if rects:
                     specs = front_parts(label, size, rects, rgba)

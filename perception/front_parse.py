@@ -388,8 +388,8 @@ def parse_face(face_rgb: np.ndarray, m_per_px: float, inside: np.ndarray | None 
         rects = outlined_rectangles(horiz, vert, box, m_per_px, lambda b: _handle_in(handles, b, m_per_px))
         if len(rects) < 2:
             rects = handle_column(handles, box, m_per_px, ins)
-        own = own_gray = None
-        if ins.sum() >= 0.25 * ins.size:
+        own_handles = None
+        if len(rects) < 2 and ins.sum() >= 0.25 * ins.size:
             # The face's contrast stretched over the object's own pixels, to its brightest
             # handful: a bright bed beside a dark night stand left the stand's pulls too faint
             # (sunrgbd_imvotenet_000004). Only here: stretched so for every face, the cuts and
@@ -397,14 +397,15 @@ def parse_face(face_rgb: np.ndarray, m_per_px: float, inside: np.ndarray | None 
             own = cv2.warpAffine(raw, fwd, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE) if (sh or sv) else raw
             lo, hi = np.percentile(own[ins], [1.0, 99.9])
             own_gray = np.clip((own - lo) / max(hi - lo, 0.05), 0.0, 1.0)
-        if len(rects) < 2 and own is not None:
-            rects = handle_column(_credible_handles(own_gray, m_per_px), box, m_per_px, ins)
+            own_handles = _credible_handles(own_gray, m_per_px)  # found once, for both fallbacks
+        if len(rects) < 2 and own_handles is not None:
+            rects = handle_column(own_handles, box, m_per_px, ins)
         if len(rects) < 2:
             # rows of handles: a dresser's row of small drawers over wide ones
             rects = handle_grid(handles, horiz, vert, box, m_per_px, ins)
-        if len(rects) < 2 and own is not None:
+        if len(rects) < 2 and own_handles is not None:
             o_horiz, o_vert = _edges(own_gray, sigma=1.2)
-            rects = handle_grid(_credible_handles(own_gray, m_per_px), o_horiz, o_vert, box, m_per_px, ins)
+            rects = handle_grid(own_handles, o_horiz, o_vert, box, m_per_px, ins)
         if len(rects) >= 2 and len(rects) > len(fronts):
             fronts = [(rect, (True, True, True, True), hd) for rect, _, hd in rects]
     panels = []

@@ -146,6 +146,22 @@ HANDLE_STRONG = 0.5
 KNOB_ASPECT = 1.2
 
 
+def _pulls_in(handles: list, box: tuple[int, int, int, int], mask: np.ndarray | None) -> list:
+    """The handles centred in ``box`` (and on ``mask``, when given) that lie or are knobs: drawer
+    pulls (a standing bar is a door's, beside the gap of a pair)."""
+    x0, y0, x1, y1 = box
+    return [hd for hd in handles if x0 <= hd.centre[0] < x1 and y0 <= hd.centre[1] < y1
+            and (mask is None or mask[int(hd.centre[1]), int(hd.centre[0])])
+            and hd.box[3] - hd.box[1] <= KNOB_ASPECT * (hd.box[2] - hd.box[0])]
+
+
+def _strong(handles: list) -> list:
+    """The handles of at least HANDLE_STRONG of the strongest's score (JPEG blocks and grain give
+    many weak blobs)."""
+    strongest = max(hd.score for hd in handles)
+    return [hd for hd in handles if hd.score >= HANDLE_STRONG * strongest]
+
+
 def handle_column(handles: list, box: tuple[int, int, int, int], m_per_px: float, mask: np.ndarray | None = None) -> list[tuple[tuple[int, int, int, int], float, object]]:
     """Drawers told by their handles alone, for a face too dark or too blurred to show its
     fronts' outlines (sunrgbd_imvotenet_000004's night stand: its two pulls stand out, its
@@ -157,16 +173,12 @@ def handle_column(handles: list, box: tuple[int, int, int, int], m_per_px: float
     column stands out (or two do)."""
     x0, y0, x1, y1 = box
     w = x1 - x0
-    # (drawer pulls lie or are knobs: a standing bar is a door's, beside the gap of a pair)
-    inside = [hd for hd in handles if x0 <= hd.centre[0] < x1 and y0 <= hd.centre[1] < y1
-              and (mask is None or mask[int(hd.centre[1]), int(hd.centre[0])])
-              and hd.box[3] - hd.box[1] <= KNOB_ASPECT * (hd.box[2] - hd.box[0])]
+    inside = _pulls_in(handles, box, mask)
     if not inside:
         return []
-    # The strong ones only (JPEG blocks and grain give many weak blobs), and of blobs one above
-    # the other closer than the smallest front, the stronger (a pull's bar and its backplate).
-    strongest = max(hd.score for hd in inside)
-    inside = sorted((hd for hd in inside if hd.score >= HANDLE_STRONG * strongest), key=lambda hd: -hd.score)
+    # The strong ones only, and of blobs one above the other closer than the smallest front, the
+    # stronger (a pull's bar and its backplate).
+    inside = sorted(_strong(inside), key=lambda hd: -hd.score)
     near = RECT_MIN_M / m_per_px
     kept: list = []
     for hd in inside:
@@ -254,14 +266,10 @@ def handle_grid(handles: list, horiz: np.ndarray, vert: np.ndarray, box: tuple[i
     from dataclasses import replace
 
     x0, y0, x1, y1 = box
-    inside = [hd for hd in handles if x0 <= hd.centre[0] < x1 and y0 <= hd.centre[1] < y1
-              and (mask is None or mask[int(hd.centre[1]), int(hd.centre[0])])
-              and hd.box[3] - hd.box[1] <= KNOB_ASPECT * (hd.box[2] - hd.box[0])]
-    inside = [hd for hd in inside if not _on_line(hd, horiz, m_per_px)]
+    inside = [hd for hd in _pulls_in(handles, box, mask) if not _on_line(hd, horiz, m_per_px)]
     if len(inside) < 2:
         return []
-    strongest = max(hd.score for hd in inside)
-    inside = sorted((hd for hd in inside if hd.score >= HANDLE_STRONG * strongest), key=lambda hd: hd.centre[1])
+    inside = sorted(_strong(inside), key=lambda hd: hd.centre[1])
     rows: list[list] = []
     for hd in inside:
         if rows and hd.centre[1] - np.mean([r.centre[1] for r in rows[-1]]) <= ROW_M / m_per_px:
