@@ -182,7 +182,8 @@ class _Handle:
 def _handles(gray: np.ndarray, m_per_px: float) -> list[_Handle]:
     """Handle-like features of the whole face, strongest first. Candidates: components of the
     black and white top-hats (a 5 cm square) above each of HANDLE_LEVELS (highest first: a dark
-    knob joined to dark gaps at a low level stands alone at a higher one), of a handle's size,
+    knob joined to dark gaps at a low level stands alone at a higher one), as they are and opened by
+    a 3 x 3 square (a knob touching a thin gap line), of a handle's size,
     filling their box (a knob or a bar, not a curved moulding), not a gap (HANDLE_MAX_ASPECT)
     and not one of a repeated pattern (beads, a lattice, carving: four or more components of
     about the same size and contrast within three times their size (square root of the area) of
@@ -196,43 +197,49 @@ def _handles(gray: np.ndarray, m_per_px: float) -> list[_Handle]:
     black = ndimage.grey_closing(gray, size=(size, size)) - gray  # dark features smaller than the square
     white = gray - ndimage.grey_opening(gray, size=(size, size))  # bright ones
     rows_grid, cols_grid = np.indices(gray.shape)
-    for th in (black, white):
-        for level in sorted(HANDLE_LEVELS, reverse=True):
-            lab, n = ndimage.label(th > level)
-            if n == 0:
+    # Each level's mask as it is and opened by a 3 x 3 square: a knob touching a gap or a panel's
+    # shadow line (the knobs beside the meeting stiles of a pair of doors,
+    # urdformer_label31) is one component with the line, too long for a handle, until the line
+    # (1-2 px wide) is opened away; the opened pass adds only components whose core is new.
+    passes = [(th, level, opened) for th in (black, white) for level in sorted(HANDLE_LEVELS, reverse=True) for opened in (False, True)]
+    square = np.ones((3, 3), dtype=bool)
+    for th, level, opened in passes:
+        above = th > level
+        lab, n = ndimage.label(ndimage.binary_opening(above, structure=square) if opened else above)
+        if n == 0:
+            continue
+        sl = ndimage.find_objects(lab)
+        r0 = np.array([s_[0].start for s_ in sl], dtype=np.float64)
+        r1 = np.array([s_[0].stop for s_ in sl], dtype=np.float64)
+        c0 = np.array([s_[1].start for s_ in sl], dtype=np.float64)
+        c1 = np.array([s_[1].stop for s_ in sl], dtype=np.float64)
+        area = np.bincount(lab.ravel(), minlength=n + 1)[1:].astype(np.float64)
+        peak = np.zeros(n + 1)
+        on = lab.ravel() > 0
+        np.maximum.at(peak, lab.ravel()[on], th.ravel()[on])
+        peak = peak[1:]
+        cy = np.bincount(lab.ravel(), weights=rows_grid.ravel(), minlength=n + 1)[1:] / area
+        cx = np.bincount(lab.ravel(), weights=cols_grid.ravel(), minlength=n + 1)[1:] / area
+        long_, short = np.maximum(r1 - r0, c1 - c0), np.minimum(r1 - r0, c1 - c0)
+        ok = (long_ * m_per_px <= HANDLE_MAX_LONG_M) & (short * m_per_px <= HANDLE_MAX_SHORT_M) & (long_ * m_per_px >= HANDLE_MIN_LONG_M)
+        ok &= area >= 0.4 * (r1 - r0) * (c1 - c0)  # a handle fills its box (not a curved line)
+        ok &= long_ <= HANDLE_MAX_ASPECT * np.maximum(short, 1)  # a gap or a groove is longer
+        # the pattern test compares with components of at least half the smallest candidate's size
+        cand = np.flatnonzero(ok)
+        if len(cand) == 0:
+            continue
+        big = area >= 0.5 * area[cand].min()
+        cy_b, cx_b, area_b, peak_b = cy[big], cx[big], area[big], peak[big]
+        for i in cand:
+            near = np.hypot(cy_b - cy[i], cx_b - cx[i]) < 3.0 * np.sqrt(area[i])
+            similar = near & (area_b > 0.5 * area[i]) & (area_b < 2.0 * area[i]) & (peak_b > peak[i] / 1.5) & (peak_b < 1.5 * peak[i])
+            if similar.sum() >= 4:  # one of a pattern (itself and three more close by)
                 continue
-            sl = ndimage.find_objects(lab)
-            r0 = np.array([s_[0].start for s_ in sl], dtype=np.float64)
-            r1 = np.array([s_[0].stop for s_ in sl], dtype=np.float64)
-            c0 = np.array([s_[1].start for s_ in sl], dtype=np.float64)
-            c1 = np.array([s_[1].stop for s_ in sl], dtype=np.float64)
-            area = np.bincount(lab.ravel(), minlength=n + 1)[1:].astype(np.float64)
-            peak = np.zeros(n + 1)
-            on = lab.ravel() > 0
-            np.maximum.at(peak, lab.ravel()[on], th.ravel()[on])
-            peak = peak[1:]
-            cy = np.bincount(lab.ravel(), weights=rows_grid.ravel(), minlength=n + 1)[1:] / area
-            cx = np.bincount(lab.ravel(), weights=cols_grid.ravel(), minlength=n + 1)[1:] / area
-            long_, short = np.maximum(r1 - r0, c1 - c0), np.minimum(r1 - r0, c1 - c0)
-            ok = (long_ * m_per_px <= HANDLE_MAX_LONG_M) & (short * m_per_px <= HANDLE_MAX_SHORT_M) & (long_ * m_per_px >= HANDLE_MIN_LONG_M)
-            ok &= area >= 0.4 * (r1 - r0) * (c1 - c0)  # a handle fills its box (not a curved line)
-            ok &= long_ <= HANDLE_MAX_ASPECT * np.maximum(short, 1)  # a gap or a groove is longer
-            # the pattern test compares with components of at least half the smallest candidate's size
-            cand = np.flatnonzero(ok)
-            if len(cand) == 0:
-                continue
-            big = area >= 0.5 * area[cand].min()
-            cy_b, cx_b, area_b, peak_b = cy[big], cx[big], area[big], peak[big]
-            for i in cand:
-                near = np.hypot(cy_b - cy[i], cx_b - cx[i]) < 3.0 * np.sqrt(area[i])
-                similar = near & (area_b > 0.5 * area[i]) & (area_b < 2.0 * area[i]) & (peak_b > peak[i] / 1.5) & (peak_b < 1.5 * peak[i])
-                if similar.sum() >= 4:  # one of a pattern (itself and three more close by)
-                    continue
-                if len(cores) and np.any((cores[:, 0] >= c0[i]) & (cores[:, 0] <= c1[i]) & (cores[:, 1] >= r0[i]) & (cores[:, 1] <= r1[i])):
-                    continue  # its core was found at a higher level
-                boxes.append((c0[i], r0[i], c1[i], r1[i]))
-                scores.append(float(peak[i] * np.sqrt(area[i])))
-                cores = np.vstack([cores, [[cx[i], cy[i]]]])
+            if len(cores) and np.any((cores[:, 0] >= c0[i]) & (cores[:, 0] <= c1[i]) & (cores[:, 1] >= r0[i]) & (cores[:, 1] <= r1[i])):
+                continue  # its core was found at a higher level
+            boxes.append((c0[i], r0[i], c1[i], r1[i]))
+            scores.append(float(peak[i] * np.sqrt(area[i])))
+            cores = np.vstack([cores, [[cx[i], cy[i]]]])
     order = np.argsort(-np.array(scores), kind="stable")[:MAX_HANDLES]
     out = _merge_handles(np.array(boxes, dtype=np.float64).reshape(-1, 4)[order], np.array(scores)[order],
                          max(1, int(round(HANDLE_MERGE_M / m_per_px))), HANDLE_MAX_LONG_M / m_per_px, HANDLE_MAX_SHORT_M / m_per_px)
