@@ -304,6 +304,30 @@ def test_a_front_layouts_box_over_what_was_seen_beside_it_is_trimmed_to_the_free
     assert size[1] == pytest.approx(0.7, abs=0.011)
 
 
+def test_a_box_side_reaching_into_the_wall_it_stands_against_moves_back_in_front_of_it():
+    """A cabinet's box whose side reaches 10 cm into the wall beside it (estimated depth bled past
+    the wall): that side moves back to 5 mm in front of the wall, the other side, the depth and
+    the height stay; a wall the box faces across its front cuts nothing when the box is clear of
+    it, and a side more than 30 % of its extent inside a wall is left (the layout fails as before)."""
+    from generation.shape_prior import box_clear_of_walls
+    from scene_builder.frames import pose, rot_z
+    from scene_builder.model import Plane
+
+    # the box turned 90 degrees: its width (box y) along world -x, its front (box +x) along world +y
+    world_from_box = pose(rot_z(np.radians(90.0)), [1.0, 2.0, 0.0])
+    side_wall = Plane(np.array([-1.0, 0.0, 0.0]), 1.15, "wall")  # x <= 1.15 is in the room
+    back_wall = Plane(np.array([0.0, 1.0, 0.0]), -1.0, "wall")  # y >= 1.0 is in the room
+    new_pose, size = box_clear_of_walls(world_from_box, np.array([0.5, 0.5, 0.9]), (side_wall, back_wall))
+    assert size == pytest.approx([0.5, 0.4 - 0.005, 0.9])
+    right = new_pose @ np.array([0.0, -size[1] / 2, 0.0, 1.0])  # box -y is world +x
+    left = new_pose @ np.array([0.0, size[1] / 2, 0.0, 1.0])
+    assert right[0] == pytest.approx(1.145) and left[0] == pytest.approx(0.75)
+    # 20 cm into the wall is 40 % of the width: left as it was
+    far_wall = Plane(np.array([-1.0, 0.0, 0.0]), 1.05, "wall")
+    _, size = box_clear_of_walls(world_from_box, np.array([0.5, 0.5, 0.9]), (far_wall,))
+    assert size == pytest.approx([0.5, 0.5, 0.9])
+
+
 def test_a_face_with_fronts_gives_the_box_its_axes():
     """Points of a dresser whose smallest plan rectangle is turned 8 degrees (its front, a strip of
     its top, a mirror standing at the back): without a face the box takes the rectangle's turn;
