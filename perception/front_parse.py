@@ -179,7 +179,7 @@ class _Handle:
     score: float
 
 
-def _handles(gray: np.ndarray, m_per_px: float) -> list[_Handle]:
+def _handles(gray: np.ndarray, m_per_px: float, opened: bool = True) -> list[_Handle]:
     """Handle-like features of the whole face, strongest first. Candidates: components of the
     black and white top-hats (a 5 cm square) above each of HANDLE_LEVELS (highest first: a dark
     knob joined to dark gaps at a low level stands alone at a higher one), as they are and opened by
@@ -201,11 +201,12 @@ def _handles(gray: np.ndarray, m_per_px: float) -> list[_Handle]:
     # shadow line (the knobs beside the meeting stiles of a pair of doors,
     # urdformer_label31) is one component with the line, too long for a handle, until the line
     # (1-2 px wide) is opened away; the opened pass adds only components whose core is new.
-    passes = [(th, level, opened) for th in (black, white) for level in sorted(HANDLE_LEVELS, reverse=True) for opened in (False, True)]
+    modes = (False, True) if opened else (False,)
+    passes = [(th, level, o) for th in (black, white) for level in sorted(HANDLE_LEVELS, reverse=True) for o in modes]
     square = np.ones((3, 3), dtype=bool)
-    for th, level, opened in passes:
+    for th, level, open_ in passes:
         above = th > level
-        lab, n = ndimage.label(ndimage.binary_opening(above, structure=square) if opened else above)
+        lab, n = ndimage.label(ndimage.binary_opening(above, structure=square) if open_ else above)
         if n == 0:
             continue
         sl = ndimage.find_objects(lab)
@@ -247,10 +248,10 @@ def _handles(gray: np.ndarray, m_per_px: float) -> list[_Handle]:
     return out
 
 
-def _credible_handles(gray: np.ndarray, m_per_px: float) -> list[_Handle]:
+def _credible_handles(gray: np.ndarray, m_per_px: float, opened: bool = True) -> list[_Handle]:
     """:func:`_handles` of ``gray`` that are credible: a fifth (HANDLE_MIN_SHARE) of the strongest's
     score at least, strongest first."""
-    handles = _handles(gray, m_per_px)
+    handles = _handles(gray, m_per_px, opened)
     return [hd for hd in handles if hd.score >= HANDLE_MIN_SHARE * handles[0].score] if handles else []
 
 
@@ -360,12 +361,13 @@ def _skew(emap: np.ndarray) -> float:
     return best_s
 
 
-def parse_face(face_rgb: np.ndarray, m_per_px: float, inside: np.ndarray | None = None) -> list[Panel]:
+def parse_face(face_rgb: np.ndarray, m_per_px: float, inside: np.ndarray | None = None, opened: bool = True) -> list[Panel]:
     """The door and drawer fronts of a rectified face image ((h, w, 3) uint8) at ``m_per_px``
     metres per pixel (see the module docstring). ``inside``: (h, w) bool, where the face shows
     the object (its mask), given for case goods: where the cuts find fewer than two fronts,
     fronts outlined by edges within the object's box, or a column of drawer pulls, are looked for
-    (``perception.front_rects``) and taken when they are more."""
+    (``perception.front_rects``) and taken when they are more. ``opened``: handle candidates
+    also from the top-hats opened by a 3 x 3 square (:func:`_handles`)."""
     import cv2
     from skimage.color import rgb2gray
 
@@ -381,7 +383,7 @@ def parse_face(face_rgb: np.ndarray, m_per_px: float, inside: np.ndarray | None 
         gray = cv2.warpAffine(gray, fwd, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         horiz, vert = _edges(gray, sigma=1.2)
     back = cv2.invertAffineTransform(fwd)
-    handles = _credible_handles(gray, m_per_px)
+    handles = _credible_handles(gray, m_per_px, opened)
     min_piece = max(3, int(round(MIN_PANEL_M / m_per_px)))
     root = _Node((0, 0, w, h), (False, False, False, False))
     _cut(_Lines(horiz), _Lines(vert.T), root, min_piece)
@@ -404,7 +406,7 @@ def parse_face(face_rgb: np.ndarray, m_per_px: float, inside: np.ndarray | None 
             own = cv2.warpAffine(raw, fwd, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE) if (sh or sv) else raw
             lo, hi = np.percentile(own[ins], [1.0, 99.9])
             own_gray = np.clip((own - lo) / max(hi - lo, 0.05), 0.0, 1.0)
-            own_handles = _credible_handles(own_gray, m_per_px)  # found once, for both fallbacks
+            own_handles = _credible_handles(own_gray, m_per_px, opened)  # found once, for both fallbacks
         if len(rects) < 2 and own_handles is not None:
             rects = handle_column(own_handles, box, m_per_px, ins)
         if len(rects) < 2:

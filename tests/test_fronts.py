@@ -40,6 +40,29 @@ def test_parse_face_finds_the_drawer_and_both_doors_hinged_outward():
         assert p.handle is not None
 
 
+def test_a_knob_touching_a_gap_line_is_a_handle_once_the_line_is_opened_away():
+    """Two door knobs (2.5 cm, dark) right beside the dark 1 cm gap between a pair of doors: as
+    they are, each knob is one component with the 76 cm gap line, too long for a handle; opened
+    by a 3 x 3 square (the line is 2 px wide) they stand alone as handles."""
+    from perception.front_parse import _handles
+
+    img = np.full((160, 200, 3), 215, np.uint8)
+    img[:4, :] = img[-4:, :] = 170
+    img[:, :4] = img[:, -4:] = 170
+    img[4:-4, 99:101] = 40  # gap between the doors
+    img[75:80, 94:99] = 35  # left door's knob, touching the gap
+    img[75:80, 101:106] = 35  # right door's knob
+    gray = img[..., 0].astype(np.float64) / 255.0
+
+    def knobs(handles):
+        return [hd for hd in handles if 90 <= hd.centre[0] <= 110 and 70 <= hd.centre[1] <= 85 and hd.box[3] - hd.box[1] <= 12]
+
+    assert knobs(_handles(gray, M_PER_PX, opened=False)) == []
+    found = knobs(_handles(gray, M_PER_PX))
+    assert len(found) >= 1
+    assert all(hd.box[2] - hd.box[0] <= 16 for hd in found)  # a knob's size, not the line's
+
+
 def _night_stand_face() -> np.ndarray:
     """A 0.8 m x 0.6 m night stand face at 5 mm/px (a wall either side of it): two drawers inset
     in a face frame (10 cm stiles, a top moulding, a plinth), each outlined by a dark 1 cm
