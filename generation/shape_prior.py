@@ -233,6 +233,19 @@ def top_within_silhouette(space, world_from_box: np.ndarray, size_m: np.ndarray)
     return float(size_m[2])
 
 
+def _box_bounds(size_m) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) corners in its own frame of a box of ``size_m`` (depth x width x height) whose
+    origin is its bottom centre."""
+    size = np.asarray(size_m, dtype=np.float64)
+    return np.array([-size[0] / 2, -size[1] / 2, 0.0]), np.array([size[0] / 2, size[1] / 2, size[2]])
+
+
+def _box_from_bounds(world_from_box: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(world_from_box, size_m) of the box spanning ``lo``..``hi`` in the frame of
+    ``world_from_box`` (its bottom at lo[2] = 0), its origin again at its bottom centre."""
+    return world_from_box @ pose(np.eye(3), [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, 0.0]), hi - lo
+
+
 #: A front layout that fills seen free space has its sides, top and front moved inward by up to
 #: this share of each extent (TRIM_STEP_M at a time) before it is given up.
 MAX_TRIM_SHARE = 0.3
@@ -256,8 +269,7 @@ def box_within_free_space(space, world_from_box: np.ndarray, size_m: np.ndarray,
     dresser, its mask 15 cm over the night stand beside it) showed its side over what was seen
     there, and the whole front layout was given up for the observed shell."""
     size = np.asarray(size_m, dtype=np.float64)
-    lo = np.array([-size[0] / 2, -size[1] / 2, 0.0])
-    hi = np.array([size[0] / 2, size[1] / 2, size[2]])
+    lo, hi = _box_bounds(size)
     limit_lo, limit_hi = lo + MAX_TRIM_SHARE * size, hi - MAX_TRIM_SHARE * size
     if points_box_m is not None and len(points_box_m):
         limit_lo = np.minimum(limit_lo, np.percentile(points_box_m, TRIM_KEEP_PCT, axis=0))
@@ -287,8 +299,7 @@ def box_within_free_space(space, world_from_box: np.ndarray, size_m: np.ndarray,
             lo[axis] += TRIM_STEP_M
         else:
             stuck.add(i)
-    shift = pose(np.eye(3), [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, 0.0])
-    return world_from_box @ shift, hi - lo
+    return _box_from_bounds(world_from_box, lo, hi)
 
 
 #: A wall stands against a side of a box when its normal is within this angle of the side's
@@ -306,8 +317,7 @@ def box_clear_of_walls(world_from_box: np.ndarray, size_m: np.ndarray, walls) ->
     its points reach 10 cm past the side wall it stands against, and its front layout was given
     up for the observed shell)."""
     size = np.asarray(size_m, dtype=np.float64)
-    lo = np.array([-size[0] / 2, -size[1] / 2, 0.0])
-    hi = np.array([size[0] / 2, size[1] / 2, size[2]])
+    lo, hi = _box_bounds(size)
     rot = world_from_box[:3, :3]
     cos_side = float(np.cos(np.radians(WALL_SIDE_DEG)))
     for axis in (0, 1):
@@ -327,8 +337,7 @@ def box_clear_of_walls(world_from_box: np.ndarray, size_m: np.ndarray, walls) ->
                         hi[axis] -= cut
                     else:
                         lo[axis] += cut
-    shift = pose(np.eye(3), [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, 0.0])
-    return world_from_box @ shift, hi - lo
+    return _box_from_bounds(world_from_box, lo, hi)
 
 
 def fronts_normal(fronts) -> np.ndarray | None:
@@ -356,13 +365,12 @@ def front_on_face(fit, fronts):
     saw through, and its front layout was given up."""
     box_from_world = np.linalg.inv(fit.world_from_box)
     face_x = float(np.mean([transform_points(box_from_world, f.corners_world_m)[:, 0] for f in fronts]))
-    d = float(fit.size_m[0])
-    if d / 2 <= face_x + FRONT_PAST_FACE_M or face_x <= -d / 2 + 0.05:
+    lo, hi = _box_bounds(fit.size_m)
+    if hi[0] <= face_x + FRONT_PAST_FACE_M or face_x <= lo[0] + 0.05:
         return fit
-    new_d = face_x + d / 2
-    size = fit.size_m.copy()
-    size[0] = new_d
-    return dataclasses.replace(fit, world_from_box=fit.world_from_box @ pose(np.eye(3), [(face_x - d / 2) / 2, 0.0, 0.0]), size_m=size)
+    hi[0] = face_x
+    world_from_box, size = _box_from_bounds(fit.world_from_box, lo, hi)
+    return dataclasses.replace(fit, world_from_box=world_from_box, size_m=size)
 
 
 def face_fitted_box(obj: PerceivedObject, space, camera_position_m: np.ndarray, walls, floor_snap_m: float):
@@ -384,6 +392,14 @@ def face_fitted_box(obj: PerceivedObject, space, camera_position_m: np.ndarray, 
     pts = transform_points(np.linalg.inv(world_from_box), obj.points_world_m)
     world_from_box, size = box_within_free_space(space, world_from_box, size, pts)
     return dataclasses.replace(fit, world_from_box=world_from_box, size_m=size.copy()), size
+
+
+def _seen_rects(obj: PerceivedObject, world_from_box: np.ndarray, size_m: np.ndarray, walls) -> list:
+    """The fronts seen on ``obj`` as rectangles of the box (``generation.front_parts``), clear of the
+    walls beside it."""
+    from generation.front_parts import front_rectangles, fronts_clear_of_walls
+
+    return fronts_clear_of_walls(front_rectangles(obj.fronts, np.linalg.inv(world_from_box), size_m), world_from_box, size_m, walls)
 
 
 def _median_rgba(colors_rgb: np.ndarray) -> tuple[float, float, float, float]:
@@ -433,11 +449,11 @@ class ShapePriorGenerator:
         rects = []
         space = FreeSpace(perception.observation, perception.camera, own_mask=obj.mask)
         if obj.fronts:  # doors and drawers where the photo showed them (generation.front_parts)
-            from generation.front_parts import front_parts, front_rectangles, fronts_clear_of_walls
+            from generation.front_parts import front_parts
 
             size = np.maximum(size, 0.3 * np.asarray(category("cabinet").typical_size_m))
             size[2] = top_within_silhouette(space, fit.world_from_box, size)
-            rects = fronts_clear_of_walls(front_rectangles(obj.fronts, box_from_world, size), fit.world_from_box, size, perception.room.walls)
+            rects = _seen_rects(obj, fit.world_from_box, size, perception.room.walls)
         if rects:
             specs = front_parts(label, size, rects, rgba)
             description += f"; {len(rects)} fronts seen in the photo"
@@ -502,9 +518,8 @@ class ShapePriorGenerator:
                 fit, size = face_fitted_box(obj, space, cam_world, perception.room.walls, snap_m)
                 box_from_world = np.linalg.inv(fit.world_from_box)
                 pts = transform_points(box_from_world, obj.points_world_m)
-                # (front_parts and the rest were imported above: there are rects, so fronts)
-                rects = fronts_clear_of_walls(front_rectangles(obj.fronts, box_from_world, size), fit.world_from_box, size, perception.room.walls)
-                if rects:
+                rects = _seen_rects(obj, fit.world_from_box, size, perception.room.walls)
+                if rects:  # (front_parts was imported above: there are rects, so fronts)
                     specs = front_parts(label, size, rects, rgba)
                     description = f"{description.split('; ')[0]}; {len(rects)} fronts seen in the photo; box refitted to their face and the seen free space, " \
                                   f"{size[0]:.2f} x {size[1]:.2f} x {size[2]:.2f} m"
