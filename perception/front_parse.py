@@ -21,8 +21,9 @@ rules below use it only for sizes that tolerate a factor of about 1.5).
 4. **Kind**: a panel is a front when it has a handle, or when it is at least 12 cm in both
    directions and every side of it is a cut (not the face's border: the face's top, plinth and
    side strips are carcass). A front whose handle is near its left or right edge is a door hinged
-   on the far side; one with a centred handle that is at least as wide as 0.8 of its height is a
-   drawer; without a handle, a panel wider than 1.3 x its height and under 40 cm high is a drawer,
+   on the far side, unless it is wide and low (``WIDE_FRONT_RATIO``) with the handle more than
+   ``EDGE_HANDLE_SHARE`` of its width in from the edge (a drawer's pull found off its middle);
+   one with a centred handle that is at least as wide as 0.8 of its height is a drawer; without a handle, a panel wider than 1.3 x its height and under 40 cm high is a drawer,
    else a door hinged on the side nearer to the face's border (the outer sides of a pair).
 """
 
@@ -62,6 +63,10 @@ FRONT_MIN_M = 0.12
 FRONT_MAX_M = 2.5
 #: Handles at least this share of the strongest one's score are credible.
 HANDLE_MIN_SHARE = 0.2
+#: A door's handle lies within this share of its width from its edge; a front at least
+#: WIDE_FRONT_RATIO times as wide as high with its handle farther in is a drawer.
+EDGE_HANDLE_SHARE = 0.15
+WIDE_FRONT_RATIO = 1.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -425,6 +430,11 @@ def parse_face(face_rgb: np.ndarray, m_per_px: float, inside: np.ndarray | None 
             rel = (hd.centre[0] - x0) / max(1, x1 - x0)
             if 0.3 <= rel <= 0.7:
                 kind = "drawer" if pw >= 0.8 * ph else "door"
+            elif min(rel, 1.0 - rel) >= EDGE_HANDLE_SHARE and pw >= WIDE_FRONT_RATIO * ph:
+                # A wide, low front pulled a fifth of the way in: a drawer whose pull was found
+                # off its middle (one of two knobs, or an ornament beside the knob), not a door
+                # (a door's knob sits at its edge; urdformer_label62's drawers, 53's top drawer).
+                kind = "drawer"
             else:
                 kind = "door"
                 hinge = "right" if rel < 0.3 else "left"

@@ -12,7 +12,8 @@ photo and the world through the same plane (:class:`scene_builder.model.Front`).
 
 An object of a category that may hold drawers without being made of them (a table that is a
 night stand, a desk) keeps its fronts only when at least ``MIN_HANDLED_FRONTS`` of them show a
-handle; ovens and dishwashers get their largest front as a flap hinged at the bottom. On sensor
+handle; ovens and dishwashers get their largest front as a flap hinged at the bottom, microwaves
+as a door hinged on the left. On sensor
 depth, a panel whose middle lies ``OPENING_RECESS_M`` (``HANDLED_RECESS_M`` for a case good's panel with a
 handle) or more behind the face is an opening, not a front (the cubbies of an open bookcase).
 """
@@ -197,7 +198,7 @@ def fronts_on_face(rgb: np.ndarray, camera: Camera, face: Face, label: str = "",
                    depth: np.ndarray | None = None) -> tuple[Front, ...]:
     """The door and drawer fronts on ``face`` of the photo ``rgb`` (the analysis image), left to
     right then top to bottom. ``label``: the object's category (ovens and dishwashers: the largest
-    front is a flap hinged at its bottom). ``depth``: measured (sensor) depth of the analysis
+    front is a flap hinged at its bottom; microwaves: a door hinged on its left). ``depth``: measured (sensor) depth of the analysis
     image, to tell openings from fronts (:data:`OPENING_RECESS_M`)."""
     from perception.front_parse import parse_face
 
@@ -234,6 +235,11 @@ def fronts_on_face(rgb: np.ndarray, camera: Camera, face: Face, label: str = "",
     if label in ("oven", "dishwasher") and out:
         big = max(range(len(out)), key=lambda i: _area(out[i]))
         out[big] = replace(out[big], kind="flap", hinge="bottom")
+    elif label == "microwave" and out:
+        # A microwave's door is hinged on its left (its keypad and latch are on the right),
+        # whatever the parse read from the window's frame.
+        big = max(range(len(out)), key=lambda i: _area(out[i]))
+        out[big] = replace(out[big], kind="door", hinge="left")
     return tuple(out)
 
 

@@ -8,7 +8,7 @@ import pytest
 
 from generation.front_parts import front_parts, front_rectangles
 from perception.front_parse import parse_face
-from scene_builder.bench.fronts import iou, match_count
+from scene_builder.bench.fronts import iou, kinds_right, match_count, match_pairs
 from scene_builder.model import Front, JointProbe, JointType
 
 M_PER_PX = 0.005  # 5 mm per pixel
@@ -38,6 +38,26 @@ def test_parse_face_finds_the_drawer_and_both_doors_hinged_outward():
     for p, t in zip(panels, truth):
         assert iou(p.box, t) > 0.8, (p.box, t)
         assert p.handle is not None
+
+
+def _wide_front(knob_x: int) -> np.ndarray:
+    """A wide, low front (0.64 m x 0.21 m at 5 mm/px) in a 2 cm carcass border behind a 1 cm dark
+    gap, with a 3 cm dark knob at column ``knob_x``, halfway up."""
+    h, w = 54, 140
+    img = np.full((h, w, 3), 160, np.uint8)  # carcass
+    img[4:-4, 4:-4] = 40  # the gap around the front
+    img[6:-6, 6:-6] = 210  # the front
+    img[24:30, knob_x:knob_x + 6] = 30
+    return img
+
+
+@pytest.mark.parametrize("knob_x, kind", [(33, "drawer"), (101, "drawer"), (19, "door"), (115, "door")])
+def test_a_wide_low_front_pulled_a_fifth_of_the_way_in_is_a_drawer(knob_x, kind):
+    """A knob a fifth of the way in on a front three times as wide as high is a drawer's pull found
+    off its middle (urdformer_label62's drawers were built as doors); at the edge it is a door's."""
+    panels = parse_face(_wide_front(knob_x), M_PER_PX)
+    assert len(panels) == 1 and panels[0].handle is not None
+    assert panels[0].kind == kind, (panels[0].kind, panels[0].box, panels[0].handle)
 
 
 def test_a_knob_touching_a_gap_line_is_a_handle_once_the_line_is_opened_away():
@@ -160,6 +180,16 @@ def test_match_count_is_one_to_one_at_iou_half():
     assert match_count([], truth) == 0
 
 
+def test_joint_kind_counts_matched_fronts_that_move_as_the_hand_count_says():
+    truth = [(0, 0, 10, 10), (10, 0, 20, 10), (20, 0, 30, 10)]
+    kinds = ["drawer", "appliance_door", "door"]
+    fronts = [("cab", "drawer_1", (0, 0, 10, 10)), ("cab", "door_1", (10, 0, 20, 10)), ("cab", "drawer_2", (20, 0, 30, 10)), ("cab", "flap_1", (40, 0, 50, 10))]
+    pairs = match_pairs([b for _, _, b in fronts], truth)
+    assert sorted(pairs) == [(0, 0), (1, 1), (2, 2)]  # the flap matches nothing
+    assert kinds_right(fronts, kinds, pairs) == 2  # the drawer built over a hinged door is wrong
+    assert kinds_right([("cab", "flap_1", (10, 0, 20, 10))], kinds, [(0, 1)]) == 1  # an oven's flap is a hinged appliance door
+
+
 def _probe(fraction, displacement=0.0, violation=0.0, obj="built_in_1"):
     return JointProbe(f"{obj}/door_1/joint", obj, "hinge", (0.0, 1.7), 0.0, 1.0, 20.0, 1.7 * fraction, fraction,
                       0.0, violation, 1.7 * fraction, displacement, np.zeros(2), np.zeros(2))
@@ -229,6 +259,26 @@ def test_a_panel_whose_middle_is_measured_deep_behind_the_face_is_an_opening():
     recess = _recess_m(px, world, cubby, cam)
     assert recess == pytest.approx(0.2, abs=1e-3) and recess > OPENING_RECESS_M
     assert _recess_m(px, world, np.zeros_like(flat), cam) == 0.0  # no valid depth: no evidence
+
+
+@pytest.mark.parametrize("label, kind, hinge", [("microwave", "door", "left"), ("oven", "flap", "bottom"), ("cabinet", "drawer", "")])
+def test_an_appliances_largest_front_moves_as_that_appliance_does(monkeypatch, label, kind, hinge):
+    """The parse reads a microwave's window as a drawer (a wide front with a centred pull);
+    the door of a microwave turns on its left side, an oven's on its bottom (coco 164's
+    microwave was built as a drawer)."""
+    import perception.front_parse as front_parse
+    from perception.front_parse import Panel
+    from perception.fronts import Face, fronts_on_face
+    from scene_builder.model import Camera, CameraIntrinsics
+
+    k = CameraIntrinsics(200.0, 200.0, 99.5, 79.5, 200, 160)
+    rot = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # looking along world +x
+    cam = Camera(k, np.block([[rot, np.array([[0.0], [0.0], [1.0]])], [np.zeros((1, 3)), np.ones((1, 1))]]))
+    face = Face(np.array([2.0, 0.3, 0.8]), np.array([0.0, -1.0, 0.0]), np.array([-1.0, 0.0, 0.0]), 0.6, 0.4)
+    window = Panel(np.array([[10.0, 150.0], [290.0, 150.0], [290.0, 50.0], [10.0, 50.0]]), "drawer", "", (150.0, 100.0), 1.0)
+    monkeypatch.setattr(front_parse, "parse_face", lambda *a, **kw: [window])
+    fronts = fronts_on_face(np.full((160, 200, 3), 200, np.uint8), cam, face, label)
+    assert [(f.kind, f.hinge) for f in fronts] == [(kind, hinge)]
 
 
 def _dresser_edges():

@@ -12,7 +12,9 @@ gets its category template's doors and drawers and the built-ins stay on the bac
 Per photo: the built fronts (every part on a revolute or prismatic joint named ``door*``,
 ``drawer*`` or ``flap*``, of every object) projected into the photo as the bounding rectangle of
 the part's front face at its placed pose; one-to-one matching (Hungarian) to the hand-counted
-rectangles, a match when IoU >= 0.5; recall = matched / hand-counted, precision = matched / built.
+rectangles, a match when IoU >= 0.5; recall = matched / hand-counted, precision = matched / built;
+of the matched, how many move as the hand count's kind does (a drawer slides; a door, an appliance
+door or a flap turns on a hinge).
 Then every built front's joint is pulled open (``layout.interaction.open_joint``, as ``scene-builder
 check --interact``): the share that opens fully (``layout.interaction.opens_fully``: 90 % of its
 range, within its limits, the carcass still). Also the built-in runs (fixed objects with front
@@ -37,7 +39,7 @@ ANNOTATION = REPO / "tests" / "data" / "fronts_annotation.json"
 MATCH_IOU = 0.5
 FRONT_NAMES = ("door", "drawer", "flap")
 
-__all__ = ["ANNOTATION", "MATCH_IOU", "built_fronts", "iou", "main", "match_count"]
+__all__ = ["ANNOTATION", "MATCH_IOU", "SWINGS", "built_fronts", "iou", "joint_kind", "kinds_right", "main", "match_count", "match_pairs"]
 
 
 def iou(a, b) -> float:
@@ -49,16 +51,36 @@ def iou(a, b) -> float:
     return inter / union if union > 0 else 0.0
 
 
-def match_count(built: list, truth: list, min_iou: float = MATCH_IOU) -> int:
-    """How many of ``truth`` rectangles a one-to-one assignment (Hungarian, on IoU) matches to
-    ``built`` ones at IoU >= ``min_iou``."""
+def match_pairs(built: list, truth: list, min_iou: float = MATCH_IOU) -> list[tuple[int, int]]:
+    """(built index, truth index) of the pairs a one-to-one assignment (Hungarian, on IoU) of
+    ``truth`` rectangles to ``built`` ones matches at IoU >= ``min_iou``."""
     from scipy.optimize import linear_sum_assignment
 
     if not built or not truth:
-        return 0
+        return []
     m = np.array([[iou(b, t) for t in truth] for b in built])
     rows, cols = linear_sum_assignment(-m)
-    return int(sum(m[r, c] >= min_iou for r, c in zip(rows, cols)))
+    return [(int(r), int(c)) for r, c in zip(rows, cols) if m[r, c] >= min_iou]
+
+
+def match_count(built: list, truth: list, min_iou: float = MATCH_IOU) -> int:
+    """How many of ``truth`` rectangles :func:`match_pairs` matches."""
+    return len(match_pairs(built, truth, min_iou))
+
+
+#: The hand count's kinds by how they move: a door and an appliance door (an oven's or a
+#: refrigerator's) turn on a hinge, a drawer slides.
+SWINGS = {"door": "hinge", "appliance_door": "hinge", "drawer": "slide"}
+
+
+def joint_kind(part_name: str) -> str:
+    """``"slide"`` for a built drawer, ``"hinge"`` for a door or a flap (by the part's name)."""
+    return "slide" if "drawer" in part_name.lower() else "hinge"
+
+
+def kinds_right(fronts: list, truth_kinds: list[str], pairs: list[tuple[int, int]]) -> int:
+    """How many matched pairs move the way the hand count says (hinge or slide)."""
+    return sum(joint_kind(fronts[b][1]) == SWINGS.get(truth_kinds[t], "") for b, t in pairs)
 
 
 def is_front(part) -> bool:
@@ -171,7 +193,9 @@ def main(argv: list[str] | None = None) -> int:
                 not_built.append(f"{name}: {type(err).__name__}: {str(err).splitlines()[0]}")
                 continue
             fronts = built_fronts(result.scene, size)
-            matched = match_count([b for _, _, b in fronts], truth)
+            pairs = match_pairs([b for _, _, b in fronts], truth)
+            matched = len(pairs)
+            right = kinds_right(fronts, [f["kind"] for f in photo["fronts"]], pairs)
             runs = sorted({o for o, _, _ in fronts if result.scene.object(o).asset.is_fixed and o.startswith("built_in")})
             opened, pulled, pf = (0, 0, []) if args.no_probe else _probe(result.files.mjcf, fronts)
             probe[0] += opened
@@ -185,32 +209,34 @@ def main(argv: list[str] | None = None) -> int:
                 cf = built_fronts(control.scene, size)
                 c_built, c_matched = len(cf), match_count([b for _, _, b in cf], truth)
             group = photo["scene"]
-            t = totals.setdefault(group, [0, 0, 0, 0, 0])
+            t = totals.setdefault(group, [0, 0, 0, 0, 0, 0])
             t[0] += len(truth)
             t[1] += len(fronts)
             t[2] += matched
+            t[5] += right
             if not args.no_control:
                 t[3] += c_built
                 t[4] += c_matched
             if group == "kitchen":
                 kitchens[name] = sum(1 for o in runs if any(ob == o for ob, _, _ in fronts))
-            rows.append(f"| {name} | {group} | {len(truth)} | {len(fronts)} | {matched} | {c_built} | {c_matched} | {len(runs)} "
+            rows.append(f"| {name} | {group} | {len(truth)} | {len(fronts)} | {matched} | {right} | {c_built} | {c_matched} | {len(runs)} "
                         f"| {opened}/{pulled} | {wall:.1f} | {cpu:.1f} |")
     print(f"Load average at the end: {' / '.join(f'{v:.1f}' for v in os.getloadavg())} (2 cores shared with other work).")
     print()
-    print("| photo | scene | hand-counted fronts | built fronts | matched (IoU >= 0.5) | control: built | control: matched | built-in runs | opened fully / pulled | build s (wall) | build s (CPU) |")
-    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print("| photo | scene | hand-counted fronts | built fronts | matched (IoU >= 0.5) | matched, joint kind right | control: built | control: matched | built-in runs | opened fully / pulled | build s (wall) | build s (CPU) |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     print("\n".join(rows))
     print()
-    print("| photos | hand-counted | built | matched | recall | precision | control recall | control precision |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|")
-    all_t = [sum(t[i] for t in totals.values()) for i in range(5)]
+    print("| photos | hand-counted | built | matched | recall | precision | joint kind right (of matched) | control recall | control precision |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+    all_t = [sum(t[i] for t in totals.values()) for i in range(6)]
     for group, t in list(totals.items()) + [("all", all_t)]:
         rec = f"{t[2]}/{t[0]} = {t[2] / t[0]:.2f}" if t[0] else "-"
         prec = f"{t[2]}/{t[1]} = {t[2] / t[1]:.2f}" if t[1] else "-"
         crec = f"{t[4]}/{t[0]} = {t[4] / t[0]:.2f}" if t[0] and not args.no_control else "-"
         cprec = f"{t[4]}/{t[3]} = {t[4] / t[3]:.2f}" if t[3] and not args.no_control else "-"
-        print(f"| {group} | {t[0]} | {t[1]} | {t[2]} | {rec} | {prec} | {crec} | {cprec} |")
+        kind = f"{t[5]}/{t[2]}" if t[2] else "-"
+        print(f"| {group} | {t[0]} | {t[1]} | {t[2]} | {rec} | {prec} | {kind} | {crec} | {cprec} |")
     print()
     if probe[1]:
         print(f"Probe: {probe[0]} of {probe[1]} built doors and drawers open fully = {probe[0] / probe[1]:.0%} "
