@@ -120,11 +120,13 @@ def _select_instances(
     k: CameraIntrinsics,
     config: PerceptionConfig,
     geometric: bool,
-) -> tuple[list[tuple[np.ndarray, np.ndarray]], int]:
+) -> tuple[list[tuple[np.ndarray, np.ndarray]], int, int]:
     """The instances of ``labels`` ((H, W) int, 0 = none) that are objects: enough observed points
     and a plausible height, in front of the walls. Returns (mask, points' pixels) pairs, both
-    (H, W) bool, largest first and at most ``config.max_objects``, and how many instances were
-    left out for lying behind a wall.
+    (H, W) bool, largest first and at most ``config.max_objects``, how many instances were left
+    out for lying behind a wall, and how many for having fewer than
+    ``config.min_object_points`` measured points off the room's planes (of those whose mask
+    holds at least that many pixels: smaller ones are specks, not things left out).
 
     An image-space mask (a learned segmenter's, ``geometric`` False) bleeds over object edges onto
     the room and onto whatever is behind: its points keep the room out and only the 3D clusters
@@ -132,14 +134,17 @@ def _select_instances(
     """
     kept: list[tuple[np.ndarray, np.ndarray]] = []
     behind_walls = 0
+    unmeasured = 0
     for inst in range(1, int(labels.max(initial=0)) + 1):
         mask = labels == inst
         pix = mask & valid & ~frame.background
         if pix.sum() < config.min_object_points:
+            unmeasured += int(mask.sum() >= config.min_object_points)
             continue
         if not geometric:
             pix = _main_clusters(pix, points_cam, k)
             if pix.sum() < config.min_object_points:
+                unmeasured += 1
                 continue
         if frame.room.walls:
             # The room is the space in front of its (infinite) walls. What lies mostly behind one
@@ -175,7 +180,7 @@ def _select_instances(
             InputWarning,
             stacklevel=3,
         )
-    return kept[: config.max_objects], behind_walls
+    return kept[: config.max_objects], behind_walls, unmeasured
 
 
 def _fill_silhouettes(kept: list[tuple[np.ndarray, np.ndarray]], labels: np.ndarray, free: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -427,10 +432,12 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
             observation = dataclasses.replace(observation, depth_m=np.asarray(obj_depth, dtype=np.float32))
             backends.append(BackendUse("placement", "floor-contact", f"{len(lifted)} detected objects the estimated depth missed stand at their floor contact"))
 
-    kept, behind_walls = _select_instances(labels, points_cam, valid, frame, k, config, geometric)
+    kept, behind_walls, unmeasured = _select_instances(labels, points_cam, valid, frame, k, config, geometric)
     kept = _fill_silhouettes(kept, labels, frame.background | ~valid)
     if behind_walls:
         backends.append(BackendUse("walls", "room-planes", f"{len(frame.room.walls)} walls; left out {behind_walls} objects behind them (in the next room)"))
+    if unmeasured:
+        backends.append(BackendUse("segmentation", seg_use.backend, f"left out {unmeasured} segmented objects with fewer than {config.min_object_points} measured depth points off the room's planes (too dark, far or thin for the depth to build them)"))
     if not kept:
         raise EmptySceneError(
             f"no objects found in {loaded.image_path}: nothing stands out from the floor and walls; "
@@ -548,5 +555,6 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
 
             backends.append(BackendUse("room-closure", "room-box", f"{bg.closed_sides} sides of the room with no wall seen closed by a wall {BOX_CLEARANCE_M * 100:.0f} cm past the farthest point seen "
                                        f"(at least {CAMERA_MARGIN_M} m beside the camera; a guess, drawn only)"))
-    return Perception(observation, camera, room, tuple(objects), tuple(backends), removed_mask=removed, left_out_behind_walls=behind_walls)
+    return Perception(observation, camera, room, tuple(objects), tuple(backends), removed_mask=removed, left_out_behind_walls=behind_walls,
+                      left_out_unmeasured=unmeasured)
 

@@ -426,9 +426,9 @@ class Perception:
 
     removed_mask: None, or (H, W) bool pixels of people and animals seen in the photo: not part of
     the room, in no object, filled in the background with what they hid.
-    left_out_behind_walls: how many of the segmenter's instances were left out for lying mostly
-    behind a wall (in the next room, or past the end of a wall where the room turns a corner):
-    not among ``objects``, counted so that reports can say so."""
+    left_out_behind_walls / left_out_unmeasured: how many of the segmenter's instances were left
+    out for lying mostly behind a wall (the next room, or past a wall's end) / for too few measured
+    depth points to build (dark or far furniture): not in ``objects``, counted for the reports."""
 
     observation: Observation
     camera: Camera
@@ -437,6 +437,7 @@ class Perception:
     backends: tuple[BackendUse, ...] = ()
     removed_mask: np.ndarray | None = None
     left_out_behind_walls: int = 0
+    left_out_unmeasured: int = 0
 
     def __post_init__(self) -> None:
         if self.removed_mask is not None:

@@ -176,7 +176,8 @@ def object_fates(perception: Perception, layout: LayoutResult, scene: Scene, fir
     movable + fixed_with_joints + fixed + background; interactive = movable + fixed_with_joints
     (a robot can act on them); background_by_reason counts the reasons; left_out_behind_walls:
     instances perception left out for lying behind a wall (not among the perceived: in the next
-    room, or past a wall's end where the room turns). ``first_verdict``: the
+    room, or past a wall's end where the room turns); left_out_unmeasured: instances left out for
+    too little measured depth on them (not among the perceived either). ``first_verdict``: the
     physics check before any object became background in the settle rounds (the layout may
     already have kept some where seen); ``verdict``: the final one. Rest and penetration are
     given over the perceived objects (an object that became background is not at rest: it is
@@ -202,6 +203,7 @@ def object_fates(perception: Perception, layout: LayoutResult, scene: Scene, fir
         "background_by_reason": dict(sorted(by_reason.items(), key=lambda kv: (-kv[1], kv[0]))),
         "interactive_share_of_perceived": _r(len(movable + with_joints) / len(names), 4) if names else None,
         "left_out_behind_walls": int(perception.left_out_behind_walls),
+        "left_out_unmeasured": int(perception.left_out_unmeasured),
     }
     if verdict is not None:
         at_rest = sum(1 for v in verdict.objects if not v.fixed and v.name in movable and v.drift_m <= bounds.stable_drift_m and v.rotation_deg <= bounds.stable_rotation_deg)
@@ -226,8 +228,10 @@ def fates_line(f: dict) -> str:
     """One line: ``9 perceived: 6 movable, 1 fixed with joints, 0 fixed, 2 background (hangs 1, ...)``."""
     why = ", ".join(f"{k} {n}" for k, n in f["background_by_reason"].items())
     behind = f.get("left_out_behind_walls", 0)
+    unmeasured = f.get("left_out_unmeasured", 0)
     return (f"{f['perceived']} perceived: {f['movable']} movable, {f['fixed_with_joints']} fixed with joints, {f['fixed']} fixed, "
-            f"{f['background']} background" + (f" ({why})" if why else "") + (f"; {behind} left out behind walls" if behind else ""))
+            f"{f['background']} background" + (f" ({why})" if why else "") + (f"; {behind} left out behind walls" if behind else "")
+            + (f"; {unmeasured} left out with too little depth on them" if unmeasured else ""))
 
 
 def _generation_use(backend: str, scene: Scene) -> dict:

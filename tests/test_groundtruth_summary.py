@@ -10,7 +10,7 @@ from scene_builder.bench.groundtruth import Item, ObjectFates, summarize
 
 def test_summary_pools_penetration_and_rest_over_builds_and_the_readme_shows_them():
     items = [
-        Item("real", "a", "built", 10.0, fates=ObjectFates(5, 4, 0, 1, (), 2), max_penetration_m=0.0004, stable=True),
+        Item("real", "a", "built", 10.0, fates=ObjectFates(5, 4, 0, 1, (), 2, 3), max_penetration_m=0.0004, stable=True),
         Item("real", "b", "built", 12.0, fates=ObjectFates(3, 3, 0, 0), max_penetration_m=0.1035, stable=False),
         Item("real", "c", "refused", 0.1, "bad depth"),
     ]
@@ -23,7 +23,10 @@ def test_summary_pools_penetration_and_rest_over_builds_and_the_readme_shows_the
     assert "| 103.50 | 1 |" in block
     # Instances left out behind walls are no perceived object, but they are counted and shown.
     assert s["left_out_behind_walls"] == 2
-    assert block.splitlines()[-1].endswith("| 103.50 | 1 | 2 |")
+    # ... and so are those left out for too little measured depth on them.
+    assert s["left_out_unmeasured"] == 3
+    assert "left out with too little depth (not perceived) |" in block
+    assert block.splitlines()[-1].endswith("| 103.50 | 1 | 2 | 3 |")
 
 
 def test_mask_precision_leaves_out_what_the_annotation_is_too_small_to_judge():
@@ -85,3 +88,4 @@ def test_the_builds_fates_line_says_how_many_instances_were_left_out_behind_wall
          "background_by_reason": {"hangs": 1}, "left_out_behind_walls": 2}
     assert fates_line(f) == "9 perceived: 5 movable, 0 fixed with joints, 0 fixed, 4 background (hangs 1); 2 left out behind walls"
     assert fates_line({**f, "left_out_behind_walls": 0}).endswith("4 background (hangs 1)")
+    assert fates_line({**f, "left_out_unmeasured": 3}).endswith("; 2 left out behind walls; 3 left out with too little depth on them")

@@ -107,6 +107,19 @@ def test_sunrgbd_ground_truth_boxes():
     assert set(hits) == {"bed", "night_stand"}
 
 
+def test_segmented_objects_with_too_little_depth_to_build_are_counted_not_lost():
+    """sunrgbd_000017's depth is a 13 % subsample, and the far dark chest of drawers and the
+    lamp's base have a few dozen points each: they are no objects, and the perception says how
+    many it left out so (report.json's object fates), rather than losing them silently."""
+    d = REAL_DATA / "sunrgbd_000017_mmdet3d"
+    if not d.exists():
+        pytest.skip(f"shared data not present: {d}")
+    p = perceive(_spec(d), PerceptionConfig(), seed=0)
+    assert p.left_out_unmeasured >= 2
+    said = [b.reason for b in p.backends if b.task == "segmentation" and "left out" in b.reason]
+    assert said and said[0].startswith(f"left out {p.left_out_unmeasured} segmented objects with fewer than")
+
+
 def test_plain_bedroom_photo_keeps_the_bed_whole_to_its_headboard():
     """sunrgbd_imvotenet_000003 as a plain photo (no depth): single-view depth stands the detected
     bed as a cuboid with a headboard. Its top and headboard are the bed's (the depth segmenter

@@ -143,7 +143,8 @@ def interactive_names(scene) -> tuple[str, ...]:
 class ObjectFates:
     """Every object perception found, by what it ended as. perceived = interactive + fixed +
     background; background_reasons: (name, reason) of those that became static background;
-    left_out_behind_walls: instances perception left out for lying behind a wall (not perceived)."""
+    left_out_behind_walls: instances perception left out for lying behind a wall (not perceived);
+    left_out_unmeasured: instances left out for too little measured depth on them (not perceived)."""
 
     perceived: int
     interactive: int
@@ -151,9 +152,10 @@ class ObjectFates:
     background: int
     background_reasons: tuple[tuple[str, str], ...] = ()
     left_out_behind_walls: int = 0
+    left_out_unmeasured: int = 0
 
 
-def object_fates(perceived_names, scene, placements, left_out_behind_walls: int = 0) -> ObjectFates:
+def object_fates(perceived_names, scene, placements, left_out_behind_walls: int = 0, left_out_unmeasured: int = 0) -> ObjectFates:
     """Fates of ``perceived_names`` (every object perception found) in the built ``scene``."""
     inter = set(interactive_names(scene))
     placed = {o.name for o in scene.objects}
@@ -161,7 +163,7 @@ def object_fates(perceived_names, scene, placements, left_out_behind_walls: int 
     n = len(tuple(perceived_names))
     n_inter = sum(1 for name in perceived_names if name in inter)
     n_fixed = sum(1 for name in perceived_names if name in placed and name not in inter)
-    return ObjectFates(n, n_inter, n_fixed, n - n_inter - n_fixed, reasons, int(left_out_behind_walls))
+    return ObjectFates(n, n_inter, n_fixed, n - n_inter - n_fixed, reasons, int(left_out_behind_walls), int(left_out_unmeasured))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -459,7 +461,8 @@ def run_item(set_name: str, sample: Path, out_dir: Path, config, with_depth: boo
         return Item(set_name, sample.name, "crash", time.perf_counter() - start, traceback.format_exc())
     seconds = time.perf_counter() - start
     scene = result.scene
-    fates = object_fates([o.name for o in result.perception.objects], scene, result.layout.placements, result.perception.left_out_behind_walls)
+    fates = object_fates([o.name for o in result.perception.objects], scene, result.layout.placements, result.perception.left_out_behind_walls,
+                         result.perception.left_out_unmeasured)
     inter = set(interactive_names(scene))
     objects = tuple((o.name, o.asset.label, o.name in inter) for o in scene.objects)
     item = Item(set_name, sample.name, "built", seconds, fates=fates, objects=objects,
@@ -542,6 +545,7 @@ def summarize(items: list[Item]) -> dict:
             "fixed_objects": sum(f.fixed for f in fates),
             "background_objects": sum(f.background for f in fates),
             "left_out_behind_walls": sum(f.left_out_behind_walls for f in fates),
+            "left_out_unmeasured": sum(f.left_out_unmeasured for f in fates),
             "interactive_share_of_perceived": (sum(f.interactive for f in fates) / perceived) if perceived else None,
             "build_s_median": float(np.median([i.seconds for i in built])) if built else None,
             # Physical validity of what was built (the objects that ended interactive or fixed):

@@ -70,6 +70,10 @@ def _objects(data: dict) -> str:
     if behind:  # (results written before perception counted them have none)
         head += " left out behind walls (not perceived) |"
         rule += "---:|"
+    unmeasured = any("left_out_unmeasured" in (s.get(n) or {}) for n in ("sun-rgbd", "sun-plain", "coco", "real"))
+    if unmeasured:
+        head += " left out with too little depth (not perceived) |"
+        rule += "---:|"
     fates = [head, rule]
     for name in ("sun-rgbd", "sun-plain", "coco", "real"):
         v = s.get(name)
@@ -81,6 +85,8 @@ def _objects(data: dict) -> str:
             row += f" {_f(v.get('max_penetration_mm'), 2)} | {v.get('builds_not_at_rest', '-')} |"
         if behind:
             row += f" {v.get('left_out_behind_walls', '-')} |"
+        if unmeasured:
+            row += f" {v.get('left_out_unmeasured', '-')} |"
         fates.append(row)
     lines.append("\n".join(fates))
     meta = data.get("meta", {})
