@@ -13,7 +13,7 @@ photo and the world through the same plane (:class:`scene_builder.model.Front`).
 An object of a category that may hold drawers without being made of them (a table that is a
 night stand, a desk) keeps its fronts only when at least ``MIN_HANDLED_FRONTS`` of them show a
 handle; ovens and dishwashers get their largest front as a flap hinged at the bottom, microwaves
-as a door hinged on the left. On sensor
+as a door hinged on the left; a "drawer" taller than ``DRAWER_MAX_HEIGHT_M`` is a door. On sensor
 depth, a panel whose middle lies ``OPENING_RECESS_M`` (``HANDLED_RECESS_M`` for a case good's panel with a
 handle) or more behind the face is an opening, not a front (the cubbies of an open bookcase).
 """
@@ -49,6 +49,9 @@ YAW_STEP_DEG = 2.5
 YAW_PX = 160
 #: Fronts smaller than this (m) in either direction are not kept (a sliver of a cut face).
 MIN_FRONT_M = 0.07
+#: A drawer front is at most this high (m; a kitchen's deep pan drawer is about 0.4 m): a taller
+#: "drawer" is a door (a refrigerator's, which the parse reads as a drawer by its centred handle).
+DRAWER_MAX_HEIGHT_M = 0.45
 #: On sensor depth, a "front" whose middle was measured this far (median, m) behind the face is
 #: an opening (an open shelf's cubby, 7-33 cm deep on promptda_arkit's bookcase), not a door or a
 #: drawer. Not on estimated depth, whose relief inside a face is not measured well enough.
@@ -231,7 +234,18 @@ def fronts_on_face(rgb: np.ndarray, camera: Camera, face: Face, label: str = "",
         if depth is not None and _recess_m(px, world, depth, camera) >= deep:
             continue
         score = 0.5 * float(p.handle is not None) + 0.5 * p.support
-        out.append(Front(p.kind, p.hinge, px, world, handle, float(np.clip(score, 0.0, 1.0))))
+        kind, hinge = p.kind, p.hinge
+        if kind == "drawer" and float(np.ptp(world[:, 2])) > DRAWER_MAX_HEIGHT_M:
+            # A door, hinged on the side away from its handle (off the middle), else on the
+            # face's outer side (the pair rule of front_parse).
+            lo, hi = float(np.min(a)), float(np.max(a))
+            mid = 0.5 * (lo + hi)
+            if p.handle is not None and abs(p.handle[0] * m - mid) > 0.05 * (hi - lo):
+                hinge = "right" if p.handle[0] * m < mid else "left"
+            else:
+                hinge = "left" if mid < 0.5 * face.width_m else "right"
+            kind = "door"
+        out.append(Front(kind, hinge, px, world, handle, float(np.clip(score, 0.0, 1.0))))
     if label in ("oven", "dishwasher") and out:
         big = max(range(len(out)), key=lambda i: _area(out[i]))
         out[big] = replace(out[big], kind="flap", hinge="bottom")

@@ -281,6 +281,29 @@ def test_an_appliances_largest_front_moves_as_that_appliance_does(monkeypatch, l
     assert [(f.kind, f.hinge) for f in fronts] == [(kind, hinge)]
 
 
+@pytest.mark.parametrize("top_px, kind", [(250.0, "drawer"), (130.0, "door")])
+def test_a_drawer_front_taller_than_a_drawer_is_a_door(monkeypatch, top_px, kind):
+    """The parse calls a front with a centred handle at least 0.8 as wide as high a drawer; one
+    over DRAWER_MAX_HEIGHT_M high is a door (coco 164's refrigerator, named a cabinet, had its
+    0.55 m main door built as a drawer), hinged on the face's outer side."""
+    import perception.front_parse as front_parse
+    from perception.front_parse import Panel
+    from perception.fronts import DRAWER_MAX_HEIGHT_M, Face, fronts_on_face
+    from scene_builder.model import Camera, CameraIntrinsics
+
+    k = CameraIntrinsics(200.0, 200.0, 99.5, 79.5, 200, 160)
+    rot = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+    cam = Camera(k, np.block([[rot, np.array([[0.0], [0.0], [1.0]])], [np.zeros((1, 3)), np.ones((1, 1))]]))
+    face = Face(np.array([2.0, 0.3, 0.6]), np.array([0.0, -1.0, 0.0]), np.array([-1.0, 0.0, 0.0]), 0.6, 1.0)  # 216 x 360 px, 1/360 m each
+    panel = Panel(np.array([[10.0, 330.0], [200.0, 330.0], [200.0, top_px], [10.0, top_px]]), "drawer", "", (105.0, 0.5 * (top_px + 330.0)), 1.0)
+    monkeypatch.setattr(front_parse, "parse_face", lambda *a, **kw: [panel])
+    fronts = fronts_on_face(np.full((160, 200, 3), 200, np.uint8), cam, face, "cabinet")
+    assert len(fronts) == 1
+    height = float(np.ptp(fronts[0].corners_world_m[:, 2]))
+    assert (height > DRAWER_MAX_HEIGHT_M) == (kind == "door")
+    assert (fronts[0].kind, fronts[0].hinge) == ((kind, "") if kind == "drawer" else (kind, "left"))
+
+
 def _dresser_edges():
     """Edge maps of a dark 1.0 m x 0.6 m dresser face at 5 mm/px (200 x 120 px) as the parser sees
     it: a row of three small drawers (15 cm) over two wide ones, the rows parted by lit bevels
