@@ -26,6 +26,7 @@ __all__ = [
     "OID_TO_LABEL",
     "PASCAL_TO_LABEL",
     "box_iou",
+    "box_is_slice",
     "empty_detections",
     "family",
     "merge_detections",
@@ -140,6 +141,30 @@ def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     area_b = np.prod(np.clip(b[:, 2:] - b[:, :2], 0.0, None), axis=1)
     union = area_a[:, None] + area_b[None, :] - inter
     return np.where(union > 0, inter / np.maximum(union, 1e-12), 0.0)
+
+
+#: A box is a slice of another when it lies inside it (0.9 of its area), shares three of its
+#: four sides (each within SLICE_TOL of the other's side length, at least SLICE_TOL_PX) and
+#: covers at least SLICE_MIN_SHARE of its area.
+SLICE_TOL = 0.05
+SLICE_TOL_PX = 4.0
+SLICE_MIN_SHARE = 0.3
+
+
+def box_is_slice(inner: np.ndarray, outer: np.ndarray) -> bool:
+    """Whether xyxy box ``inner`` (4,) is a slice of xyxy box ``outer`` (4,): its full width or
+    its full height (a cabinet's lower drawers, a bed's foot). A thing on or in front of another
+    (a lamp on a dresser, a book on a bed) shares at most two of its sides."""
+    inner, outer = np.asarray(inner, dtype=np.float64), np.asarray(outer, dtype=np.float64)
+    ow, oh = outer[2] - outer[0], outer[3] - outer[1]
+    iw, ih = inner[2] - inner[0], inner[3] - inner[1]
+    if ow <= 0 or oh <= 0 or iw <= 0 or ih <= 0:
+        return False
+    ix = max(0.0, min(inner[2], outer[2]) - max(inner[0], outer[0])) * max(0.0, min(inner[3], outer[3]) - max(inner[1], outer[1]))
+    if ix < 0.9 * iw * ih or iw * ih < SLICE_MIN_SHARE * ow * oh:
+        return False
+    tol = np.maximum(SLICE_TOL * np.array([ow, oh, ow, oh]), SLICE_TOL_PX)
+    return int(np.sum(np.abs(inner - outer) <= tol)) >= 3
 
 
 def _take(d: Detections, idx: np.ndarray, scores: np.ndarray | None = None) -> Detections:

@@ -48,7 +48,7 @@ import numpy as np
 
 from perception.box_clusters import BOXY, box_slices as _box_slices, cuboid_faces, fill_box, whole_cluster
 from perception.box_segment import HINT_BACKGROUND, HINT_FOREGROUND, HINT_PROBABLY_BACKGROUND, HINT_PROBABLY_FOREGROUND, keep_main_regions
-from perception.detection import CONFIDENT, box_iou, family, merge_detections
+from perception.detection import CONFIDENT, box_iou, box_is_slice, family, merge_detections
 from perception.extras import is_clear, point_normals, solidity
 from perception.protocols import BoxPromptSegmenter, Detections, InstanceMasks, ObjectDetector, SemanticMap
 from scene_builder.model import BackendUse, CameraIntrinsics
@@ -550,10 +550,13 @@ class DetectionSegmenter:
         return keep_main_regions(out.reshape(mask.shape), share=0.1)
 
     def _merge_parts(self, cands: list[_Candidate], points, off_room, focal: float) -> list[_Candidate]:
-        """Two boxes of one family, one inside the other, whose masks depth joins into one
-        connected 3D piece are one object cut in two (a bed boxed whole and by its headboard,
-        each box cut with the other's pixels taken): one candidate, the stronger's, with both
-        masks. Without depth that sees both, nothing is merged."""
+        """Two boxes, one inside the other, whose masks depth joins into one connected 3D piece
+        are one object cut in two (a bed boxed whole and by its headboard, each box cut with the
+        other's pixels taken): one candidate, the stronger's, with both masks. The boxes are of
+        one family, or of any two classes when the inner box is a slice of the outer one
+        (:func:`perception.detection.box_is_slice`: sunrgbd_imvotenet_000005's night stand boxed whole as "oven" and by
+        its lower drawers as "suitcase"; the inner one's mask, painted in front, took most of the
+        whole's, and the whole was dropped). Without depth that sees both, nothing is merged."""
         from perception.segment_depth import cluster_points
 
         order = sorted(range(len(cands)), key=lambda i: (-cands[i].score, i))
@@ -563,7 +566,9 @@ class DetectionSegmenter:
                 continue
             for b in order:
                 ca, cb = cands[a], cands[b]
-                if b == a or b in gone or not cb.depth_sees or cb.label not in family(ca.label):
+                if b == a or b in gone or not cb.depth_sees:
+                    continue
+                if cb.label not in family(ca.label) and not (box_is_slice(ca.box, cb.box) or box_is_slice(cb.box, ca.box)):
                     continue
                 lt, rb = np.maximum(ca.box[:2], cb.box[:2]), np.minimum(ca.box[2:], cb.box[2:])
                 inter = float(np.prod(np.clip(rb - lt, 0.0, None)))

@@ -15,6 +15,7 @@ from perception.detection import (
     OID_TO_LABEL,
     PASCAL_TO_LABEL,
     box_iou,
+    box_is_slice,
     merge_detections,
     suppress,
 )
@@ -83,6 +84,16 @@ def test_box_iou_suppress_and_merge():
     table = _det([[180, 160, 637, 510]], [0.3], ["table"])
     m = merge_detections([(couch, 0.3), (table, 0.5)])
     assert m.labels == ("sofa",)
+
+
+def test_a_slice_box_spans_its_outer_box_one_way_and_shares_three_sides():
+    night_stand = np.array([604.0, 299.0, 729.0, 530.0])
+    assert box_is_slice(np.array([599.0, 365.0, 729.0, 530.0]), night_stand)  # its lower drawers (5 px past the left side)
+    assert box_is_slice(np.array([604.0, 299.0, 729.0, 420.0]), night_stand)  # its upper part
+    assert not box_is_slice(np.array([630.0, 250.0, 700.0, 300.0]), night_stand)  # a lamp on it: not inside
+    assert not box_is_slice(np.array([640.0, 380.0, 700.0, 450.0]), night_stand)  # a handle on its face: no shared side
+    assert not box_is_slice(np.array([604.0, 480.0, 729.0, 530.0]), night_stand)  # its plinth: too small a share
+    assert not box_is_slice(night_stand, np.array([599.0, 365.0, 729.0, 530.0]))  # the whole is no slice of its part
 
 
 def test_family_refinement_follows_a_size_aware_posterior():
