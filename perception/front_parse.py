@@ -23,7 +23,8 @@ rules below use it only for sizes that tolerate a factor of about 1.5).
    side strips are carcass). A front whose handle is near its left or right edge is a door hinged
    on the far side, unless it is wide and low (``WIDE_FRONT_RATIO``) with the handle more than
    ``EDGE_HANDLE_SHARE`` of its width in from the edge (a drawer's pull found off its middle);
-   one with a centred handle that is at least as wide as 0.8 of its height is a drawer; without a handle, a panel wider than 1.3 x its height and under 40 cm high is a drawer,
+   one with a centred handle that is at least as wide as 0.8 of its height is a drawer; without
+   a handle, a panel wider than 1.3 x its height and under 40 cm high is a drawer,
    else a door hinged on the side nearer to the face's border (the outer sides of a pair).
 """
 

@@ -201,8 +201,9 @@ def fronts_on_face(rgb: np.ndarray, camera: Camera, face: Face, label: str = "",
                    depth: np.ndarray | None = None) -> tuple[Front, ...]:
     """The door and drawer fronts on ``face`` of the photo ``rgb`` (the analysis image), left to
     right then top to bottom. ``label``: the object's category (ovens and dishwashers: the largest
-    front is a flap hinged at its bottom; microwaves: a door hinged on its left). ``depth``: measured (sensor) depth of the analysis
-    image, to tell openings from fronts (:data:`OPENING_RECESS_M`)."""
+    front is a flap hinged at its bottom; microwaves: a door hinged on its left). ``depth``:
+    measured (sensor) depth of the analysis image, to tell openings from fronts
+    (:data:`OPENING_RECESS_M`)."""
     from perception.front_parse import parse_face
 
     img, inside, m = rectify(rgb, camera, face, mask)

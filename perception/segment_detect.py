@@ -554,9 +554,10 @@ class DetectionSegmenter:
         are one object cut in two (a bed boxed whole and by its headboard, each box cut with the
         other's pixels taken): one candidate, the stronger's, with both masks. The boxes are of
         one family, or of any two classes when the inner box is a slice of the outer one
-        (:func:`perception.detection.box_is_slice`: sunrgbd_imvotenet_000005's night stand boxed whole as "oven" and by
-        its lower drawers as "suitcase"; the inner one's mask, painted in front, took most of the
-        whole's, and the whole was dropped). Without depth that sees both, nothing is merged."""
+        (:func:`perception.detection.box_is_slice`: sunrgbd_imvotenet_000005's night stand
+        boxed whole as "oven" and by its lower drawers as "suitcase"; the inner one's mask,
+        painted in front, took most of the whole's, and the whole was dropped). Without depth
+        that sees both, nothing is merged."""
         from perception.segment_depth import cluster_points
 
         order = sorted(range(len(cands)), key=lambda i: (-cands[i].score, i))
