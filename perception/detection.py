@@ -25,6 +25,7 @@ __all__ = [
     "FAMILIES",
     "OID_TO_LABEL",
     "PASCAL_TO_LABEL",
+    "box_inside",
     "box_iou",
     "box_is_slice",
     "empty_detections",
@@ -151,6 +152,12 @@ SLICE_TOL_PX = 4.0
 SLICE_MIN_SHARE = 0.3
 
 
+def box_inside(box: np.ndarray, other: np.ndarray, share: float = 0.7) -> bool:
+    """Whether ``share`` of xyxy box ``box`` (4,) lies inside xyxy box ``other`` (4,)."""
+    ix = max(0.0, min(box[2], other[2]) - max(box[0], other[0])) * max(0.0, min(box[3], other[3]) - max(box[1], other[1]))
+    return ix >= share * max((box[2] - box[0]) * (box[3] - box[1]), 1e-9)
+
+
 def box_is_slice(inner: np.ndarray, outer: np.ndarray) -> bool:
     """Whether xyxy box ``inner`` (4,) is a slice of xyxy box ``outer`` (4,): its full width or
     its full height (a cabinet's lower drawers, a bed's foot). A thing on or in front of another
@@ -160,8 +167,7 @@ def box_is_slice(inner: np.ndarray, outer: np.ndarray) -> bool:
     iw, ih = inner[2] - inner[0], inner[3] - inner[1]
     if ow <= 0 or oh <= 0 or iw <= 0 or ih <= 0:
         return False
-    ix = max(0.0, min(inner[2], outer[2]) - max(inner[0], outer[0])) * max(0.0, min(inner[3], outer[3]) - max(inner[1], outer[1]))
-    if ix < 0.9 * iw * ih or iw * ih < SLICE_MIN_SHARE * ow * oh:
+    if not box_inside(inner, outer, 0.9) or iw * ih < SLICE_MIN_SHARE * ow * oh:
         return False
     tol = np.maximum(SLICE_TOL * np.array([ow, oh, ow, oh]), SLICE_TOL_PX)
     return int(np.sum(np.abs(inner - outer) <= tol)) >= 3

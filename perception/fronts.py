@@ -49,6 +49,10 @@ YAW_STEP_DEG = 2.5
 YAW_PX = 160
 #: Fronts smaller than this (m) in either direction are not kept (a sliver of a cut face).
 MIN_FRONT_M = 0.07
+#: An appliance's largest front, whatever the parse read from its window or panel: (kind,
+#: hinge). An oven's or a dishwasher's is a flap hinged at its bottom; a microwave's a door
+#: hinged on its left (its keypad and latch are on the right).
+APPLIANCE_DOORS = {"oven": ("flap", "bottom"), "dishwasher": ("flap", "bottom"), "microwave": ("door", "left")}
 #: A drawer front is at most this high (m; a kitchen's deep pan drawer is about 0.4 m): a taller
 #: "drawer" is a door (a refrigerator's, which the parse reads as a drawer by its centred handle).
 DRAWER_MAX_HEIGHT_M = 0.45
@@ -247,14 +251,10 @@ def fronts_on_face(rgb: np.ndarray, camera: Camera, face: Face, label: str = "",
                 hinge = "left" if mid < 0.5 * face.width_m else "right"
             kind = "door"
         out.append(Front(kind, hinge, px, world, handle, float(np.clip(score, 0.0, 1.0))))
-    if label in ("oven", "dishwasher") and out:
+    if label in APPLIANCE_DOORS and out:
         big = max(range(len(out)), key=lambda i: _area(out[i]))
-        out[big] = replace(out[big], kind="flap", hinge="bottom")
-    elif label == "microwave" and out:
-        # A microwave's door is hinged on its left (its keypad and latch are on the right),
-        # whatever the parse read from the window's frame.
-        big = max(range(len(out)), key=lambda i: _area(out[i]))
-        out[big] = replace(out[big], kind="door", hinge="left")
+        kind, hinge = APPLIANCE_DOORS[label]
+        out[big] = replace(out[big], kind=kind, hinge=hinge)
     return tuple(out)
 
 

@@ -48,7 +48,7 @@ import numpy as np
 
 from perception.box_clusters import BOXY, box_slices as _box_slices, cuboid_faces, fill_box, whole_cluster
 from perception.box_segment import HINT_BACKGROUND, HINT_FOREGROUND, HINT_PROBABLY_BACKGROUND, HINT_PROBABLY_FOREGROUND, keep_main_regions
-from perception.detection import CONFIDENT, box_iou, box_is_slice, family, merge_detections
+from perception.detection import CONFIDENT, box_inside, box_iou, box_is_slice, family, merge_detections
 from perception.extras import is_clear, point_normals, solidity
 from perception.protocols import BoxPromptSegmenter, Detections, InstanceMasks, ObjectDetector, SemanticMap
 from scene_builder.model import BackendUse, CameraIntrinsics
@@ -169,12 +169,6 @@ def _same_object(box: np.ndarray, others: np.ndarray) -> bool:
     small, large = np.minimum(area, areas), np.maximum(area, areas)
     iou = inter / np.maximum(area + areas - inter, 1e-9)
     return bool(np.any((iou >= 0.5) | ((inter >= 0.6 * small) & (small >= 0.5 * large))))
-
-
-def _inside(box: np.ndarray, other: np.ndarray, share: float = 0.7) -> bool:
-    """Whether ``share`` of ``box`` (4,) lies inside ``other`` (4,)."""
-    ix = max(0.0, min(box[2], other[2]) - max(box[0], other[0])) * max(0.0, min(box[3], other[3]) - max(box[1], other[1]))
-    return ix >= share * max((box[2] - box[0]) * (box[3] - box[1]), 1e-9)
 
 
 class DetectionSegmenter:
@@ -421,7 +415,7 @@ class DetectionSegmenter:
                 # a sofa, a book on a bed): then it may be in front of it or on it.
                 taken = claimed.copy()
                 for j in order[:n]:
-                    if not (_inside(c.box, cands[j].box, 0.5) and cands[j].label not in family(c.label)):
+                    if not (box_inside(c.box, cands[j].box, 0.5) and cands[j].label not in family(c.label)):
                         taken |= masks[j]
                 hint[taken & (hint >= 0)] = HINT_PROBABLY_BACKGROUND
                 masks[i] = seg.segment_boxes(rgb, c.box[None], hints=hint[None])[0]
@@ -646,7 +640,7 @@ class DetectionSegmenter:
         sees both (0.3 m apart), else the lower box bottom in the image (for things on one floor,
         the nearer one reaches lower), else the smaller mask."""
 
-        a_in, b_in = _inside(a.box, b.box, 0.8), _inside(b.box, a.box, 0.8)
+        a_in, b_in = box_inside(a.box, b.box, 0.8), box_inside(b.box, a.box, 0.8)
         if a_in != b_in:
             return a_in
         if np.isfinite(med_a) and np.isfinite(med_b) and abs(med_a - med_b) > 0.3:
