@@ -21,7 +21,7 @@ from dataclasses import replace
 import numpy as np
 
 from scene_builder.config import GenerationConfig
-from scene_builder.frames import pose, transform_points
+from scene_builder.frames import cut_by_photo_bottom, pose, transform_points
 from generation.visibility import FreeSpace, surface_samples
 from scene_builder.model import AssetKind, GeneratedAsset, Inertial, ObjectAsset, PerceivedObject, Perception
 
@@ -431,6 +431,13 @@ class ShapePriorGenerator:
         other_objects = [o for o in perception.objects if o.name != obj.name]
         others = [o.points_world_m for o in other_objects]
         snap_m = floor_snap_height_m(obj.points_world_m, others)
+        if cat.on_floor and cut_by_photo_bottom(obj.mask, perception.observation.valid_depth):
+            # The photo's bottom edge cut it (a sideboard's top and upper front in the photo's
+            # corner): what is below it was never seen, so floor furniture reaches the floor,
+            # unless another object's top lies under it (the snap height is then the default).
+            if floor_snap_height_m(obj.points_world_m, others, max_gap_m=np.inf) > snap_m:
+                snap_m = np.inf
+        cut_to_floor = bool(np.isinf(snap_m))
         # The plan orientation of large furniture follows the category's proportions (a sofa
         # seen end-on), unless fronts seen on a face say which face is the front.
         typical = cat.typical_size_m if label in PLAN_BY_PROPORTIONS and not obj.fronts else None
@@ -444,6 +451,8 @@ class ShapePriorGenerator:
         soft = deformable_settings(label)
         kind = None
         description = f"{label} fitted to measured extents {size[0]:.2f} x {size[1]:.2f} x {size[2]:.2f} m (depth x width x height)"
+        if cut_to_floor:
+            description += ", down to the floor below the photo's bottom edge, which cut it"
         cfg = config
 
         rects = []

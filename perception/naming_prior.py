@@ -15,7 +15,7 @@ import numpy as np
 
 from scene_builder.vocabulary import BY_NAME
 
-__all__ = ["CANDIDATES", "GeometricPriorNamer", "MAX_CONFIDENCE", "SIZE_SIGMA_LOG", "shape_rule", "size_distance", "size_log_likelihoods"]
+__all__ = ["CANDIDATES", "GeometricPriorNamer", "MAX_CONFIDENCE", "SIZE_SIGMA_LOG", "height_hypotheses", "shape_rule", "size_distance", "size_log_likelihoods"]
 
 #: The namer never claims more than this: size is weak evidence of what an object is.
 MAX_CONFIDENCE = 0.35
@@ -69,23 +69,50 @@ def shape_rule(size_m: tuple[float, float, float]) -> str | None:
 SIZE_SIGMA_LOG = 0.25
 
 
-def size_log_likelihoods(labels: tuple[str, ...], size_m: tuple[float, float, float]) -> np.ndarray:
+#: Heights tried between an object's seen height and its top's height above the floor when the
+#: photo's bottom edge cut it (:func:`height_hypotheses`).
+HEIGHT_STEPS = 6
+
+
+def height_hypotheses(size_m: tuple[float, float, float], height_max_m: float | None) -> list[tuple[float, float, float]]:
+    """The extents to weigh for an object: ``size_m`` itself, or, when the photo's bottom edge cut
+    the object (its seen height a lower bound, its top's height above the floor ``height_max_m``
+    an upper bound), :data:`HEIGHT_STEPS` heights spaced evenly in log between the two."""
+    length, width, height = (float(s) for s in size_m)
+    if height_max_m is None or height_max_m <= 1.05 * height:
+        return [(length, width, height)]
+    return [(length, width, float(h)) for h in np.geomspace(max(height, 0.01), height_max_m, HEIGHT_STEPS)]
+
+
+def size_log_likelihoods(labels: tuple[str, ...], size_m: tuple[float, float, float], height_max_m: float | None = None) -> np.ndarray:
     """(L,) log-likelihood of the observed extents under each label's typical size:
     -d^2 / (2 SIZE_SIGMA_LOG^2) with d = :func:`size_distance`; the label a shape rule picks is
-    scored as if it were at distance <= 0.5 (:class:`GeometricPriorNamer` does the same)."""
-    rule = shape_rule(size_m)
-    d = np.array([min(size_distance(lab, size_m), 0.5) if lab == rule else size_distance(lab, size_m) for lab in labels])
-    return -0.5 * (d / SIZE_SIGMA_LOG) ** 2
+    scored as if it were at distance <= 0.5 (:class:`GeometricPriorNamer` does the same). With
+    ``height_max_m`` (the photo's bottom edge cut the object: its height is somewhere between the
+    seen one and its top's height above the floor), the likelihood is averaged over the heights of
+    :func:`height_hypotheses` (an interval-censored height, uniform in log)."""
+    from scipy.special import logsumexp
+
+    per = []
+    for size in height_hypotheses(size_m, height_max_m):
+        rule = shape_rule(size)
+        d = np.array([min(size_distance(lab, size), 0.5) if lab == rule else size_distance(lab, size) for lab in labels])
+        per.append(-0.5 * (d / SIZE_SIGMA_LOG) ** 2)
+    return logsumexp(np.array(per), axis=0) - np.log(len(per))
 
 
 class GeometricPriorNamer:
     """Names an object from its gravity-aligned extents (see the module doc)."""
 
-    def name(self, crop_rgb: np.ndarray, crop_mask: np.ndarray, size_m: tuple[float, float, float]) -> tuple[str, float]:
-        """size_m: (length, width, height) with length >= width. Returns (label, confidence)."""
-        dist = {label: size_distance(label, size_m) for label in CANDIDATES}
+    def name(self, crop_rgb: np.ndarray, crop_mask: np.ndarray, size_m: tuple[float, float, float], height_max_m: float | None = None) -> tuple[str, float]:
+        """size_m: (length, width, height) with length >= width; height_max_m: see
+        :func:`size_log_likelihoods` (the height that fits a label best within the range is
+        used). Returns (label, confidence)."""
+        sizes = height_hypotheses(size_m, height_max_m)
+        dist = {label: min(size_distance(label, s) for s in sizes) for label in CANDIDATES}
         best = min(CANDIDATES, key=lambda lab: dist[lab])
         best_d = dist[best]
+        size_m = min(sizes, key=lambda s: size_distance(best, s))
         rule = shape_rule(size_m)
         # The rule stands unless the size already picked a label of the same family.
         family = ("table", "bed", "sofa") if rule == "table" else ("wardrobe", "shelf")

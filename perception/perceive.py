@@ -15,7 +15,7 @@ from perception.protocols import InstanceMasks
 from perception.room import RoomFrame, estimate_room, place_floor_under
 from scene_builder.config import InputSpec, PerceptionConfig
 from scene_builder.errors import EmptySceneError, InputError
-from scene_builder.frames import transform_points
+from scene_builder.frames import cut_by_photo_bottom, transform_points
 from scene_builder.model import BackendUse, Camera, CameraIntrinsics, Observation, PerceivedObject, Perception, Room
 
 __all__ = ["BEHIND_WALL_TOLERANCE_M", "CROP_CONTEXT", "MAX_OBJECT_HEIGHT_M", "MIN_OBJECT_HEIGHT_M", "MIN_RAISED_OBJECT_HEIGHT_M", "RAISED_M", "gravity_aligned_size", "perceive"]
@@ -461,6 +461,9 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     kept.sort(key=centroid)
     points_world = [transform_points(frame.world_from_camera, points_cam[pix]) for _, pix in kept]
     sizes = [gravity_aligned_size(p) for p in points_world]
+    # An object the photo's bottom edge cut (a sideboard filling the bottom corner) is taller than
+    # it was seen, by at most down to the floor: named over that range of heights.
+    tops = [float(np.quantile(p[:, 2], 0.99)) if cut_by_photo_bottom(mask, valid) else None for (mask, _), p in zip(kept, points_world)]
     crops = [_crop(loaded.rgb, mask) for mask, _ in kept]
     # Names the segmenter knows (a detector's class) come first; the naming backend names the rest.
     names: list[tuple[str, float] | None] = [_given_name(mask, labels, masks) for mask, _ in kept]
@@ -474,11 +477,12 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
         names[i] = None
     todo = [i for i, n in enumerate(names) if n is None]
     if todo and hasattr(namer, "name_many"):  # a learned namer runs all crops in one batch
-        for i, n in zip(todo, namer.name_many([crops[i][0] for i in todo], [crops[i][1] for i in todo], [sizes[i] for i in todo])):
+        cut = [[tops[i] for i in todo]] if any(tops[i] is not None for i in todo) else []
+        for i, n in zip(todo, namer.name_many([crops[i][0] for i in todo], [crops[i][1] for i in todo], [sizes[i] for i in todo], *cut)):
             names[i] = n
     else:
         for i in todo:
-            names[i] = namer.name(crops[i][0], crops[i][1], sizes[i])
+            names[i] = namer.name(crops[i][0], crops[i][1], sizes[i]) if tops[i] is None else namer.name(crops[i][0], crops[i][1], sizes[i], height_max_m=tops[i])
     for i, n in guessed.items():
         if names[i][0] == "object":
             names[i] = n
@@ -489,7 +493,7 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
 
         # (Not for objects stood on their floor contact: their depth, so their size, is a guess.)
         given = [i for i in range(len(kept)) if i not in todo and _instance_id(kept[i][0], labels) not in lifted]
-        refined = refine_in_family(namer, [names[i] for i in given], [crops[i] for i in given], [sizes[i] for i in given])
+        refined = refine_in_family(namer, [names[i] for i in given], [crops[i] for i in given], [sizes[i] for i in given], [tops[i] for i in given])
         for i, n in zip(given, refined):
             names[i] = n
         backends.append(

@@ -86,3 +86,29 @@ def mujoco_camera(world_from_camera: np.ndarray, k: CameraIntrinsics) -> dict[st
         "principalpixel": ((k.width_px - 1) / 2.0 - k.cx_px, (k.height_px - 1) / 2.0 - k.cy_px),
         "sensorsize": (float(k.width_px), float(k.height_px)),
     }
+
+
+
+#: A mask reaching within this share of the photo's height of its last measured row on at least
+#: :data:`BOTTOM_CUT_SHARE` of its columns was cut by the photo's bottom edge: what lies below it
+#: was out of view (a sideboard whose top and upper front fill the photo's bottom corner). A
+#: chair's legs standing on the edge are a small share of its columns. (Segmenters stop a few
+#: pixels short of a photo's edge: slambook frame 5's sideboard mask ends 9 px above it.)
+BOTTOM_CUT_ROWS_SHARE = 0.03
+BOTTOM_CUT_SHARE = 0.3
+
+
+def cut_by_photo_bottom(mask: np.ndarray, valid_depth: np.ndarray | None = None) -> bool:
+    """Whether the (H, W) bool ``mask`` was cut by the photo's bottom edge (see
+    :data:`BOTTOM_CUT_SHARE`). valid_depth: (H, W) bool pixels with measured depth; the bottom edge
+    is its last row with any (a sensor's depth often ends short of the photo's), else row H - 1."""
+    mask = np.asarray(mask, dtype=np.bool_)
+    columns = mask.any(axis=0)
+    if not columns.any():
+        return False
+    last = mask.shape[0] - 1
+    if valid_depth is not None:
+        rows_valid = np.flatnonzero(np.asarray(valid_depth, dtype=np.bool_).any(axis=1))
+        last = int(rows_valid[-1]) if len(rows_valid) else last
+    rows = max(2, int(round(BOTTOM_CUT_ROWS_SHARE * mask.shape[0])))
+    return bool(mask[max(0, last - rows + 1) : last + 1].any(axis=0).sum() >= BOTTOM_CUT_SHARE * columns.sum())

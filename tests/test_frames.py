@@ -45,3 +45,27 @@ def test_mujoco_camera_reproduces_opencv_projection():
     p_cam = frames.transform_points(np.linalg.inv(world_from_camera), target[None])
     u, v = k.project(p_cam)[0]
     assert abs(xs.mean() - u) < 0.5 and abs(ys.mean() - v) < 0.5
+
+
+def test_a_mask_filling_the_photos_bottom_corner_is_cut_by_its_bottom_edge_a_chairs_legs_are_not():
+    h, w = 480, 640
+    sideboard = np.zeros((h, w), bool)
+    sideboard[230:475, 25:190] = True  # a segmenter stops a few pixels short of the edge
+    assert frames.cut_by_photo_bottom(sideboard)
+    # slambook frame 5's sideboard ends at row 461; its sensor's depth ends at row 471 (a flat
+    # frame below it), which is the edge.
+    sideboard[462:] = False
+    assert not frames.cut_by_photo_bottom(sideboard)
+    valid = np.zeros((h, w), bool)
+    valid[40:472] = True
+    assert frames.cut_by_photo_bottom(sideboard, valid)
+    chair = np.zeros((h, w), bool)
+    chair[100:400, 200:400] = True  # seat and back well above the edge ...
+    for x in (205, 390):
+        chair[400:480, x : x + 8] = True  # ... two legs standing on it
+    assert not frames.cut_by_photo_bottom(chair)
+    floating = np.zeros((h, w), bool)
+    floating[100:300, 100:300] = True
+    assert not frames.cut_by_photo_bottom(floating) and not frames.cut_by_photo_bottom(np.zeros((h, w), bool))
+    valid[:] = True  # measured down to the last row: 18 px short, over 3 % of the height
+    assert not frames.cut_by_photo_bottom(sideboard, valid)

@@ -121,3 +121,26 @@ def test_combined_score_weighs_classifier_against_size():
     assert best(combined_label_posterior({"laptop": 0.9}, (0.6, 0.5, 1.5))) != "laptop"
     # More classifier evidence, more confidence.
     assert combined_label_posterior({"drawer_unit": 0.8}, size)["drawer_unit"] > combined_label_posterior({"drawer_unit": 0.3}, size)["drawer_unit"]
+
+
+def test_an_object_cut_by_the_photos_bottom_edge_is_named_over_its_possible_heights():
+    """slambook frame 5's sideboard: its top and upper front fill the photo's bottom corner, 1.06 x
+    0.24 x 0.31 m seen, its top 0.98 m above the floor. Named from the seen extents alone it was a
+    monitor (a 1 m wide slab); its height lies between 0.31 and 0.98 m, and over that range
+    furniture standing on the floor is likelier. With no room above the seen height (top = seen
+    height) nothing changes."""
+    from perception.learned.naming import combined_label_posterior
+    from perception.naming_prior import GeometricPriorNamer, height_hypotheses
+
+    seen = (1.06, 0.24, 0.31)
+    assert height_hypotheses(seen, None) == [seen] and height_hypotheses(seen, 0.31) == [seen]
+    heights = [s[2] for s in height_hypotheses(seen, 0.98)]
+    assert heights[0] == pytest.approx(0.31) and heights[-1] == pytest.approx(0.98) and heights == sorted(heights)
+    flat = combined_label_posterior(None, seen)
+    cut = combined_label_posterior(None, seen, 0.98)
+    assert combined_label_posterior(None, seen, 0.31) == pytest.approx(flat)
+    furniture = ("cabinet", "table", "desk", "shelf", "drawer_unit", "sideboard")
+    assert sum(cut.get(k, 0.0) for k in furniture) > 2.0 * sum(flat.get(k, 0.0) for k in furniture)
+    assert cut["monitor"] < flat["monitor"]
+    crop, mask = np.zeros((4, 4, 3), np.uint8), np.ones((4, 4), bool)
+    assert GeometricPriorNamer().name(crop, mask, seen)[0] != GeometricPriorNamer().name(crop, mask, seen, height_max_m=0.98)[0]
