@@ -431,10 +431,12 @@ class ShapePriorGenerator:
         other_objects = [o for o in perception.objects if o.name != obj.name]
         others = [o.points_world_m for o in other_objects]
         snap_m = floor_snap_height_m(obj.points_world_m, others)
-        if cat.on_floor and cut_by_photo_bottom(obj.mask, perception.observation.valid_depth):
+        floor_seen = any(b.task == "floor" and b.backend == "floor-plane" for b in perception.backends)
+        if floor_seen and cat.on_floor and cut_by_photo_bottom(obj.mask, perception.observation.valid_depth):
             # The photo's bottom edge cut it (a sideboard's top and upper front in the photo's
             # corner): what is below it was never seen, so floor furniture reaches the floor,
             # unless another object's top lies under it (the snap height is then the default).
+            # (Not to a floor put under what was seen: a close-up of a cabinet shows no floor.)
             if floor_snap_height_m(obj.points_world_m, others, max_gap_m=np.inf) > snap_m:
                 snap_m = np.inf
         cut_to_floor = bool(np.isinf(snap_m))

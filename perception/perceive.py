@@ -462,8 +462,9 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     points_world = [transform_points(frame.world_from_camera, points_cam[pix]) for _, pix in kept]
     sizes = [gravity_aligned_size(p) for p in points_world]
     # An object the photo's bottom edge cut (a sideboard filling the bottom corner) is taller than
-    # it was seen, by at most down to the floor: named over that range of heights.
-    tops = [float(np.quantile(p[:, 2], 0.99)) if cut_by_photo_bottom(mask, valid) else None for (mask, _), p in zip(kept, points_world)]
+    # it was seen, by at most down to the floor: named over that range of heights (when the floor
+    # was seen: a floor put under what was seen says nothing of what is below the photo).
+    tops = [float(np.quantile(p[:, 2], 0.99)) if frame.floor_found and cut_by_photo_bottom(mask, valid) else None for (mask, _), p in zip(kept, points_world)]
     crops = [_crop(loaded.rgb, mask) for mask, _ in kept]
     # Names the segmenter knows (a detector's class) come first; the naming backend names the rest.
     names: list[tuple[str, float] | None] = [_given_name(mask, labels, masks) for mask, _ in kept]
