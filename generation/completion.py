@@ -48,6 +48,8 @@ def complete_occupancy(
     mirror_x: bool = False,
     fill_down: bool = True,
     blocked=None,
+    resting_m: np.ndarray | None = None,
+    resting_bottom_m: np.ndarray | None = None,
 ) -> VoxelGeometry:
     """Completed occupancy of an object from its observed surface points.
 
@@ -55,8 +57,12 @@ def complete_occupancy(
     frame. size_m: (3,) box extents (the box spans x in [-D/2, D/2], y in [-W/2, W/2], z in
     [0, H]). resolution: voxels along the longest side. blocked: optional callable mapping (V, 3)
     asset-frame points to (V,) bool "cannot be this object" (seen free space, another object's
-    surface): voxel centres it marks are never filled. Returns a :class:`VoxelGeometry`. Raises
-    ValueError when no observed point lies in the box.
+    surface): voxel centres it marks are never filled. resting_m: (M, 3) observed points (asset
+    frame) of other objects resting on this one, with resting_bottom_m (M,) the bottom height of
+    the object each belongs to: what they hide below their bottom is this object's (the back of a
+    sideboard's top under the tea set standing on it), extruded along the rays like its own
+    surface. Returns a :class:`VoxelGeometry`. Raises ValueError when no observed point lies in
+    the box.
     """
     from scipy import ndimage
     from scipy.spatial import cKDTree
@@ -91,6 +97,13 @@ def complete_occupancy(
     reach = np.maximum(1.5 * spacing, 0.75 * s / np.maximum(rng_v, 1e-9))
     behind = (dist <= reach) & (rng_v >= rng_p[nn] - 0.5 * s)
     occ |= behind.reshape(dims)
+    if resting_m is not None and len(resting_m):
+        rel_r = np.asarray(resting_m, dtype=np.float64) - cam
+        rng_r = np.linalg.norm(rel_r, axis=1)
+        tree_r = cKDTree(rel_r / np.maximum(rng_r[:, None], 1e-12))
+        dist_r, nn_r = tree_r.query(dir_v, k=1)
+        hidden = (dist_r <= reach) & (rng_v >= rng_r[nn_r] - 0.5 * s) & (centres[:, 2] < np.asarray(resting_bottom_m)[nn_r])
+        occ |= hidden.reshape(dims)
 
     if mirror_y:
         occ |= occ[:, ::-1, :]

@@ -141,6 +141,31 @@ def _ownership(obj: PerceivedObject) -> tuple[np.ndarray, float, tuple]:
     return thin, float(np.percentile(p[:, 2], 2)), _column(p)
 
 
+#: Another object rests on this one when its bottom (2nd height percentile) lies within this of
+#: this one's top (98th) and RESTING_SHARE of its points lie over this one's box in plan.
+RESTING_BAND_M = 0.05
+RESTING_SHARE = 0.5
+
+
+def _resting_on(obj: PerceivedObject, others: list[PerceivedObject], world_from_box: np.ndarray, size_m) -> tuple[np.ndarray, np.ndarray]:
+    """(M, 3) box-frame points of the objects of ``others`` resting on ``obj`` (see
+    :data:`RESTING_BAND_M`) and (M,) the box-frame bottom of the object each belongs to."""
+    top = float(np.percentile(obj.points_world_m[:, 2], 98))
+    box_from_world = np.linalg.inv(world_from_box)
+    half = np.asarray(size_m, dtype=np.float64)[:2] / 2.0
+    pts, bottoms = [np.zeros((0, 3))], [np.zeros(0)]
+    for o in others:
+        bottom = float(np.percentile(o.points_world_m[:, 2], 2))
+        if abs(bottom - top) > RESTING_BAND_M:
+            continue
+        local = transform_points(box_from_world, o.points_world_m)
+        if np.mean(np.all(np.abs(local[:, :2]) <= half, axis=1)) < RESTING_SHARE:
+            continue
+        pts.append(local)
+        bottoms.append(np.full(len(local), bottom - float(world_from_box[2, 3])))
+    return np.concatenate(pts), np.concatenate(bottoms)
+
+
 def _column(points_world_m: np.ndarray):
     """(plan outline as a shapely Polygon, bottom, top) of another object's observed points: the
     convex hull of their plan positions, shrunk by 2 cm, and their 2nd / 98th height
@@ -604,7 +629,9 @@ class ShapePriorGenerator:
                             out |= inside
             return out
 
-        geometry = complete_occupancy(pts, cam, size, config.voxel_resolution, mirror_y=True, mirror_x=label in _MIRROR_X, blocked=blocked)
+        resting, resting_bottom = _resting_on(obj, other_objects, fit.world_from_box, size)
+        geometry = complete_occupancy(pts, cam, size, config.voxel_resolution, mirror_y=True, mirror_x=label in _MIRROR_X, blocked=blocked,
+                                      resting_m=resting, resting_bottom_m=resting_bottom)
         specs = [PartSpec("body", None, geometry, cm.material, affordance_rank=3, affordance="pick up or push",
                           description=f"{label}: observed shell extruded and mirrored", shell_thickness_m=cm.shell_thickness_m,
                           rgba=rgba)]

@@ -236,3 +236,35 @@ def test_a_shape_contradicts_estimated_depth_only_beyond_its_relative_error():
     assert share("depth-anything", 2.8) == 0.0
     assert share("sensor", 2.4) == 1.0 and share("depth-anything", 2.4) == 1.0
     assert share("sensor", 3.0) == 0.0
+
+
+def test_what_an_object_resting_on_the_back_of_a_top_hides_is_the_tops():
+    """A sideboard's top seen from above the front, a tea set standing on the back of it: the
+    camera saw the top's front 60 % and the set, not the back of the top under and behind the
+    set. Extruded from its own points alone the top stops where the set begins (the set had no
+    face to rest on and was made background); what the set hides below its bottom is the
+    sideboard's, and the completed top reaches the back."""
+    rng = np.random.default_rng(7)
+    size = np.array([0.5, 1.0, 0.9])  # x: depth (front at +0.25), y: width, z: height
+    camera = np.array([2.0, 0.0, 1.6])
+    n = 4000
+    top = np.column_stack([rng.uniform(-0.05, 0.25, n), rng.uniform(-0.5, 0.5, n), np.full(n, 0.9)])
+    front = np.column_stack([np.full(n, 0.25), rng.uniform(-0.5, 0.5, n), rng.uniform(0.0, 0.9, n)])
+    own = np.vstack([top, front])
+    tea_front = np.column_stack([np.full(n, -0.05), rng.uniform(-0.5, 0.5, n), rng.uniform(0.9, 1.05, n)])
+    tea_top = np.column_stack([rng.uniform(-0.25, -0.05, n), rng.uniform(-0.5, 0.5, n), np.full(n, 1.05)])
+    tea = np.vstack([tea_front, tea_top])
+    probe = np.array([-0.2, 0.0, 0.885])  # just under the top, at its back, under the set
+
+    def filled(vg) -> bool:
+        i = np.floor((probe - vg.origin_m) / vg.voxel_size_m).astype(int)
+        return bool(vg.occupancy[tuple(i)])
+
+    alone = complete_occupancy(own, camera, size, 40)
+    assert not filled(alone)
+    with_set = complete_occupancy(own, camera, size, 40, resting_m=tea, resting_bottom_m=np.full(len(tea), 0.9))
+    assert filled(with_set)
+    # Nothing above the set's bottom is taken, and the front half is the same.
+    k = int(np.floor((0.9 - with_set.origin_m[2]) / with_set.voxel_size_m)) + 1
+    assert not with_set.occupancy[:, :, k + 1 :].any()
+    assert np.array_equal(alone.occupancy[alone.occupancy.shape[0] // 2 + 2 :], with_set.occupancy[with_set.occupancy.shape[0] // 2 + 2 :])
