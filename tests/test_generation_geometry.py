@@ -268,3 +268,31 @@ def test_what_an_object_resting_on_the_back_of_a_top_hides_is_the_tops():
     k = int(np.floor((0.9 - with_set.origin_m[2]) / with_set.voxel_size_m)) + 1
     assert not with_set.occupancy[:, :, k + 1 :].any()
     assert np.array_equal(alone.occupancy[alone.occupancy.shape[0] // 2 + 2 :], with_set.occupancy[with_set.occupancy.shape[0] // 2 + 2 :])
+
+
+def test_only_objects_standing_on_a_top_count_as_resting_on_it():
+    """shape_prior._resting_on: the piece on the sideboard's top (its bottom at the top's height,
+    over the top in plan) rests on it; a lamp beside the sideboard at the same height (not over
+    it), a picture hanging above it and the chair in front of it do not."""
+    from generation.shape_prior import _resting_on
+    from scene_builder.model import PerceivedObject
+
+    rng = np.random.default_rng(3)
+
+    def obj(i, lo, hi):
+        p = rng.uniform(lo, hi, size=(400, 3))
+        return PerceivedObject(i, f"o_{i}", "box", 0.9, np.zeros((4, 4), bool), p, np.zeros((400, 3), np.uint8))
+
+    sideboard = obj(1, (-0.25, -0.5, 0.0), (0.25, 0.5, 0.9))
+    piece = obj(2, (-0.2, 0.1, 0.9), (-0.05, 0.3, 1.05))
+    lamp = obj(3, (0.5, 0.7, 0.9), (0.7, 0.9, 1.4))
+    picture = obj(4, (-0.3, -0.2, 1.3), (-0.28, 0.2, 1.8))
+    chair = obj(5, (0.6, -0.3, 0.0), (1.1, 0.2, 0.9))
+    pts, bottoms = _resting_on(sideboard, [piece, lamp, picture, chair], np.eye(4), np.array([0.5, 1.0, 0.9]))
+    assert len(pts) == 400 and np.allclose(pts, piece.points_world_m)
+    assert np.allclose(bottoms, np.percentile(piece.points_world_m[:, 2], 2))
+    # In the box frame: a box whose bottom is 0.2 m above the floor gives bottoms 0.2 m lower.
+    lifted = np.eye(4)
+    lifted[2, 3] = 0.2
+    _, b2 = _resting_on(sideboard, [piece], lifted, np.array([0.5, 1.0, 0.9]))
+    assert np.allclose(b2, bottoms - 0.2)
