@@ -149,13 +149,14 @@ RESTING_SHARE = 0.5
 
 def _resting_on(obj: PerceivedObject, others: list[PerceivedObject], world_from_box: np.ndarray, size_m) -> tuple[np.ndarray, np.ndarray]:
     """(M, 3) box-frame points of the objects of ``others`` resting on ``obj`` (see
-    :data:`RESTING_BAND_M`) and (M,) the box-frame bottom of the object each belongs to."""
-    top = float(np.percentile(obj.points_world_m[:, 2], 98))
+    :data:`RESTING_BAND_M`) and (M,) the box-frame bottom of the object each belongs to. (The
+    heights are :func:`_ownership`'s, cached per object.)"""
+    top = _ownership(obj)[2][2]
     box_from_world = np.linalg.inv(world_from_box)
     half = np.asarray(size_m, dtype=np.float64)[:2] / 2.0
     pts, bottoms = [np.zeros((0, 3))], [np.zeros(0)]
     for o in others:
-        bottom = float(np.percentile(o.points_world_m[:, 2], 2))
+        bottom = _ownership(o)[1]
         if abs(bottom - top) > RESTING_BAND_M:
             continue
         local = transform_points(box_from_world, o.points_world_m)

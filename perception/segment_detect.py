@@ -565,9 +565,7 @@ class DetectionSegmenter:
                     continue
                 if cb.label not in family(ca.label) and not (box_is_slice(ca.box, cb.box) or box_is_slice(cb.box, ca.box)):
                     continue
-                lt, rb = np.maximum(ca.box[:2], cb.box[:2]), np.minimum(ca.box[2:], cb.box[2:])
-                inter = float(np.prod(np.clip(rb - lt, 0.0, None)))
-                if inter < 0.7 * min(float(np.prod(ca.box[2:] - ca.box[:2])), float(np.prod(cb.box[2:] - cb.box[:2]))):
+                if not (box_inside(ca.box, cb.box) or box_inside(cb.box, ca.box)):  # 0.7 of the smaller inside the other
                     continue
                 pa, pb = ca.mask & off_room, cb.mask & off_room
                 if pa.sum() < self.min_points or pb.sum() < self.min_points:

@@ -88,7 +88,6 @@ def mujoco_camera(world_from_camera: np.ndarray, k: CameraIntrinsics) -> dict[st
     }
 
 
-
 #: A mask reaching within this share of the photo's height of its last measured row on at least
 #: :data:`BOTTOM_CUT_SHARE` of its columns was cut by the photo's bottom edge: what lies below it
 #: was out of view (a sideboard whose top and upper front fill the photo's bottom corner). A
