@@ -261,20 +261,22 @@ def refine_in_family(
     crops: list[tuple[np.ndarray, np.ndarray]],
     sizes: list[tuple[float, float, float]],
     heights_max_m: list[float | None] | None = None,
+    lengths_max_m: list[float | None] | None = None,
 ) -> list[tuple[str, float]]:
     """Detector names refined within their family by a namer that weighs size and appearance
     (``label_scores_many``: EfficientNet-Lite0 with the size prior): a member of the family whose
     posterior is :data:`REFINE_RATIO` times the detector label's replaces it. names: (label,
     score) per object; crops: (crop_rgb, crop_mask) per object; sizes: gravity-aligned extents;
-    heights_max_m: per object, None or its top's height when the photo's bottom edge cut it.
+    heights_max_m: per object, None or its top's height when the photo's bottom edge cut it;
+    lengths_max_m: per object, None or the most its length can be when a side edge of the photo cut it.
     Names of single-member families, and all names when the namer has no posterior, stay."""
     idx = [i for i, (lab, _) in enumerate(names) if len(family(lab)) > 1]
     if not idx or not hasattr(namer, "label_scores_many"):
         return list(names)
-    args = [[crops[i][0] for i in idx], [crops[i][1] for i in idx], [sizes[i] for i in idx]]
-    if heights_max_m is not None and any(heights_max_m[i] is not None for i in idx):
-        args.append([heights_max_m[i] for i in idx])  # (a namer without the argument is asked without it)
-    post = namer.label_scores_many(*args)
+    # (a namer is asked without the bounds no object has: a plug-in may not take them)
+    bounds = {key: [vals[i] for i in idx] for key, vals in (("heights_max_m", heights_max_m), ("lengths_max_m", lengths_max_m))
+              if vals is not None and any(vals[i] is not None for i in idx)}
+    post = namer.label_scores_many([crops[i][0] for i in idx], [crops[i][1] for i in idx], [sizes[i] for i in idx], **bounds)
     out = list(names)
     for i, p in zip(idx, post):
         lab, score = names[i]

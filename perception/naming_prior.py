@@ -15,7 +15,7 @@ import numpy as np
 
 from scene_builder.vocabulary import BY_NAME
 
-__all__ = ["CANDIDATES", "GeometricPriorNamer", "MAX_CONFIDENCE", "SIZE_SIGMA_LOG", "height_hypotheses", "shape_rule", "size_distance", "size_log_likelihoods"]
+__all__ = ["CANDIDATES", "GeometricPriorNamer", "MAX_CONFIDENCE", "SIZE_SIGMA_LOG", "height_hypotheses", "LENGTH_CAP_M", "LENGTH_FACTOR", "shape_rule", "size_distance", "size_log_likelihoods"]
 
 #: The namer never claims more than this: size is weak evidence of what an object is.
 MAX_CONFIDENCE = 0.35
@@ -74,27 +74,37 @@ SIZE_SIGMA_LOG = 0.25
 HEIGHT_STEPS = 6
 
 
-def height_hypotheses(size_m: tuple[float, float, float], height_max_m: float | None) -> list[tuple[float, float, float]]:
+def height_hypotheses(size_m: tuple[float, float, float], height_max_m: float | None, length_max_m: float | None = None) -> list[tuple[float, float, float]]:
     """The extents to weigh for an object: ``size_m`` itself, or, when the photo's bottom edge cut
     the object (its seen height a lower bound, its top's height above the floor ``height_max_m``
-    an upper bound), :data:`HEIGHT_STEPS` heights spaced evenly in log between the two."""
+    an upper bound), :data:`HEIGHT_STEPS` heights spaced evenly in log between the two; likewise,
+    when a side edge of the photo cut it (its seen length a lower
+    bound, ``length_max_m`` an upper one), :data:`HEIGHT_STEPS` lengths (every pair of the two)."""
     length, width, height = (float(s) for s in size_m)
-    if height_max_m is None or height_max_m <= 1.05 * height:
-        return [(length, width, height)]
-    return [(length, width, float(h)) for h in np.geomspace(max(height, 0.01), height_max_m, HEIGHT_STEPS)]
+    heights = [height] if height_max_m is None or height_max_m <= 1.05 * height else list(np.geomspace(max(height, 0.01), height_max_m, HEIGHT_STEPS))
+    lengths = [length] if length_max_m is None or length_max_m <= 1.05 * length else list(np.geomspace(max(length, 0.01), length_max_m, HEIGHT_STEPS))
+    return [(float(ln), width, float(h)) for ln in lengths for h in heights]
 
 
-def size_log_likelihoods(labels: tuple[str, ...], size_m: tuple[float, float, float], height_max_m: float | None = None) -> np.ndarray:
+#: An object a side edge of the photo cut is weighed at lengths up to LENGTH_FACTOR times the seen
+#: one, at most LENGTH_CAP_M (a bed's or a sofa's length): what is out of view is taken to be no
+#: more than what is in it.
+LENGTH_FACTOR = 2.0
+LENGTH_CAP_M = 2.5
+
+
+def size_log_likelihoods(labels: tuple[str, ...], size_m: tuple[float, float, float], height_max_m: float | None = None, length_max_m: float | None = None) -> np.ndarray:
     """(L,) log-likelihood of the observed extents under each label's typical size:
     -d^2 / (2 SIZE_SIGMA_LOG^2) with d = :func:`size_distance`; the label a shape rule picks is
     scored as if it were at distance <= 0.5 (:class:`GeometricPriorNamer` does the same). With
     ``height_max_m`` (the photo's bottom edge cut the object: its height is somewhere between the
-    seen one and its top's height above the floor), the likelihood is averaged over the heights of
-    :func:`height_hypotheses` (an interval-censored height, uniform in log)."""
+    seen one and its top's height above the floor) or ``length_max_m`` (a side edge of the photo cut it), the
+    likelihood is averaged over the extents of :func:`height_hypotheses` (interval-censored
+    extents, uniform in log)."""
     from scipy.special import logsumexp
 
     per = []
-    for size in height_hypotheses(size_m, height_max_m):
+    for size in height_hypotheses(size_m, height_max_m, length_max_m):
         rule = shape_rule(size)
         d = np.array([min(size_distance(lab, size), 0.5) if lab == rule else size_distance(lab, size) for lab in labels])
         per.append(-0.5 * (d / SIZE_SIGMA_LOG) ** 2)
@@ -104,11 +114,13 @@ def size_log_likelihoods(labels: tuple[str, ...], size_m: tuple[float, float, fl
 class GeometricPriorNamer:
     """Names an object from its gravity-aligned extents (see the module doc)."""
 
-    def name(self, crop_rgb: np.ndarray, crop_mask: np.ndarray, size_m: tuple[float, float, float], height_max_m: float | None = None) -> tuple[str, float]:
-        """size_m: (length, width, height) with length >= width; height_max_m: see
-        :func:`size_log_likelihoods` (the height that fits a label best within the range is
+    def name(
+        self, crop_rgb: np.ndarray, crop_mask: np.ndarray, size_m: tuple[float, float, float], height_max_m: float | None = None, length_max_m: float | None = None
+    ) -> tuple[str, float]:
+        """size_m: (length, width, height) with length >= width; height_max_m, length_max_m: see
+        :func:`size_log_likelihoods` (the extents that fit a label best within the ranges are
         used). Returns (label, confidence)."""
-        sizes = height_hypotheses(size_m, height_max_m)
+        sizes = height_hypotheses(size_m, height_max_m, length_max_m)
         dist = {label: min(size_distance(label, s) for s in sizes) for label in CANDIDATES}
         best = min(CANDIDATES, key=lambda lab: dist[lab])
         best_d = dist[best]

@@ -10,9 +10,10 @@ import numpy as np
 from perception.backends import PerceptionRegistries, build_registries
 from perception.inputs import LoadedInput, check_depth, load_input, photo_frame, without_frame
 from perception.lying_on import split_lying, top_height, without_points
-from perception.naming_prior import GeometricPriorNamer
+from perception.naming_prior import LENGTH_CAP_M, LENGTH_FACTOR, GeometricPriorNamer
 from perception.protocols import InstanceMasks
 from perception.room import RoomFrame, estimate_room, place_floor_under
+from perception.seen_extent import SIDEWAYS_MIN_HEIGHT_M, cut_by_side_edge
 from scene_builder.config import InputSpec, PerceptionConfig
 from scene_builder.errors import EmptySceneError, InputError
 from scene_builder.frames import cut_by_photo_bottom, transform_points
@@ -463,8 +464,14 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     sizes = [gravity_aligned_size(p) for p in points_world]
     # An object the photo's bottom edge cut (a sideboard filling the bottom corner) is taller than
     # it was seen, by at most down to the floor: named over that range of heights (when the floor
-    # was seen: a floor put under what was seen says nothing of what is below the photo).
+    # was seen: a floor put under what was seen says nothing of what is below the photo). A piece
+    # of furniture a side edge cut (a dresser at the photo's edge) is longer than seen: named over
+    # a range of lengths (perception.seen_extent).
     tops = [float(np.quantile(p[:, 2], 0.99)) if frame.floor_found and cut_by_photo_bottom(mask, valid) else None for (mask, _), p in zip(kept, points_world)]
+    spans = [min(LENGTH_FACTOR * s[0], max(LENGTH_CAP_M, s[0])) if s[2] >= SIDEWAYS_MIN_HEIGHT_M and cut_by_side_edge(mask) else None for (mask, _), s in zip(kept, sizes)]
+
+    def bounds(ids: list[int]) -> dict[str, list[float | None]]:
+        return {key: [vals[i] for i in ids] for key, vals in (("heights_max_m", tops), ("lengths_max_m", spans)) if any(vals[i] is not None for i in ids)}
     crops = [_crop(loaded.rgb, mask) for mask, _ in kept]
     # Names the segmenter knows (a detector's class) come first; the naming backend names the rest.
     names: list[tuple[str, float] | None] = [_given_name(mask, labels, masks) for mask, _ in kept]
@@ -478,12 +485,13 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
         names[i] = None
     todo = [i for i, n in enumerate(names) if n is None]
     if todo and hasattr(namer, "name_many"):  # a learned namer runs all crops in one batch
-        cut = [[tops[i] for i in todo]] if any(tops[i] is not None for i in todo) else []
-        for i, n in zip(todo, namer.name_many([crops[i][0] for i in todo], [crops[i][1] for i in todo], [sizes[i] for i in todo], *cut)):
+        # (a namer is asked without the bounds no object has: a plug-in may not take them)
+        for i, n in zip(todo, namer.name_many([crops[i][0] for i in todo], [crops[i][1] for i in todo], [sizes[i] for i in todo], **bounds(todo))):
             names[i] = n
     else:
         for i in todo:
-            names[i] = namer.name(crops[i][0], crops[i][1], sizes[i]) if tops[i] is None else namer.name(crops[i][0], crops[i][1], sizes[i], height_max_m=tops[i])
+            one = {key[:-3] + "_m": vals[0] for key, vals in bounds([i]).items()}  # heights_max_m -> height_max_m
+            names[i] = namer.name(crops[i][0], crops[i][1], sizes[i], **one)
     for i, n in guessed.items():
         if names[i][0] == "object":
             names[i] = n
@@ -494,7 +502,7 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
 
         # (Not for objects stood on their floor contact: their depth, so their size, is a guess.)
         given = [i for i in range(len(kept)) if i not in todo and _instance_id(kept[i][0], labels) not in lifted]
-        refined = refine_in_family(namer, [names[i] for i in given], [crops[i] for i in given], [sizes[i] for i in given], [tops[i] for i in given])
+        refined = refine_in_family(namer, [names[i] for i in given], [crops[i] for i in given], [sizes[i] for i in given], [tops[i] for i in given], [spans[i] for i in given])
         for i, n in zip(given, refined):
             names[i] = n
         backends.append(

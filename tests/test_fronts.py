@@ -180,6 +180,19 @@ def test_match_count_is_one_to_one_at_iou_half():
     assert match_count([], truth) == 0
 
 
+def test_a_front_cut_by_the_photos_edge_is_compared_as_far_as_it_is_seen():
+    from scene_builder.bench.fronts import seen_rectangle
+
+    # a dresser's drawer reaching 150 px past the right edge of a 730 x 530 photo, and the hand
+    # count's rectangle of what the photo shows of it
+    drawer = np.array([[650.0, 300.0], [880.0, 300.0], [880.0, 362.0], [650.0, 362.0]])
+    assert seen_rectangle(drawer, (730, 530)) == (650.0, 300.0, 730.0, 362.0)
+    assert match_count([seen_rectangle(drawer, (730, 530))], [(652, 300, 730, 362)]) == 1
+    assert match_count([(650.0, 300.0, 880.0, 362.0)], [(652, 300, 730, 362)]) == 0  # IoU 0.34 unclipped
+    gone = seen_rectangle(drawer + [300.0, 0.0], (730, 530))
+    assert gone[0] == gone[2] == 730.0 and match_count([gone], [(652, 300, 730, 362)]) == 0
+
+
 def test_joint_kind_counts_matched_fronts_that_move_as_the_hand_count_says():
     truth = [(0, 0, 10, 10), (10, 0, 20, 10), (20, 0, 30, 10)]
     kinds = ["drawer", "appliance_door", "door"]

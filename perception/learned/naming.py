@@ -227,17 +227,20 @@ def _label_space() -> tuple[tuple[str, ...], np.ndarray]:
     return labels, log_prior
 
 
-def combined_label_posterior(label_probs: dict[str, float] | None, size_m: tuple[float, float, float], height_max_m: float | None = None) -> dict[str, float]:
+def combined_label_posterior(
+    label_probs: dict[str, float] | None, size_m: tuple[float, float, float], height_max_m: float | None = None, length_max_m: float | None = None
+) -> dict[str, float]:
     """One calibrated score per label: posterior over the label space of
     prior x size likelihood (:func:`perception.naming_prior.size_log_likelihoods`, with
-    ``height_max_m`` for an object the photo's bottom edge cut) x classifier
+    ``height_max_m`` for an object the photo's bottom edge cut, ``length_max_m`` for one a side
+    edge cut) x classifier
     likelihood ratio ((p + CLASSIFIER_FLOOR) / CLASSIFIER_FLOOR of the label's summed ImageNet
     probability p; ``label_probs`` None = no classifier). Values sum to 1."""
     from perception.naming_prior import size_log_likelihoods
 
     labels, log_prior = _label_space()
     p = np.array([(label_probs or {}).get(lab, 0.0) for lab in labels])
-    logit = log_prior + size_log_likelihoods(labels, size_m, height_max_m) + np.log1p(p / CLASSIFIER_FLOOR)
+    logit = log_prior + size_log_likelihoods(labels, size_m, height_max_m, length_max_m) + np.log1p(p / CLASSIFIER_FLOOR)
     post = np.exp(logit - logit.max())
     post /= post.sum()
     return {lab: float(v) for lab, v in zip(labels, post)}
@@ -356,16 +359,19 @@ class EfficientNetNamer:
         crop_masks: list[np.ndarray],
         sizes_m: list[tuple[float, float, float] | None],
         heights_max_m: list[float | None] | None = None,
+        lengths_max_m: list[float | None] | None = None,
     ) -> list[dict[str, float]]:
         """Per crop, the posterior per label (sums to 1); with a size of None, the classifier's
-        summed probability per label alone. heights_max_m: per crop, see
-        :func:`combined_label_posterior` (None: no crop was cut by the photo's bottom edge)."""
+        summed probability per label alone. heights_max_m, lengths_max_m: per crop, see
+        :func:`combined_label_posterior` (None: the photo's bottom edge, or side edge, did not cut
+        that crop's object)."""
         probs = self.class_probabilities([self._views(c, m) for c, m in zip(crops_rgb, crop_masks)])
         heights = heights_max_m or [None] * len(sizes_m)
+        lengths = lengths_max_m or [None] * len(sizes_m)
         out = []
-        for p, size, top in zip(probs, sizes_m, heights):
+        for p, size, top, span in zip(probs, sizes_m, heights, lengths):
             lp = label_probabilities(p)
-            out.append(lp if size is None else combined_label_posterior(lp, size, top))
+            out.append(lp if size is None else combined_label_posterior(lp, size, top, span))
         return out
 
     def label_scores(self, crop_rgb: np.ndarray, crop_mask: np.ndarray, size_m: tuple[float, float, float] | None) -> dict[str, float]:
@@ -378,6 +384,7 @@ class EfficientNetNamer:
         crop_masks: list[np.ndarray],
         sizes_m: list[tuple[float, float, float]],
         heights_max_m: list[float | None] | None = None,
+        lengths_max_m: list[float | None] | None = None,
     ) -> list[tuple[str, float]]:
         """(label, confidence in [0, 1]) per crop: the label of highest posterior and its
         posterior; ``("object", 1 - that posterior)`` when the size fits no label (log-size
@@ -386,19 +393,22 @@ class EfficientNetNamer:
 
         probs = self.class_probabilities([self._views(c, m) for c, m in zip(crops_rgb, crop_masks)])
         heights = heights_max_m or [None] * len(sizes_m)
+        lengths = lengths_max_m or [None] * len(sizes_m)
         out = []
-        for p, size, top in zip(probs, sizes_m, heights):
+        for p, size, top, span in zip(probs, sizes_m, heights, lengths):
             lp = label_probabilities(p)
-            post = combined_label_posterior(lp, size, top)
+            post = combined_label_posterior(lp, size, top, span)
             best = max(sorted(post), key=lambda k: post[k])
             conf = float(np.clip(post[best], 0.0, 1.0))
-            sizes = height_hypotheses(size, top)
+            sizes = height_hypotheses(size, top, span)
             if lp.get(best, 0.0) < 0.5 and min(size_distance(lab, s) for lab in post for s in sizes) > _MAX_SIZE_DISTANCE:
                 out.append(("object", 1.0 - conf))
             else:
                 out.append((best, conf))
         return out
 
-    def name(self, crop_rgb: np.ndarray, crop_mask: np.ndarray, size_m: tuple[float, float, float], height_max_m: float | None = None) -> tuple[str, float]:
+    def name(
+        self, crop_rgb: np.ndarray, crop_mask: np.ndarray, size_m: tuple[float, float, float], height_max_m: float | None = None, length_max_m: float | None = None
+    ) -> tuple[str, float]:
         """:meth:`name_many` for one crop."""
-        return self.name_many([crop_rgb], [crop_mask], [size_m], [height_max_m])[0]
+        return self.name_many([crop_rgb], [crop_mask], [size_m], [height_max_m], [length_max_m])[0]

@@ -39,7 +39,7 @@ ANNOTATION = REPO / "tests" / "data" / "fronts_annotation.json"
 MATCH_IOU = 0.5
 FRONT_NAMES = ("door", "drawer", "flap")
 
-__all__ = ["ANNOTATION", "MATCH_IOU", "SWINGS", "built_fronts", "iou", "joint_kind", "kinds_right", "main", "match_count", "match_pairs"]
+__all__ = ["ANNOTATION", "MATCH_IOU", "SWINGS", "built_fronts", "iou", "joint_kind", "kinds_right", "main", "match_count", "match_pairs", "seen_rectangle"]
 
 
 def iou(a, b) -> float:
@@ -91,10 +91,21 @@ def is_front(part) -> bool:
     return part.joint is not None and part.joint.type in (JointType.REVOLUTE, JointType.PRISMATIC) and any(k in name for k in FRONT_NAMES)
 
 
+def seen_rectangle(px: np.ndarray, photo_size: tuple[int, int]) -> tuple[float, float, float, float]:
+    """(x0, y0, x1, y1): the bounding rectangle of the (N, 2) pixels ``px`` clipped to the photo
+    of ``photo_size`` (w, h). The hand count outlines a front the photo's edge cuts (a dresser at
+    the right edge, wall cabinets at the top) as far as it is seen; a front wholly outside keeps
+    an empty rectangle on the edge (built, matching nothing)."""
+    size = np.asarray(photo_size, dtype=np.float64)
+    lo, hi = np.clip(px.min(axis=0), 0.0, size), np.clip(px.max(axis=0), 0.0, size)
+    return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
+
+
 def built_fronts(scene, photo_size: tuple[int, int]) -> list[tuple[str, str, tuple[float, float, float, float]]]:
     """[(object, part, (x0, y0, x1, y1) in the photo's pixels at ``photo_size`` (w, h))] of every
     front part of ``scene``: the bounding rectangle of the part's front face (its visual
-    vertices within 2.5 cm of its largest x, the asset's front) at the placed pose."""
+    vertices within 2.5 cm of its largest x, the asset's front) at the placed pose, clipped to
+    the photo (a front wholly outside it keeps an empty rectangle on the edge: built, unmatched)."""
     from scene_builder.frames import transform_points
 
     k = scene.camera.intrinsics
@@ -111,8 +122,7 @@ def built_fronts(scene, photo_size: tuple[int, int]) -> list[tuple[str, str, tup
             if np.any(pc[:, 2] <= 0.05):
                 continue
             px = k.project(pc) * sx
-            lo, hi = px.min(axis=0), px.max(axis=0)
-            out.append((obj.name, part.name, (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))))
+            out.append((obj.name, part.name, seen_rectangle(px, photo_size)))
     return out
 
 
