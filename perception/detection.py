@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from perception.protocols import Detections
+from perception.protocols import Detections, keywords_taken
 
 __all__ = [
     "COCO_CLASSES",
@@ -273,10 +273,11 @@ def refine_in_family(
     idx = [i for i, (lab, _) in enumerate(names) if len(family(lab)) > 1]
     if not idx or not hasattr(namer, "label_scores_many"):
         return list(names)
-    # (a namer is asked without the bounds no object has: a plug-in may not take them)
+    # (a namer is asked without the bounds no object has, or that it does not take: a plug-in)
     bounds = {key: [vals[i] for i in idx] for key, vals in (("heights_max_m", heights_max_m), ("lengths_max_m", lengths_max_m))
               if vals is not None and any(vals[i] is not None for i in idx)}
-    post = namer.label_scores_many([crops[i][0] for i in idx], [crops[i][1] for i in idx], [sizes[i] for i in idx], **bounds)
+    post = namer.label_scores_many([crops[i][0] for i in idx], [crops[i][1] for i in idx], [sizes[i] for i in idx],
+                                   **keywords_taken(namer.label_scores_many, **bounds))
     out = list(names)
     for i, p in zip(idx, post):
         lab, score = names[i]

@@ -11,7 +11,7 @@ from perception.backends import PerceptionRegistries, build_registries
 from perception.inputs import LoadedInput, check_depth, load_input, photo_frame, without_frame
 from perception.lying_on import split_lying, top_height, without_points
 from perception.naming_prior import LENGTH_CAP_M, LENGTH_FACTOR, GeometricPriorNamer
-from perception.protocols import InstanceMasks
+from perception.protocols import InstanceMasks, keywords_taken
 from perception.room import RoomFrame, estimate_room, place_floor_under
 from perception.seen_extent import SIDEWAYS_MIN_HEIGHT_M, cut_by_side_edge
 from scene_builder.config import InputSpec, PerceptionConfig
@@ -485,13 +485,14 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
         names[i] = None
     todo = [i for i, n in enumerate(names) if n is None]
     if todo and hasattr(namer, "name_many"):  # a learned namer runs all crops in one batch
-        # (a namer is asked without the bounds no object has: a plug-in may not take them)
-        for i, n in zip(todo, namer.name_many([crops[i][0] for i in todo], [crops[i][1] for i in todo], [sizes[i] for i in todo], **bounds(todo))):
+        # (a namer is asked without the bounds no object has, or that it does not take: a plug-in)
+        for i, n in zip(todo, namer.name_many([crops[i][0] for i in todo], [crops[i][1] for i in todo], [sizes[i] for i in todo],
+                                              **keywords_taken(namer.name_many, **bounds(todo)))):
             names[i] = n
     else:
         for i in todo:
             one = {key[:-3] + "_m": vals[0] for key, vals in bounds([i]).items()}  # heights_max_m -> height_max_m
-            names[i] = namer.name(crops[i][0], crops[i][1], sizes[i], **one)
+            names[i] = namer.name(crops[i][0], crops[i][1], sizes[i], **keywords_taken(namer.name, **one))
     for i, n in guessed.items():
         if names[i][0] == "object":
             names[i] = n

@@ -131,6 +131,21 @@ class BoxPromptSegmenter(Protocol):
         ...
 
 
+def keywords_taken(fn, **kwargs) -> dict:
+    """The items of ``kwargs`` that the callable ``fn`` takes by keyword: a plug-in written to an
+    older protocol (an ``ObjectNamer.name`` without ``height_max_m`` / ``length_max_m``) is called
+    without the bounds it does not know, rather than failing on the photos that need them."""
+    import inspect
+
+    try:
+        params = inspect.signature(fn).parameters
+    except (TypeError, ValueError):  # a builtin or C callable without a signature: keep them all
+        return dict(kwargs)
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
+        return dict(kwargs)
+    return {k: v for k, v in kwargs.items() if k in params and params[k].kind is not inspect.Parameter.POSITIONAL_ONLY}
+
+
 class ObjectNamer(Protocol):
     """Names an object crop with a label of ``scene_builder.vocabulary``."""
 
@@ -142,6 +157,6 @@ class ObjectNamer(Protocol):
         object the photo's bottom edge cut, its top's height above the floor (its height lies
         between the seen one and this); length_max_m: None, or, for an object a side edge of the
         photo cut, the most its length can be. Both are optional: a
-        namer that takes neither is called without them. Returns (label, confidence in [0, 1]);
+        namer that takes neither is called without them (:func:`keywords_taken`). Returns (label, confidence in [0, 1]);
         ``("object", c)`` when unknown."""
         ...

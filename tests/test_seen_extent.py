@@ -49,3 +49,28 @@ def test_an_object_a_side_edge_cut_is_named_over_its_possible_lengths():
     assert combined_label_posterior(lp, seen, None, 0.38) == pytest.approx(flat)  # no room to be longer
     crop, mask = np.zeros((4, 4, 3), np.uint8), np.ones((4, 4), bool)
     assert GeometricPriorNamer().name(crop, mask, seen, length_max_m=0.38) == GeometricPriorNamer().name(crop, mask, seen)
+
+
+def test_a_plug_in_namer_of_the_older_protocol_is_called_without_the_bounds():
+    """A namer written before ``height_max_m`` / ``length_max_m`` (name(crop, mask, size)) is
+    called without them on a photo where an object is cut, rather than failing; one that takes
+    them, or **kwargs, gets them."""
+    from perception.protocols import keywords_taken
+
+    class Old:
+        def name(self, crop_rgb, crop_mask, size_m):
+            return "object", 0.1
+
+    class New:
+        def name(self, crop_rgb, crop_mask, size_m, height_max_m=None, length_max_m=None):
+            return "object", 0.1
+
+        def label_scores_many(self, crops, masks, sizes, **bounds):
+            return [{}]
+
+    bounds = {"height_max_m": 0.98, "length_max_m": 0.76}
+    assert keywords_taken(Old().name, **bounds) == {}
+    assert keywords_taken(New().name, **bounds) == bounds
+    assert keywords_taken(New().label_scores_many, **bounds) == bounds
+    crop = np.zeros((4, 4, 3), np.uint8)
+    assert Old().name(crop, np.ones((4, 4), bool), (0.4, 0.1, 1.0), **keywords_taken(Old().name, **bounds)) == ("object", 0.1)
