@@ -470,8 +470,12 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     tops = [float(np.quantile(p[:, 2], 0.99)) if frame.floor_found and cut_by_photo_bottom(mask, valid) else None for (mask, _), p in zip(kept, points_world)]
     spans = [min(LENGTH_FACTOR * s[0], max(LENGTH_CAP_M, s[0])) if s[2] >= SIDEWAYS_MIN_HEIGHT_M and cut_by_side_edge(mask) else None for (mask, _), s in zip(kept, sizes)]
 
-    def bounds(ids: list[int]) -> dict[str, list[float | None]]:
-        return {key: [vals[i] for i in ids] for key, vals in (("heights_max_m", tops), ("lengths_max_m", spans)) if any(vals[i] is not None for i in ids)}
+    def bounds(ids: list[int], one: bool = False) -> dict:
+        """The namer's keyword arguments for objects ``ids`` that have them: per object
+        (``heights_max_m``, ``lengths_max_m``), or for one (``height_max_m``, ``length_max_m``)."""
+        return {f"{what}{'' if one else 's'}_max_m": vals[ids[0]] if one else [vals[i] for i in ids]
+                for what, vals in (("height", tops), ("length", spans)) if any(vals[i] is not None for i in ids)}
+
     crops = [_crop(loaded.rgb, mask) for mask, _ in kept]
     # Names the segmenter knows (a detector's class) come first; the naming backend names the rest.
     names: list[tuple[str, float] | None] = [_given_name(mask, labels, masks) for mask, _ in kept]
@@ -491,8 +495,7 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
             names[i] = n
     else:
         for i in todo:
-            one = {key[:-3] + "_m": vals[0] for key, vals in bounds([i]).items()}  # heights_max_m -> height_max_m
-            names[i] = namer.name(crops[i][0], crops[i][1], sizes[i], **keywords_taken(namer.name, **one))
+            names[i] = namer.name(crops[i][0], crops[i][1], sizes[i], **keywords_taken(namer.name, **bounds([i], one=True)))
     for i, n in guessed.items():
         if names[i][0] == "object":
             names[i] = n
