@@ -15,7 +15,10 @@ import numpy as np
 
 from scene_builder.vocabulary import BY_NAME
 
-__all__ = ["CANDIDATES", "GeometricPriorNamer", "MAX_CONFIDENCE", "SIZE_SIGMA_LOG", "height_hypotheses", "LENGTH_CAP_M", "LENGTH_FACTOR", "shape_rule", "size_distance", "size_log_likelihoods"]
+__all__ = [
+    "CANDIDATES", "EXTENT_STEPS", "GeometricPriorNamer", "LENGTH_CAP_M", "LENGTH_FACTOR", "MAX_CONFIDENCE", "SIZE_SIGMA_LOG",
+    "shape_rule", "size_distance", "size_hypotheses", "size_log_likelihoods",
+]
 
 #: The namer never claims more than this: size is weak evidence of what an object is.
 MAX_CONFIDENCE = 0.35
@@ -69,20 +72,20 @@ def shape_rule(size_m: tuple[float, float, float]) -> str | None:
 SIZE_SIGMA_LOG = 0.25
 
 
-#: Heights tried between an object's seen height and its top's height above the floor when the
-#: photo's bottom edge cut it (:func:`height_hypotheses`).
-HEIGHT_STEPS = 6
+#: Heights (lengths) tried between an object's seen height (length) and its upper bound when an
+#: edge of the photo cut it (:func:`size_hypotheses`).
+EXTENT_STEPS = 6
 
 
-def height_hypotheses(size_m: tuple[float, float, float], height_max_m: float | None, length_max_m: float | None = None) -> list[tuple[float, float, float]]:
+def size_hypotheses(size_m: tuple[float, float, float], height_max_m: float | None, length_max_m: float | None = None) -> list[tuple[float, float, float]]:
     """The extents to weigh for an object: ``size_m`` itself, or, when the photo's bottom edge cut
     the object (its seen height a lower bound, its top's height above the floor ``height_max_m``
-    an upper bound), :data:`HEIGHT_STEPS` heights spaced evenly in log between the two; likewise,
-    when a side edge of the photo cut it (its seen length a lower
-    bound, ``length_max_m`` an upper one), :data:`HEIGHT_STEPS` lengths (every pair of the two)."""
+    an upper bound), :data:`EXTENT_STEPS` heights spaced evenly in log between the two; likewise,
+    when a side edge of the photo cut it (its seen length a lower bound, ``length_max_m`` an
+    upper one), :data:`EXTENT_STEPS` lengths (every pair of a height and a length)."""
     length, width, height = (float(s) for s in size_m)
-    heights = [height] if height_max_m is None or height_max_m <= 1.05 * height else list(np.geomspace(max(height, 0.01), height_max_m, HEIGHT_STEPS))
-    lengths = [length] if length_max_m is None or length_max_m <= 1.05 * length else list(np.geomspace(max(length, 0.01), length_max_m, HEIGHT_STEPS))
+    heights = [height] if height_max_m is None or height_max_m <= 1.05 * height else list(np.geomspace(max(height, 0.01), height_max_m, EXTENT_STEPS))
+    lengths = [length] if length_max_m is None or length_max_m <= 1.05 * length else list(np.geomspace(max(length, 0.01), length_max_m, EXTENT_STEPS))
     return [(float(ln), width, float(h)) for ln in lengths for h in heights]
 
 
@@ -99,12 +102,12 @@ def size_log_likelihoods(labels: tuple[str, ...], size_m: tuple[float, float, fl
     scored as if it were at distance <= 0.5 (:class:`GeometricPriorNamer` does the same). With
     ``height_max_m`` (the photo's bottom edge cut the object: its height is somewhere between the
     seen one and its top's height above the floor) or ``length_max_m`` (a side edge of the photo cut it), the
-    likelihood is averaged over the extents of :func:`height_hypotheses` (interval-censored
+    likelihood is averaged over the extents of :func:`size_hypotheses` (interval-censored
     extents, uniform in log)."""
     from scipy.special import logsumexp
 
     per = []
-    for size in height_hypotheses(size_m, height_max_m, length_max_m):
+    for size in size_hypotheses(size_m, height_max_m, length_max_m):
         rule = shape_rule(size)
         d = np.array([min(size_distance(lab, size), 0.5) if lab == rule else size_distance(lab, size) for lab in labels])
         per.append(-0.5 * (d / SIZE_SIGMA_LOG) ** 2)
@@ -120,7 +123,7 @@ class GeometricPriorNamer:
         """size_m: (length, width, height) with length >= width; height_max_m, length_max_m: see
         :func:`size_log_likelihoods` (the extents that fit a label best within the ranges are
         used). Returns (label, confidence)."""
-        sizes = height_hypotheses(size_m, height_max_m, length_max_m)
+        sizes = size_hypotheses(size_m, height_max_m, length_max_m)
         dist = {label: min(size_distance(label, s) for s in sizes) for label in CANDIDATES}
         best = min(CANDIDATES, key=lambda lab: dist[lab])
         best_d = dist[best]

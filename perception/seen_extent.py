@@ -1,5 +1,5 @@
 """Which objects a side edge of the photo cut: their seen length is a lower bound, and naming
-weighs the lengths they may have (:func:`perception.naming_prior.height_hypotheses`); the photo's
+weighs the lengths they may have (:func:`perception.naming_prior.size_hypotheses`); the photo's
 bottom edge is :func:`scene_builder.frames.cut_by_photo_bottom`'s.
 
 A side is cut when, on at least :data:`CUT_SHARE` of the mask's rows, the mask's outermost pixel

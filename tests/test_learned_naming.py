@@ -130,11 +130,11 @@ def test_an_object_cut_by_the_photos_bottom_edge_is_named_over_its_possible_heig
     furniture standing on the floor is likelier. With no room above the seen height (top = seen
     height) nothing changes."""
     from perception.learned.naming import combined_label_posterior
-    from perception.naming_prior import GeometricPriorNamer, height_hypotheses
+    from perception.naming_prior import GeometricPriorNamer, size_hypotheses
 
     seen = (1.06, 0.24, 0.31)
-    assert height_hypotheses(seen, None) == [seen] and height_hypotheses(seen, 0.31) == [seen]
-    heights = [s[2] for s in height_hypotheses(seen, 0.98)]
+    assert size_hypotheses(seen, None) == [seen] and size_hypotheses(seen, 0.31) == [seen]
+    heights = [s[2] for s in size_hypotheses(seen, 0.98)]
     assert heights[0] == pytest.approx(0.31) and heights[-1] == pytest.approx(0.98) and heights == sorted(heights)
     flat = combined_label_posterior(None, seen)
     cut = combined_label_posterior(None, seen, 0.98)

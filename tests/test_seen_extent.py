@@ -33,12 +33,12 @@ def test_an_object_a_side_edge_cut_is_named_over_its_possible_lengths():
     classifier's drawer_unit at 0.5 (a file cabinet). Named from the seen extents it was a chair
     (a 0.4 m wide, 1 m tall thing); up to twice as long, furniture with drawers wins."""
     from perception.learned.naming import combined_label_posterior
-    from perception.naming_prior import GeometricPriorNamer, height_hypotheses
+    from perception.naming_prior import GeometricPriorNamer, size_hypotheses
 
     seen = (0.38, 0.12, 0.96)
-    lengths = [s[0] for s in height_hypotheses(seen, None, 0.76)]
+    lengths = [s[0] for s in size_hypotheses(seen, None, 0.76)]
     assert lengths[0] == pytest.approx(0.38) and lengths[-1] == pytest.approx(0.76) and lengths == sorted(lengths)
-    assert len(height_hypotheses(seen, 1.5, 0.76)) == len(lengths) ** 2  # every pair of the two
+    assert len(size_hypotheses(seen, 1.5, 0.76)) == len(lengths) ** 2  # every pair of the two
     lp = {"drawer_unit": 0.496, "monitor": 0.02, "desk": 0.018, "cabinet": 0.009}
     flat = combined_label_posterior(lp, seen)
     cut = combined_label_posterior(lp, seen, None, 0.76)

@@ -389,7 +389,7 @@ class EfficientNetNamer:
         """(label, confidence in [0, 1]) per crop: the label of highest posterior and its
         posterior; ``("object", 1 - that posterior)`` when the size fits no label (log-size
         distance over 1 from all) and the classifier gives the best label under 0.5."""
-        from perception.naming_prior import height_hypotheses, size_distance
+        from perception.naming_prior import size_hypotheses, size_distance
 
         probs = self.class_probabilities([self._views(c, m) for c, m in zip(crops_rgb, crop_masks)])
         heights = heights_max_m or [None] * len(sizes_m)
@@ -400,7 +400,7 @@ class EfficientNetNamer:
             post = combined_label_posterior(lp, size, top, span)
             best = max(sorted(post), key=lambda k: post[k])
             conf = float(np.clip(post[best], 0.0, 1.0))
-            sizes = height_hypotheses(size, top, span)
+            sizes = size_hypotheses(size, top, span)
             if lp.get(best, 0.0) < 0.5 and min(size_distance(lab, s) for lab in post for s in sizes) > _MAX_SIZE_DISTANCE:
                 out.append(("object", 1.0 - conf))
             else:
