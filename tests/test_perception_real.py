@@ -139,30 +139,6 @@ def test_a_night_stand_boxed_whole_and_by_its_lower_drawers_is_one_object():
     assert sum(f.kind == "drawer" for f in stand.fronts) >= 2
 
 
-def test_a_namer_without_a_batch_gets_the_bounds_of_an_object_an_edge_cut(monkeypatch):
-    """The geometric-prior namer (one crop at a time) is asked with ``length_max_m`` for the dresser
-    at sunrgbd_imvotenet_000005's right edge (and ``height_max_m`` for what the bottom edge cuts),
-    as the learned namer's batch is."""
-    from perception.naming_prior import GeometricPriorNamer
-
-    d = REAL_DATA / "sunrgbd_imvotenet_000005"
-    if not d.exists():
-        pytest.skip(f"shared data not present: {d}")
-    asked = []
-    original = GeometricPriorNamer.name
-
-    def spy(self, crop_rgb, crop_mask, size_m, **bounds):
-        asked.append(bounds)
-        return original(self, crop_rgb, crop_mask, size_m, **bounds)
-
-    monkeypatch.setattr(GeometricPriorNamer, "name", spy)
-    _CACHE.pop(d.name, None)  # (another test may have perceived it unpatched)
-    _run(d)
-    lengths = [b["length_max_m"] for b in asked if "length_max_m" in b]
-    assert lengths and all(0.3 < v <= 2.5 for v in lengths), asked
-    assert any("height_max_m" in b for b in asked), asked
-
-
 def test_plain_bedroom_photo_keeps_the_bed_whole_to_its_headboard():
     """sunrgbd_imvotenet_000003 as a plain photo (no depth): single-view depth stands the detected
     bed as a cuboid with a headboard. Its top and headboard are the bed's (the depth segmenter

@@ -407,3 +407,28 @@ def test_a_wall_5_6_m_away_in_kinect_depth_steps_is_found():
     # (the quantisation biases nothing by more than a step).
     cam = frame.world_from_camera[:3, 3]
     assert walls[0].signed_distance_m(cam[None])[0] == pytest.approx(5.6, abs=0.1)
+
+
+def test_a_cabinet_the_photos_side_edge_cuts_is_named_over_its_lengths(tmp_path, monkeypatch):
+    """A cabinet 1 m long whose left part is out of the photo: the one-crop namer (geometric prior)
+    is asked with ``length_max_m`` (twice the seen length) for it, and only for it."""
+    from perception.naming_prior import GeometricPriorNamer
+
+    asked = []
+    original = GeometricPriorNamer.name
+
+    def spy(self, crop_rgb, crop_mask, size_m, **bounds):
+        asked.append((tuple(size_m), bounds))
+        return original(self, crop_rgb, crop_mask, size_m, **bounds)
+
+    monkeypatch.setattr(GeometricPriorNamer, "name", spy)
+    truth = _camera(1.4, 12.0, 0.0, 0.0)
+    cabinet = ((3.0, 1.5, 0.0), (3.5, 2.5, 0.9))  # the view's left edge is at y = 1.85 m there
+    depth = _render(truth, [cabinet, TABLE])
+    p = perceive(_write(tmp_path, depth, "edge"), CFG)
+    assert len(p.objects) == 2
+    cut = [(size, b) for size, b in asked if "length_max_m" in b]
+    assert len(cut) == 1, asked
+    (size, bounds), = cut
+    assert 0.25 < size[0] < 0.6  # the 0.35 m of it in view
+    assert bounds["length_max_m"] == pytest.approx(2.0 * size[0])
