@@ -16,7 +16,7 @@ import numpy as np
 from scene_builder.vocabulary import BY_NAME
 
 __all__ = [
-    "CANDIDATES", "EXTENT_STEPS", "GeometricPriorNamer", "LENGTH_CAP_M", "LENGTH_FACTOR", "MAX_CONFIDENCE", "SIZE_SIGMA_LOG",
+    "CANDIDATES", "EXTENT_STEPS", "GeometricPriorNamer", "MAX_CONFIDENCE", "SIZE_SIGMA_LOG",
     "shape_rule", "size_distance", "size_hypotheses", "size_log_likelihoods",
 ]
 
@@ -87,13 +87,6 @@ def size_hypotheses(size_m: tuple[float, float, float], height_max_m: float | No
     heights = [height] if height_max_m is None or height_max_m <= 1.05 * height else list(np.geomspace(max(height, 0.01), height_max_m, EXTENT_STEPS))
     lengths = [length] if length_max_m is None or length_max_m <= 1.05 * length else list(np.geomspace(max(length, 0.01), length_max_m, EXTENT_STEPS))
     return [(float(ln), width, float(h)) for ln in lengths for h in heights]
-
-
-#: An object a side edge of the photo cut is weighed at lengths up to LENGTH_FACTOR times the seen
-#: one, at most LENGTH_CAP_M (a bed's or a sofa's length): what is out of view is taken to be no
-#: more than what is in it.
-LENGTH_FACTOR = 2.0
-LENGTH_CAP_M = 2.5
 
 
 def size_log_likelihoods(labels: tuple[str, ...], size_m: tuple[float, float, float], height_max_m: float | None = None, length_max_m: float | None = None) -> np.ndarray:

@@ -10,10 +10,10 @@ import numpy as np
 from perception.backends import PerceptionRegistries, build_registries
 from perception.inputs import LoadedInput, check_depth, load_input, photo_frame, without_frame
 from perception.lying_on import split_lying, top_height, without_points
-from perception.naming_prior import LENGTH_CAP_M, LENGTH_FACTOR, GeometricPriorNamer
+from perception.naming_prior import GeometricPriorNamer
 from perception.protocols import InstanceMasks, keywords_taken
 from perception.room import RoomFrame, estimate_room, place_floor_under
-from perception.seen_extent import SIDEWAYS_MIN_HEIGHT_M, cut_by_side_edge
+from perception.seen_extent import length_max_m
 from scene_builder.config import InputSpec, PerceptionConfig
 from scene_builder.errors import EmptySceneError, InputError
 from scene_builder.frames import cut_by_photo_bottom, transform_points
@@ -468,7 +468,7 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     # of furniture a side edge cut (a dresser at the photo's edge) is longer than seen: named over
     # a range of lengths (perception.seen_extent).
     tops = [float(np.quantile(p[:, 2], 0.99)) if frame.floor_found and cut_by_photo_bottom(mask, valid) else None for (mask, _), p in zip(kept, points_world)]
-    spans = [min(LENGTH_FACTOR * s[0], max(LENGTH_CAP_M, s[0])) if s[2] >= SIDEWAYS_MIN_HEIGHT_M and cut_by_side_edge(mask) else None for (mask, _), s in zip(kept, sizes)]
+    spans = [length_max_m(mask, s) for (mask, _), s in zip(kept, sizes)]
 
     def bounds(ids: list[int], one: bool = False) -> dict:
         """The namer's keyword arguments for objects ``ids`` that have them: per object

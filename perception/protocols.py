@@ -156,7 +156,7 @@ class ObjectNamer(Protocol):
         (length, width, height) sorted so that length >= width; height_max_m: None, or, for an
         object the photo's bottom edge cut, its top's height above the floor (its height lies
         between the seen one and this); length_max_m: None, or, for an object a side edge of the
-        photo cut, the most its length can be. Both are optional: a
-        namer that takes neither is called without them (:func:`keywords_taken`). Returns (label, confidence in [0, 1]);
+        photo cut, the most its length can be. Both are optional: a namer that takes neither is
+        called without them (:func:`keywords_taken`). Returns (label, confidence in [0, 1]);
         ``("object", c)`` when unknown."""
         ...

@@ -7,7 +7,7 @@ on that side lies within :data:`EDGE_SHARE` of the photo's width of the edge (SU
 dresser at the right edge, 0.38 m of it seen, was named a chair). An object reaching both side
 edges fills the photo's width: a close-up framed on it, not cut (urdformer_label31's cabinet,
 weighed as longer, became a table). Only objects seen at least :data:`SIDEWAYS_MIN_HEIGHT_M` tall
-are weighed so (:mod:`perception.perceive`): a mug at the edge of a close-up of a shelf, weighed
+are weighed so (:func:`length_max_m`): a mug at the edge of a close-up of a shelf, weighed
 as up to twice as wide, became a box that crowded the shelf (promptda_arkit); small things are
 named by what the classifier sees more than by their size.
 
@@ -21,11 +21,16 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CUT_SHARE", "EDGE_SHARE", "SIDEWAYS_MIN_HEIGHT_M", "cut_by_side_edge"]
+__all__ = ["CUT_SHARE", "EDGE_SHARE", "LENGTH_CAP_M", "LENGTH_FACTOR", "SIDEWAYS_MIN_HEIGHT_M", "cut_by_side_edge", "length_max_m"]
 
 EDGE_SHARE = 0.03
 CUT_SHARE = 0.3
 SIDEWAYS_MIN_HEIGHT_M = 0.3
+#: An object a side edge of the photo cut is weighed at lengths up to LENGTH_FACTOR times the seen
+#: one, at most LENGTH_CAP_M (a bed's or a sofa's length): what is out of view is taken to be no
+#: more than what is in it.
+LENGTH_FACTOR = 2.0
+LENGTH_CAP_M = 2.5
 
 
 def cut_by_side_edge(mask: np.ndarray) -> bool:
@@ -41,3 +46,14 @@ def cut_by_side_edge(mask: np.ndarray) -> bool:
     at_left = (left <= near - 1).mean() >= CUT_SHARE
     at_right = (right >= w - near).mean() >= CUT_SHARE
     return bool(at_left != at_right)  # (both: it fills the photo's width, a close-up framed on it)
+
+
+def length_max_m(mask: np.ndarray, size_m: tuple[float, float, float]) -> float | None:
+    """The most the length of an object with (H, W) bool ``mask`` and seen extents ``size_m``
+    (length, width, height) can be, for naming (``ObjectNamer``'s ``length_max_m``): LENGTH_FACTOR
+    times the seen length (LENGTH_CAP_M at most) when a side edge of the photo cut it and it was
+    seen at least SIDEWAYS_MIN_HEIGHT_M tall; None otherwise."""
+    length, _, height = (float(s) for s in size_m)
+    if height < SIDEWAYS_MIN_HEIGHT_M or not cut_by_side_edge(mask):
+        return None
+    return min(LENGTH_FACTOR * length, max(LENGTH_CAP_M, length))

@@ -74,3 +74,16 @@ def test_a_plug_in_namer_of_the_older_protocol_is_called_without_the_bounds():
     assert keywords_taken(New().label_scores_many, **bounds) == bounds
     crop = np.zeros((4, 4, 3), np.uint8)
     assert Old().name(crop, np.ones((4, 4), bool), (0.4, 0.1, 1.0), **keywords_taken(Old().name, **bounds)) == ("object", 0.1)
+
+
+def test_the_length_bound_is_twice_the_seen_length_for_furniture_an_edge_cut():
+    from perception.seen_extent import length_max_m
+
+    dresser = np.zeros((100, 200), dtype=bool)
+    dresser[30:90, 150:200] = True
+    assert length_max_m(dresser, (0.38, 0.12, 0.96)) == pytest.approx(0.76)
+    assert length_max_m(dresser, (1.6, 0.5, 0.9)) == pytest.approx(2.5)  # capped
+    assert length_max_m(dresser, (0.1, 0.05, 0.2)) is None  # a mug: named by what it looks like
+    free = np.zeros((100, 200), dtype=bool)
+    free[30:90, 80:120] = True
+    assert length_max_m(free, (0.38, 0.12, 0.96)) is None  # in full view
