@@ -12,7 +12,8 @@ photo and the world through the same plane (:class:`scene_builder.model.Front`).
 
 An object of a category that may hold drawers without being made of them (a table that is a
 night stand, a desk) keeps its fronts only when at least ``MIN_HANDLED_FRONTS`` of them show a
-handle; ovens and dishwashers get their largest front as a flap hinged at the bottom, microwaves
+handle; a face the photo shows coarser than ``MAX_PHOTO_M_PER_PX`` gets none (too coarse to
+see a pull or a gap: the object is built rigid); ovens and dishwashers get their largest front as a flap hinged at the bottom, microwaves
 as a door hinged on the left; a "drawer" taller than ``DRAWER_MAX_HEIGHT_M`` is a door. On sensor
 depth, a panel whose middle lies ``OPENING_RECESS_M`` (``HANDLED_RECESS_M`` for a case good's panel with a
 handle) or more behind the face is an opening, not a front (the cubbies of an open bookcase).
@@ -65,6 +66,11 @@ OPENING_RECESS_M = 0.05
 #: leaks from a top seen from above onto the face below it (the top drawer of
 #: sunrgbd_imvotenet_000003's night stand read 12 cm behind its face, its bottom drawer 2 cm).
 HANDLED_RECESS_M = 0.15
+#: Fronts are read off a face the photo shows at this many metres per pixel or finer: coarser, a
+#: pull (2-3 cm) is a pixel or two and the gaps between fronts are lost (a chest of drawers 6.5 m
+#: away at 1.2 cm per pixel, sunrgbd_000017_mmdet3d, gave two doors where it has seven drawers):
+#: the object is built without fronts, rigid (the faces of the bench's photos: 0.3-0.9 cm per pixel).
+MAX_PHOTO_M_PER_PX = 0.01
 
 
 @dataclass(frozen=True, eq=False)
@@ -290,6 +296,12 @@ def _area(f: Front) -> float:
     return float(np.linalg.norm(c[1] - c[0]) * np.linalg.norm(c[3] - c[0]))
 
 
+def _photo_m_per_px(face: Face, camera: Camera) -> float:
+    """Metres of ``face`` (at its centre) one photo pixel spans."""
+    centre = face.points(np.array(0.5 * face.width_m), np.array(0.5 * face.height_m))
+    return float(np.linalg.norm(centre - camera.position_m)) / camera.intrinsics.fx_px
+
+
 def with_fronts(objects: tuple[PerceivedObject, ...], observation: Observation, camera: Camera, walls: tuple[Plane, ...] = ()) -> tuple[PerceivedObject, ...]:
     """``objects`` with the fronts seen on the face of each that can have them (see the module
     docstring); the others unchanged."""
@@ -297,7 +309,7 @@ def with_fronts(objects: tuple[PerceivedObject, ...], observation: Observation, 
     for obj in objects:
         if obj.label in FRONT_LABELS or obj.label in MAYBE_FRONT_LABELS:
             face = face_of(obj.points_world_m, camera.position_m, walls)
-            if face.width_m > 0.1 and face.height_m > 0.1:
+            if face.width_m > 0.1 and face.height_m > 0.1 and _photo_m_per_px(face, camera) <= MAX_PHOTO_M_PER_PX:
                 face = refine_yaw(observation.rgb, camera, face, obj.points_world_m)
                 depth = observation.depth_m if observation.depth_source == "sensor" else None
                 fronts = fronts_on_face(observation.rgb, camera, face, obj.label, obj.mask, depth)

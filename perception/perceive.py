@@ -18,6 +18,7 @@ from scene_builder.config import InputSpec, PerceptionConfig
 from scene_builder.errors import EmptySceneError, InputError
 from scene_builder.frames import cut_by_photo_bottom, transform_points
 from scene_builder.model import BackendUse, Camera, CameraIntrinsics, Observation, PerceivedObject, Perception, Room
+from scene_builder.vocabulary import category
 
 __all__ = ["BEHIND_WALL_TOLERANCE_M", "CROP_CONTEXT", "MAX_OBJECT_HEIGHT_M", "MIN_OBJECT_HEIGHT_M", "MIN_RAISED_OBJECT_HEIGHT_M", "RAISED_M", "gravity_aligned_size", "perceive"]
 
@@ -182,6 +183,17 @@ def _select_instances(
             stacklevel=3,
         )
     return kept[: config.max_objects], behind_walls, unmeasured
+
+
+def _unmeasured_instances(labels: np.ndarray, valid: np.ndarray, background: np.ndarray, min_points: int) -> list[int]:
+    """The instances of ``labels`` ((H, W), 1-based) of at least ``min_points`` pixels holding
+    fewer than that many measured pixels (``valid``) off the room's planes (``background``):
+    the ones :func:`_select_instances` would leave out as unmeasured."""
+    ids = np.asarray(labels).ravel()
+    n = int(ids.max(initial=0)) + 1
+    area = np.bincount(ids, minlength=n)
+    measured = np.bincount(ids[(valid & ~background).ravel()], minlength=n)
+    return [i for i in range(1, n) if area[i] >= min_points and measured[i] < min_points]
 
 
 def _fill_silhouettes(kept: list[tuple[np.ndarray, np.ndarray]], labels: np.ndarray, free: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -351,7 +363,6 @@ def _cut_seen_through(
     (:func:`_seen_through`; points and mask pixels: they are what lies behind). A bed seen from
     its foot, whose mattress lies behind a footboard, is within its size and untouched.
     Returns the kept masks and pixels, the points and the number of objects cut."""
-    from scene_builder.vocabulary import category
 
     out_kept, out_points, cut = list(kept), list(points_world), 0
     for i, (label, pts) in enumerate(zip(labels, points_world)):
@@ -415,14 +426,24 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
         backends.append(BackendUse("people", seg_use.backend, f"removed {getattr(masks, 'removed_count', 0)} people or animals ({share:.0f} % of the photo): not part of the room; the background fills what they hid"))
     given_names = getattr(masks, "names", None)
     lifted: tuple[int, ...] = ()
-    if given_names is not None and depth_source != "sensor" and frame.floor_found:
-        # Estimated depth may put a detected object on the room's planes: it stands at its floor contact.
+    if given_names is not None and frame.floor_found:
+        # Estimated depth may put a detected object on the room's planes, and a sensor may not
+        # measure one (too dark or far for it, or a sparse scan: sunrgbd_000017's chest of
+        # drawers holds 53 measured points on 8343 pixels): it stands at its floor contact.
+        # Sensor depth stands wherever it measured enough of an object to build it.
         from perception.contact import stand_on_contacts
 
-        obj_depth, valid, background, labels, lifted = stand_on_contacts(
-            depth_m, valid, frame.background, labels, given_names, frame.world_from_camera, k, config.max_depth_m,
-            getattr(masks, "boxes_xyxy_px", None), frame.room.walls,
+        # (with sensor depth, what stands on the floor: a mirror the sensor sees through, boxed
+        # as a tv, is no object standing on the dresser under it)
+        only = None if depth_source != "sensor" else frozenset(
+            i for i in _unmeasured_instances(labels, valid, frame.background, config.min_object_points)
+            if i <= len(given_names) and given_names[i - 1] and category(given_names[i - 1]).on_floor
         )
+        if only is None or only:
+            obj_depth, valid, background, labels, lifted = stand_on_contacts(
+                depth_m, valid, frame.background, labels, given_names, frame.world_from_camera, k, config.max_depth_m,
+                getattr(masks, "boxes_xyxy_px", None), frame.room.walls, only=only, square_to_walls=only is not None,
+            )
         if lifted:
             points_cam = k.unproject(obj_depth)
             frame = dataclasses.replace(frame, background=background)
@@ -431,7 +452,8 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
             # planes behind a lifted object would carve it away (a refrigerator standing 2 m
             # before the wall estimate kept only the half its contact left).
             observation = dataclasses.replace(observation, depth_m=np.asarray(obj_depth, dtype=np.float32))
-            backends.append(BackendUse("placement", "floor-contact", f"{len(lifted)} detected objects the estimated depth missed stand at their floor contact"))
+            missed = "estimated depth missed" if depth_source != "sensor" else "sensor depth did not measure"
+            backends.append(BackendUse("placement", "floor-contact", f"{len(lifted)} detected objects the {missed} stand at their floor contact"))
 
     kept, behind_walls, unmeasured = _select_instances(labels, points_cam, valid, frame, k, config, geometric)
     kept = _fill_silhouettes(kept, labels, frame.background | ~valid)

@@ -262,6 +262,59 @@ def test_detected_object_stands_at_its_floor_contact():
     assert np.allclose(out4[grown == 1], expect, rtol=1e-3)
 
 
+def test_only_the_instances_asked_stand_at_their_contact_and_their_face_is_square_to_the_room():
+    """With sensor depth, perceive lifts only the detected objects the sensor measured too little
+    of (``only``); a lifted face turned less than FACE_WALL_DEG from facing the camera is square
+    to the room's walls (its normal a wall's, or along a wall), else it faces the camera."""
+    from perception.contact import FACE_WALL_DEG, stand_on_contacts
+    from perception.perceive import _unmeasured_instances
+    from scene_builder.model import CameraIntrinsics, Plane
+
+    h, w, f = 240, 320, 200.0
+    k = CameraIntrinsics(f, f, w / 2, h / 2, w, h, "flag")
+    world_from_camera = np.eye(4)
+    world_from_camera[:3, :3] = [[1, 0, 0], [0, 0, 1], [0, -1, 0]]  # looking along world +y
+    world_from_camera[2, 3] = 1.5
+    depth = np.full((h, w), 3.0, dtype=np.float32)
+    labels = np.zeros((h, w), dtype=np.int32)
+    labels[150:200, 100:140] = 1
+    labels[150:200, 200:240] = 2
+    valid = np.ones((h, w), bool)
+    valid[labels == 2] = False  # the sensor measured nothing on instance 2
+    background = np.zeros((h, w), bool)
+    assert _unmeasured_instances(labels, valid, background, 150) == [2]
+    out, _, _, _, lifted = stand_on_contacts(depth, valid, background, labels, ("cabinet", "cabinet"), world_from_camera, k, only=frozenset({2}))
+    assert lifted == (2,)
+    assert np.array_equal(out[labels != 2], depth[labels != 2])
+
+    def face_normal(walls, square=True):
+        z, _, _, _, _ = stand_on_contacts(depth, valid, background, labels, ("cabinet", "cabinet"), world_from_camera, k, walls=walls, only=frozenset({2}),
+                                          square_to_walls=square)
+        rr, cc = np.nonzero(labels == 2)
+        cam = np.column_stack([(cc - k.cx_px) / f * z[rr, cc], (rr - k.cy_px) / f * z[rr, cc], z[rr, cc]])
+        pts = cam @ world_from_camera[:3, :3].T
+        _, _, vt = np.linalg.svd(pts - pts.mean(axis=0), full_matrices=False)
+        return vt[2] * np.sign(vt[2][1] or 1.0)
+
+    # the contact is 16.7 degrees right of the camera's axis; the face turns to the camera
+    centre = np.array([(220 - w / 2) / f, 1.0])
+    facing = np.array([centre[0], centre[1], 0.0]) / np.linalg.norm(centre)
+    assert np.allclose(face_normal(()), facing, atol=0.02)
+    # a wall turned 10 degrees: its axes lie 26.7 and 63.3 degrees off facing, the face is square
+    # to it; turned 28.3 degrees, both lie 45 degrees off (more than FACE_WALL_DEG): it faces
+    assert FACE_WALL_DEG < 45.0
+    for turn_deg, square in ((10.0, True), (28.3, False)):
+        a = np.radians(turn_deg)
+        wall = Plane(np.array([np.sin(a), -np.cos(a), 0.0]), 20.0, "wall")  # far away: no wall in the way
+        n = face_normal((wall,))
+        if square:
+            assert abs(n @ wall.normal) > 0.999
+        else:
+            assert np.allclose(n, facing, atol=0.02)
+    # walls a single-view estimate guessed are not squared to
+    assert np.allclose(face_normal((Plane(np.array([np.sin(0.17), -np.cos(0.17), 0.0]), 20.0, "wall"),), square=False), facing, atol=0.02)
+
+
 def test_registries_offer_detections_only_with_a_detector(tmp_path, monkeypatch):
     from perception import models
     from perception.backends import build_registries

@@ -389,3 +389,36 @@ def test_the_dark_night_stand_of_a_sun_rgbd_bedroom_gets_its_two_drawers():
 
     owners = [[i for i, f in enumerate(fronts) if points_in_poly([[0.5 * (b[0] + b[2]), 0.5 * (b[1] + b[3])]], f.corners_px)[0]] for b in stand_truth]
     assert sorted(sum(owners, [])) == [0, 1], owners
+
+
+@pytest.mark.parametrize("distance_m, has_fronts", [(1.5, True), (3.0, False)])
+def test_a_face_the_photo_shows_too_coarsely_gets_no_fronts(monkeypatch, distance_m, has_fronts):
+    """A pull or the gap between two fronts is a pixel or two where a photo pixel spans more than
+    MAX_PHOTO_M_PER_PX of the face (sunrgbd_000017's chest of drawers, 6.5 m away at 1.2 cm per
+    pixel, gave two doors where it has seven drawers): no fronts are read off it (a 200 px
+    focal length: 0.75 cm per pixel at 1.5 m, 1.5 cm at 3 m)."""
+    import perception.front_parse as front_parse
+    from perception.front_parse import Panel
+    from perception.fronts import MAX_PHOTO_M_PER_PX, with_fronts
+    from scene_builder.model import Camera, CameraIntrinsics, Observation, PerceivedObject
+
+    assert 0.0075 < MAX_PHOTO_M_PER_PX < 0.015
+    k = CameraIntrinsics(200.0, 200.0, 99.5, 79.5, 200, 160)
+    rot = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # looking along world +x
+    cam = Camera(k, np.block([[rot, np.array([[0.0], [0.0], [1.0]])], [np.zeros((1, 3)), np.ones((1, 1))]]))
+    # a 0.6 m wide, 0.8 m high cabinet face at x = distance_m, 0.4 m deep behind it
+    y, z = np.meshgrid(np.linspace(-0.3, 0.3, 25), np.linspace(0.0, 0.8, 25))
+    face = np.column_stack([np.full(y.size, distance_m), y.ravel(), z.ravel()])
+    side = np.column_stack([distance_m + np.linspace(0.0, 0.4, 625), np.full(625, 0.3), np.tile(np.linspace(0.0, 0.8, 25), 25)])
+    pts = np.vstack([face, side])
+    cam_pts = (pts - cam.position_m) @ rot
+    u = np.clip(np.round(k.fx_px * cam_pts[:, 0] / cam_pts[:, 2] + k.cx_px).astype(int), 0, 199)
+    v = np.clip(np.round(k.fy_px * cam_pts[:, 1] / cam_pts[:, 2] + k.cy_px).astype(int), 0, 159)
+    mask = np.zeros((160, 200), bool)
+    mask[v.min():v.max() + 1, u.min():u.max() + 1] = True
+    obj = PerceivedObject(1, "cabinet_1", "cabinet", 0.9, mask, pts, np.full((len(pts), 3), 200, np.uint8))
+    obs = Observation("x.png", np.full((160, 200, 3), 200, np.uint8), np.zeros((160, 200), np.float32), k, "sensor")
+    drawer = Panel(np.array([[20.0, 120.0], [300.0, 120.0], [300.0, 20.0], [20.0, 20.0]]), "drawer", "", (160.0, 70.0), 1.0)
+    monkeypatch.setattr(front_parse, "parse_face", lambda *a, **kw: [drawer])
+    (out,) = with_fronts((obj,), obs, cam)
+    assert bool(out.fronts) == has_fronts
