@@ -28,7 +28,7 @@ __all__ = ["LEGGED", "SEES_SHARE", "stand_on_contacts"]
 
 #: An object whose mask has this share of off-room depth is seen by the estimate: left as it is.
 SEES_SHARE = 0.5
-#: A lifted object's face is parallel to a wall turned less than this from facing the camera.
+#: A lifted object's face is square to the walls when that turns it less than this from facing the camera.
 FACE_WALL_DEG = 40.0
 #: Categories that stand on legs: what lies under their top is mostly floor.
 LEGGED = frozenset({"table", "desk", "chair", "stool", "bench"})
