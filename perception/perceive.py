@@ -137,12 +137,13 @@ def _select_instances(
     kept: list[tuple[np.ndarray, np.ndarray]] = []
     behind_walls = 0
     unmeasured = 0
-    for inst in range(1, int(labels.max(initial=0)) + 1):
+    area, measured = _pixel_counts(labels, valid & ~frame.background)
+    for inst in range(1, len(area)):
+        if measured[inst] < config.min_object_points:
+            unmeasured += int(area[inst] >= config.min_object_points)
+            continue
         mask = labels == inst
         pix = mask & valid & ~frame.background
-        if pix.sum() < config.min_object_points:
-            unmeasured += int(mask.sum() >= config.min_object_points)
-            continue
         if not geometric:
             pix = _main_clusters(pix, points_cam, k)
             if pix.sum() < config.min_object_points:
@@ -185,15 +186,20 @@ def _select_instances(
     return kept[: config.max_objects], behind_walls, unmeasured
 
 
+def _pixel_counts(labels: np.ndarray, measured: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per instance id of ``labels`` ((H, W), 1-based; index 0 is no instance): its pixels, and
+    those of them ``measured`` ((H, W) bool) holds."""
+    ids = np.asarray(labels).ravel()
+    n = int(ids.max(initial=0)) + 1
+    return np.bincount(ids, minlength=n), np.bincount(ids[measured.ravel()], minlength=n)
+
+
 def _unmeasured_instances(labels: np.ndarray, valid: np.ndarray, background: np.ndarray, min_points: int) -> list[int]:
     """The instances of ``labels`` ((H, W), 1-based) of at least ``min_points`` pixels holding
     fewer than that many measured pixels (``valid``) off the room's planes (``background``):
-    the ones :func:`_select_instances` would leave out as unmeasured."""
-    ids = np.asarray(labels).ravel()
-    n = int(ids.max(initial=0)) + 1
-    area = np.bincount(ids, minlength=n)
-    measured = np.bincount(ids[(valid & ~background).ravel()], minlength=n)
-    return [i for i in range(1, n) if area[i] >= min_points and measured[i] < min_points]
+    the ones :func:`_select_instances` leaves out as unmeasured by the same counts."""
+    area, measured = _pixel_counts(labels, valid & ~background)
+    return [i for i in range(1, len(area)) if area[i] >= min_points and measured[i] < min_points]
 
 
 def _fill_silhouettes(kept: list[tuple[np.ndarray, np.ndarray]], labels: np.ndarray, free: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
