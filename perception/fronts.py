@@ -14,7 +14,8 @@ An object of a category that may hold drawers without being made of them (a tabl
 night stand, a desk) keeps its fronts only when at least ``MIN_HANDLED_FRONTS`` of them show a
 handle; a face the photo shows coarser than ``MAX_PHOTO_M_PER_PX`` gets none (too coarse to
 see a pull or a gap: the object is built rigid); ovens and dishwashers get their largest front
-as a flap hinged at the bottom, microwaves as a door hinged on the left; a "drawer" taller than ``DRAWER_MAX_HEIGHT_M`` is a door. On sensor
+as a flap hinged at the bottom, microwaves as a door hinged on the left, and an appliance keeps
+no other front but an oven's drawer under that door (its controls, vents and cooktop are no fronts); a "drawer" taller than ``DRAWER_MAX_HEIGHT_M`` is a door. On sensor
 depth, a panel whose middle lies ``OPENING_RECESS_M`` (``HANDLED_RECESS_M`` for a case good's panel with a
 handle) or more behind the face is an opening, not a front (the cubbies of an open bookcase).
 """
@@ -54,6 +55,9 @@ MIN_FRONT_M = 0.07
 #: hinge). An oven's or a dishwasher's is a flap hinged at its bottom; a microwave's a door
 #: hinged on its left (its keypad and latch are on the right).
 APPLIANCE_DOORS = {"oven": ("flap", "bottom"), "dishwasher": ("flap", "bottom"), "microwave": ("door", "left")}
+#: An appliance keeps its largest front (its door) and, an oven, of the other fronts the parse
+#: found on its face only drawers under that door at least this share of its width.
+APPLIANCE_DRAWER_WIDTH = 0.8
 #: A drawer front is at most this high (m; a kitchen's deep pan drawer is about 0.4 m): a taller
 #: "drawer" is a door (a refrigerator's, which the parse reads as a drawer by its centred handle).
 DRAWER_MAX_HEIGHT_M = 0.45
@@ -260,8 +264,24 @@ def fronts_on_face(rgb: np.ndarray, camera: Camera, face: Face, label: str = "",
     if label in APPLIANCE_DOORS and out:
         big = max(range(len(out)), key=lambda i: _area(out[i]))
         kind, hinge = APPLIANCE_DOORS[label]
-        out[big] = replace(out[big], kind=kind, hinge=hinge)
+        door = replace(out[big], kind=kind, hinge=hinge)
+        out = [door if i == big else f for i, f in enumerate(out) if i == big or (label == "oven" and _drawer_under(f, door))]
     return tuple(out)
+
+
+def _drawer_under(f: Front, door: Front) -> bool:
+    """Whether ``f`` is an oven's drawer under its door: a drawer wholly below the door
+    (world z) and at least APPLIANCE_DRAWER_WIDTH of its width (a range's warming drawer). The
+    other panels the parse reads on an appliance's face are its controls, vents and cooktop, no
+    fronts (coco 089's range: a knob panel and the glass cooktop were built as a door and a drawer)."""
+    below = float(np.max(f.corners_world_m[:, 2])) <= float(np.min(door.corners_world_m[:, 2])) + 0.02
+    wide = _width_m(f) >= APPLIANCE_DRAWER_WIDTH * _width_m(door)
+    return f.kind == "drawer" and below and wide
+
+
+def _width_m(f: Front) -> float:
+    c = f.corners_world_m  # bottom-left, bottom-right, top-right, top-left
+    return float(np.linalg.norm(c[1] - c[0]))
 
 
 def _recess_m(px: np.ndarray, world: np.ndarray, depth_m: np.ndarray, camera: Camera) -> float:
@@ -293,7 +313,7 @@ def _recess_m(px: np.ndarray, world: np.ndarray, depth_m: np.ndarray, camera: Ca
 
 def _area(f: Front) -> float:
     c = f.corners_world_m
-    return float(np.linalg.norm(c[1] - c[0]) * np.linalg.norm(c[3] - c[0]))
+    return _width_m(f) * float(np.linalg.norm(c[3] - c[0]))
 
 
 def _photo_m_per_px(face: Face, camera: Camera) -> float:

@@ -422,3 +422,36 @@ def test_a_face_the_photo_shows_too_coarsely_gets_no_fronts(monkeypatch, distanc
     monkeypatch.setattr(front_parse, "parse_face", lambda *a, **kw: [drawer])
     (out,) = with_fronts((obj,), obs, cam)
     assert bool(out.fronts) == has_fronts
+
+
+@pytest.mark.parametrize("label, kept", [("oven", 2), ("dishwasher", 1), ("microwave", 1), ("cabinet", 4)])
+def test_an_appliance_keeps_its_door_and_a_drawer_under_it_only(monkeypatch, label, kept):
+    """On a range's face the parse also reads its control panel and cooktop as fronts (coco 089:
+    a 'door' on the knob panel, a 'drawer' beside it); an appliance keeps its door, an oven also
+    a drawer under it nearly as wide (a range's warming drawer), a cabinet every front."""
+    import perception.front_parse as front_parse
+    from perception.front_parse import Panel
+    from perception.fronts import Face, fronts_on_face
+    from scene_builder.model import Camera, CameraIntrinsics
+
+    k = CameraIntrinsics(200.0, 200.0, 99.5, 79.5, 200, 160)
+    rot = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # looking along world +x
+    cam = Camera(k, np.block([[rot, np.array([[0.0], [0.0], [1.0]])], [np.zeros((1, 3)), np.ones((1, 1))]]))
+    face = Face(np.array([2.0, 0.3, 0.5]), np.array([0.0, -1.0, 0.0]), np.array([-1.0, 0.0, 0.0]), 0.6, 0.9)  # 240 x 360 px, 1/400 m each
+
+    def panel(x0, y0, x1, y1, kind, hinge=""):
+        return Panel(np.array([[x0, y1], [x1, y1], [x1, y0], [x0, y0]], dtype=float), kind, hinge, (0.5 * (x0 + x1), 0.5 * (y0 + y1)), 1.0)
+
+    panels = [
+        panel(10.0, 10.0, 80.0, 60.0, "door", "right"),  # a knob panel, beside and above the door
+        panel(160.0, 10.0, 230.0, 60.0, "drawer"),  # a vent beside the knobs
+        panel(10.0, 100.0, 230.0, 280.0, "drawer"),  # the door (its window read as a drawer)
+        panel(12.0, 290.0, 228.0, 350.0, "drawer"),  # the warming drawer under it
+    ]
+    monkeypatch.setattr(front_parse, "parse_face", lambda *a, **kw: panels)
+    fronts = fronts_on_face(np.full((160, 200, 3), 200, np.uint8), cam, face, label)
+    assert len(fronts) == kept
+    if label != "cabinet":
+        door = max(fronts, key=lambda f: np.ptp(f.corners_world_m[:, 2]))
+        assert float(np.ptp(door.corners_world_m[:, 2])) == pytest.approx(180 / 400, abs=0.01)
+        assert all(f is door or f.kind == "drawer" for f in fronts)
