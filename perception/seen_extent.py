@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from scene_builder.frames import edge_reach_share
+
 __all__ = ["CUT_SHARE", "EDGE_SHARE", "LENGTH_CAP_M", "LENGTH_FACTOR", "SIDEWAYS_MIN_HEIGHT_M", "cut_by_side_edge", "length_max_m"]
 
 EDGE_SHARE = 0.03
@@ -35,16 +37,9 @@ LENGTH_CAP_M = 2.5
 
 def cut_by_side_edge(mask: np.ndarray) -> bool:
     """Whether exactly one side edge of the photo cut the (H, W) bool ``mask`` (module doc)."""
-    mask = np.asarray(mask, dtype=np.bool_)
-    rows = np.flatnonzero(mask.any(axis=1))
-    if len(rows) == 0:
-        return False
-    w = mask.shape[1]
-    near = max(2, int(round(EDGE_SHARE * w)))
-    left = mask[rows].argmax(axis=1)
-    right = w - 1 - mask[rows, ::-1].argmax(axis=1)
-    at_left = (left <= near - 1).mean() >= CUT_SHARE
-    at_right = (right >= w - near).mean() >= CUT_SHARE
+    near = max(2, int(round(EDGE_SHARE * np.shape(mask)[1])))
+    at_left = edge_reach_share(mask, "left", near) >= CUT_SHARE
+    at_right = edge_reach_share(mask, "right", near) >= CUT_SHARE
     return bool(at_left != at_right)  # (both: it fills the photo's width, a close-up framed on it)
 
 

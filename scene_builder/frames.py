@@ -97,17 +97,32 @@ BOTTOM_CUT_ROWS_SHARE = 0.03
 BOTTOM_CUT_SHARE = 0.3
 
 
+def edge_reach_share(mask: np.ndarray, edge: str, band_px: int, edge_px: int | None = None) -> float:
+    """The share of the (H, W) bool ``mask``'s lines across ``edge`` (its columns for "top" and
+    "bottom", its rows for "left" and "right") that hold a pixel within ``band_px`` pixels of that
+    edge of the photo (0 for an empty mask). edge_px: the edge's row or column where it is not the
+    image's last or first (a sensor's depth that ends short of the photo's bottom)."""
+    mask = np.asarray(mask, dtype=np.bool_)
+    m = mask if edge in ("top", "bottom") else mask.T  # lines are columns of m
+    if edge not in ("top", "bottom", "left", "right"):
+        raise ValueError(f"edge must be top, bottom, left or right, got {edge!r}")
+    lines = m.any(axis=0)
+    if not lines.any():
+        return 0.0
+    far = edge in ("bottom", "right")
+    at = (m.shape[0] - 1 if far else 0) if edge_px is None else int(edge_px)
+    band = m[max(0, at - band_px + 1) : at + 1] if far else m[at : at + band_px]
+    return float(band.any(axis=0).sum() / lines.sum())
+
+
 def cut_by_photo_bottom(mask: np.ndarray, valid_depth: np.ndarray | None = None) -> bool:
     """Whether the (H, W) bool ``mask`` was cut by the photo's bottom edge (see
     :data:`BOTTOM_CUT_SHARE`). valid_depth: (H, W) bool pixels with measured depth; the bottom edge
     is its last row with any (a sensor's depth often ends short of the photo's), else row H - 1."""
     mask = np.asarray(mask, dtype=np.bool_)
-    columns = mask.any(axis=0)
-    if not columns.any():
-        return False
-    last = mask.shape[0] - 1
+    last = None
     if valid_depth is not None:
         rows_valid = np.flatnonzero(np.asarray(valid_depth, dtype=np.bool_).any(axis=1))
-        last = int(rows_valid[-1]) if len(rows_valid) else last
+        last = int(rows_valid[-1]) if len(rows_valid) else None
     rows = max(2, int(round(BOTTOM_CUT_ROWS_SHARE * mask.shape[0])))
-    return bool(mask[max(0, last - rows + 1) : last + 1].any(axis=0).sum() >= BOTTOM_CUT_SHARE * columns.sum())
+    return edge_reach_share(mask, "bottom", rows, last) >= BOTTOM_CUT_SHARE

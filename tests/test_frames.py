@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from scene_builder import frames
 from scene_builder.model import CameraIntrinsics
@@ -69,3 +70,20 @@ def test_a_mask_filling_the_photos_bottom_corner_is_cut_by_its_bottom_edge_a_cha
     assert not frames.cut_by_photo_bottom(floating) and not frames.cut_by_photo_bottom(np.zeros((h, w), bool))
     valid[:] = True  # measured down to the last row: 18 px short, over 3 % of the height
     assert not frames.cut_by_photo_bottom(sideboard, valid)
+
+
+def test_edge_reach_share_counts_the_lines_across_each_edge():
+    """The share of a mask's columns (top, bottom) or rows (left, right) with a pixel within the
+    band of that edge: the one measure behind cut_by_photo_bottom and
+    perception.seen_extent.cut_by_side_edge."""
+    m = np.zeros((10, 20), dtype=bool)
+    m[5:10, 0:4] = True  # a block in the bottom-left corner, 4 columns, 5 rows
+    m[2:4, 8:16] = True  # a bar above it, 8 columns, 2 rows
+    assert frames.edge_reach_share(m, "bottom", 2) == pytest.approx(4 / 12)
+    assert frames.edge_reach_share(m, "top", 3) == pytest.approx(8 / 12)
+    assert frames.edge_reach_share(m, "left", 1) == pytest.approx(5 / 7)
+    assert frames.edge_reach_share(m, "right", 4) == 0.0
+    assert frames.edge_reach_share(m, "bottom", 2, edge_px=4) == pytest.approx(8 / 12)  # depth ends at row 4
+    assert frames.edge_reach_share(np.zeros((4, 4), dtype=bool), "left", 2) == 0.0
+    with pytest.raises(ValueError, match="edge"):
+        frames.edge_reach_share(m, "middle", 2)
