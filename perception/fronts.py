@@ -15,7 +15,8 @@ night stand, a desk) keeps its fronts only when at least ``MIN_HANDLED_FRONTS`` 
 handle; a face the photo shows coarser than ``MAX_PHOTO_M_PER_PX`` gets none (too coarse to
 see a pull or a gap: the object is built rigid); ovens and dishwashers get their largest front
 as a flap hinged at the bottom, microwaves as a door hinged on the left, and an appliance keeps
-no other front but an oven's drawer under that door (its controls, vents and cooktop are no fronts); a "drawer" taller than ``DRAWER_MAX_HEIGHT_M`` is a door. On sensor
+no other front but an oven's drawer under that door (its controls, vents and cooktop are no
+fronts); a "drawer" taller than ``DRAWER_MAX_HEIGHT_M`` is a door. On sensor
 depth, a panel whose middle lies ``OPENING_RECESS_M`` (``HANDLED_RECESS_M`` for a case good's panel with a
 handle) or more behind the face is an opening, not a front (the cubbies of an open bookcase).
 """

@@ -102,10 +102,10 @@ def edge_reach_share(mask: np.ndarray, edge: str, band_px: int, edge_px: int | N
     "bottom", its rows for "left" and "right") that hold a pixel within ``band_px`` pixels of that
     edge of the photo (0 for an empty mask). edge_px: the edge's row or column where it is not the
     image's last or first (a sensor's depth that ends short of the photo's bottom)."""
-    mask = np.asarray(mask, dtype=np.bool_)
-    m = mask if edge in ("top", "bottom") else mask.T  # lines are columns of m
     if edge not in ("top", "bottom", "left", "right"):
         raise ValueError(f"edge must be top, bottom, left or right, got {edge!r}")
+    mask = np.asarray(mask, dtype=np.bool_)
+    m = mask if edge in ("top", "bottom") else mask.T  # lines are columns of m
     lines = m.any(axis=0)
     if not lines.any():
         return 0.0
