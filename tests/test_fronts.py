@@ -14,6 +14,14 @@ from scene_builder.model import Front, JointProbe, JointType
 M_PER_PX = 0.005  # 5 mm per pixel
 
 
+
+def _camera_along_x():
+    """A 200 x 160 px camera (200 px focal length) 1 m above the origin, looking along world +x."""
+    from scene_builder.model import Camera, CameraIntrinsics
+
+    rot = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # OpenCV axes: z along world +x
+    return Camera(CameraIntrinsics(200.0, 200.0, 99.5, 79.5, 200, 160), np.block([[rot, np.array([[0.0], [0.0], [1.0]])], [np.zeros((1, 3)), np.ones((1, 1))]]))
+
 def _cabinet_face() -> np.ndarray:
     """A 1.0 m x 0.8 m cabinet face at 5 mm/px: a drawer across the top (0.2 m) with a centred
     bar pull, two doors below, each with a vertical bar pull near the gap between them, dark
@@ -257,11 +265,9 @@ def test_a_panel_whose_middle_is_measured_deep_behind_the_face_is_an_opening():
     """An open bookcase's cubbies parse as panels like doors; on sensor depth their middles lie
     15-30 cm behind the face (promptda_arkit), a door's on it."""
     from perception.fronts import OPENING_RECESS_M, _recess_m
-    from scene_builder.model import Camera, CameraIntrinsics
 
-    k = CameraIntrinsics(200.0, 200.0, 99.5, 79.5, 200, 160)
-    rot = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # looking along world +x
-    cam = Camera(k, np.block([[rot, np.array([[0.0], [0.0], [1.0]])], [np.zeros((1, 3)), np.ones((1, 1))]]))
+    cam = _camera_along_x()
+    k, rot = cam.intrinsics, cam.world_from_camera[:3, :3]
     world = np.array([[2.0, 0.3, 0.7], [2.0, -0.3, 0.7], [2.0, -0.3, 1.3], [2.0, 0.3, 1.3]])  # on the face x = 2
     cam_pts = (world - cam.position_m) @ rot  # camera frame
     px = np.column_stack([k.fx_px * cam_pts[:, 0] / cam_pts[:, 2] + k.cx_px, k.fy_px * cam_pts[:, 1] / cam_pts[:, 2] + k.cy_px])
@@ -282,11 +288,8 @@ def test_an_appliances_largest_front_moves_as_that_appliance_does(monkeypatch, l
     import perception.front_parse as front_parse
     from perception.front_parse import Panel
     from perception.fronts import Face, fronts_on_face
-    from scene_builder.model import Camera, CameraIntrinsics
 
-    k = CameraIntrinsics(200.0, 200.0, 99.5, 79.5, 200, 160)
-    rot = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # looking along world +x
-    cam = Camera(k, np.block([[rot, np.array([[0.0], [0.0], [1.0]])], [np.zeros((1, 3)), np.ones((1, 1))]]))
+    cam = _camera_along_x()
     face = Face(np.array([2.0, 0.3, 0.8]), np.array([0.0, -1.0, 0.0]), np.array([-1.0, 0.0, 0.0]), 0.6, 0.4)
     window = Panel(np.array([[10.0, 150.0], [290.0, 150.0], [290.0, 50.0], [10.0, 50.0]]), "drawer", "", (150.0, 100.0), 1.0)
     monkeypatch.setattr(front_parse, "parse_face", lambda *a, **kw: [window])
@@ -302,11 +305,8 @@ def test_a_drawer_front_taller_than_a_drawer_is_a_door(monkeypatch, top_px, kind
     import perception.front_parse as front_parse
     from perception.front_parse import Panel
     from perception.fronts import DRAWER_MAX_HEIGHT_M, Face, fronts_on_face
-    from scene_builder.model import Camera, CameraIntrinsics
 
-    k = CameraIntrinsics(200.0, 200.0, 99.5, 79.5, 200, 160)
-    rot = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
-    cam = Camera(k, np.block([[rot, np.array([[0.0], [0.0], [1.0]])], [np.zeros((1, 3)), np.ones((1, 1))]]))
+    cam = _camera_along_x()
     face = Face(np.array([2.0, 0.3, 0.6]), np.array([0.0, -1.0, 0.0]), np.array([-1.0, 0.0, 0.0]), 0.6, 1.0)  # 216 x 360 px, 1/360 m each
     panel = Panel(np.array([[10.0, 330.0], [200.0, 330.0], [200.0, top_px], [10.0, top_px]]), "drawer", "", (105.0, 0.5 * (top_px + 330.0)), 1.0)
     monkeypatch.setattr(front_parse, "parse_face", lambda *a, **kw: [panel])
@@ -400,12 +400,11 @@ def test_a_face_the_photo_shows_too_coarsely_gets_no_fronts(monkeypatch, distanc
     import perception.front_parse as front_parse
     from perception.front_parse import Panel
     from perception.fronts import MAX_PHOTO_M_PER_PX, with_fronts
-    from scene_builder.model import Camera, CameraIntrinsics, Observation, PerceivedObject
+    from scene_builder.model import Observation, PerceivedObject
 
     assert 0.0075 < MAX_PHOTO_M_PER_PX < 0.015
-    k = CameraIntrinsics(200.0, 200.0, 99.5, 79.5, 200, 160)
-    rot = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # looking along world +x
-    cam = Camera(k, np.block([[rot, np.array([[0.0], [0.0], [1.0]])], [np.zeros((1, 3)), np.ones((1, 1))]]))
+    cam = _camera_along_x()
+    k, rot = cam.intrinsics, cam.world_from_camera[:3, :3]
     # a 0.6 m wide, 0.8 m high cabinet face at x = distance_m, 0.4 m deep behind it
     y, z = np.meshgrid(np.linspace(-0.3, 0.3, 25), np.linspace(0.0, 0.8, 25))
     face = np.column_stack([np.full(y.size, distance_m), y.ravel(), z.ravel()])
@@ -432,11 +431,8 @@ def test_an_appliance_keeps_its_door_and_a_drawer_under_it_only(monkeypatch, lab
     import perception.front_parse as front_parse
     from perception.front_parse import Panel
     from perception.fronts import Face, fronts_on_face
-    from scene_builder.model import Camera, CameraIntrinsics
 
-    k = CameraIntrinsics(200.0, 200.0, 99.5, 79.5, 200, 160)
-    rot = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # looking along world +x
-    cam = Camera(k, np.block([[rot, np.array([[0.0], [0.0], [1.0]])], [np.zeros((1, 3)), np.ones((1, 1))]]))
+    cam = _camera_along_x()
     face = Face(np.array([2.0, 0.3, 0.5]), np.array([0.0, -1.0, 0.0]), np.array([-1.0, 0.0, 0.0]), 0.6, 0.9)  # 240 x 360 px, 1/400 m each
 
     def panel(x0, y0, x1, y1, kind, hinge=""):
