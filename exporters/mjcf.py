@@ -249,13 +249,20 @@ def _add_wall(spec, i: int, wall: Plane, hidden: bool = False) -> None:
     """A wall is a collision half-space (MuJoCo plane geom), drawn in an off-white paint colour;
     planes are only drawn from their front side, which faces into the room, so they never hide
     the scene from a camera inside it. With a background (which has the observed wall), the
-    plane goes to the collision group and is not drawn."""
+    plane goes to the collision group and is not drawn. A wall seen over a bounded span
+    (``Plane.bounded``: the room goes on past its ends) is its slab, a box behind its face, so
+    what stands past its ends is not pushed into the room by an infinite plane."""
     import mujoco
 
-    pos, quat = _plane_pose(wall)
+    if wall.bounded:
+        centre, yaw, half = wall.slab()
+        kind, pos, quat, size = mujoco.mjtGeom.mjGEOM_BOX, centre, [np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)], half
+    else:
+        pos, quat = _plane_pose(wall)
+        kind, size = mujoco.mjtGeom.mjGEOM_PLANE, [WALL_EXTENT_M, WALL_EXTENT_M, 0.05]
     spec.worldbody.add_geom(
-        name=f"wall_{i}", type=mujoco.mjtGeom.mjGEOM_PLANE, pos=pos, quat=quat,
-        size=[WALL_EXTENT_M, WALL_EXTENT_M, 0.05], rgba=[0.86, 0.84, 0.78, 1.0], group=COLLISION_GROUP if hidden else WALL_GROUP,
+        name=f"wall_{i}", type=kind, pos=pos, quat=quat,
+        size=list(size), rgba=[0.86, 0.84, 0.78, 1.0], group=COLLISION_GROUP if hidden else WALL_GROUP,
         friction=[FLOOR_DYNAMIC_FRICTION, TORSIONAL_FRICTION, ROLLING_FRICTION], condim=CONDIM,
         solref=list(SOLREF), solimp=list(SOLIMP),
     )

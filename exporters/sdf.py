@@ -4,7 +4,7 @@ SDFormat consumers).
 * The world: gravity ``0 0 -9.81``, a 2 ms physics step (as the MJCF), an ambient light and one
   directional ``key`` light without shadows.
 * ``room``: a static model. Its link ``room`` holds the floor (a collision plane at z = 0) and the
-  walls (collision planes, normals into the room), drawn when there is no observed background;
+  walls (collision planes, normals into the room; a wall of bounded span: a box slab), drawn when there is no observed background;
   its link ``background`` holds the static background: the photo-textured surface and the
   objects that became background as visuals, their convex pieces and the collision boxes.
 * ``input_camera``: a static model whose link carries the camera sensor ``input_camera``: the
@@ -67,7 +67,7 @@ from exporters.sdf_xml import fmt as _fmt, sub as _sub
 from exporters.textures import TEXTURE_DIR, texture_file, write_texture
 from exporters.urdf import rpy_from_matrix
 from scene_builder.errors import ExportError
-from scene_builder.model import JointType, Material, ObjectAsset, Part, PlacedObject, Scene, TriangleMesh
+from scene_builder.model import JointType, Material, ObjectAsset, Part, PlacedObject, Plane, Scene, TriangleMesh
 
 SDF_VERSION = "1.9"
 #: Where :func:`find_checker` looks first for the libsdformat checker (a path to the program).
@@ -211,6 +211,19 @@ def _plane(parent: ET.Element, kind: str, name: str, normal, point, rgba=None, m
         _material(el, rgba)
 
 
+def _slab(parent: ET.Element, name: str, wall: Plane, rgba) -> None:
+    """A bounded wall's box (``Plane.slab``): collision, and visual when ``rgba`` is given."""
+    centre, yaw, half = wall.slab()
+    for kind in ("collision", "visual") if rgba is not None else ("collision",):
+        el = _sub(parent, kind, name=name)
+        _pose(el, centre, (0.0, 0.0, yaw))
+        _sub(_sub(_sub(el, "geometry"), "box"), "size", 2.0 * half)
+        if kind == "collision":
+            _surface(el, FLOOR_DYNAMIC_FRICTION)
+        else:
+            _material(el, rgba)
+
+
 def _add_room(world: ET.Element, scene: Scene, out_dir: Path) -> None:
     """The static ``room`` model: floor and walls, and the background (module docstring)."""
     model = _sub(world, "model", name="room")
@@ -222,6 +235,9 @@ def _add_room(world: ET.Element, scene: Scene, out_dir: Path) -> None:
     # With an observed surface the drawn floor lies lower, so it shows only past the observed one.
     _plane(room, "visual", "floor", (0.0, 0.0, 1.0), (0.0, 0.0, -FLOOR_VISUAL_DROP_M if observed else 0.0), _FLOOR_RGBA)
     for i, wall in enumerate(scene.room.walls):
+        if wall.bounded:  # (the room goes on past its ends: a slab, as in the MJCF)
+            _slab(room, f"wall_{i}", wall, None if observed else _WALL_RGBA)
+            continue
         point = -wall.offset_m * wall.normal
         _plane(room, "collision", f"wall_{i}", wall.normal, point)
         if not observed:

@@ -6,7 +6,7 @@ Prim layout::
       PhysicsScene                  UsdPhysics.Scene, gravity -Z 9.81 m/s^2
       Looks/<mat>                   UsdPreviewSurface material per part material (visual)
       PhysicsMaterials/<mat>        UsdPhysics.MaterialAPI (friction, restitution, density)
-      Room/Floor, Room/Wall_i       static colliders (UsdGeom.Plane, purpose guide)
+      Room/Floor, Room/Wall_i       static colliders (UsdGeom.Plane, purpose guide; a wall seen over a bounded span: a UsdGeom.Cube slab)
       Background/Surface            the observed room as one textured mesh, a static collider
                                     with a triangle-mesh approximation ("none")
       Background/Objects/<obj>      visual meshes of objects that became background
@@ -236,7 +236,10 @@ def _add_room(ctx: _Context, scene: Scene) -> None:
     floor_mat = ctx.physics_material("floor", FLOOR_STATIC_FRICTION, FLOOR_DYNAMIC_FRICTION, 0.2, None)
     planes: list[tuple[str, np.ndarray]] = [("Floor", np.eye(4))]
     for i, wall in enumerate(scene.room.walls):
-        planes.append((f"Wall_{i}", _plane_transform(wall)))
+        if wall.bounded:  # (the room goes on past its ends: a slab, as in the MJCF)
+            _wall_slab(stage, f"/World/Room/Wall_{i}", wall, floor_mat)
+        else:
+            planes.append((f"Wall_{i}", _plane_transform(wall)))
     for name, t in planes:
         plane = UsdGeom.Plane.Define(stage, f"/World/Room/{name}")
         plane.CreateAxisAttr(UsdGeom.Tokens.z)
@@ -293,6 +296,22 @@ def _add_background(ctx: _Context, bg: Background) -> None:
         cube.AddScaleOp().Set(Gf.Vec3f(*half.tolist()))
         UsdPhysics.CollisionAPI.Apply(cube.GetPrim())
         _bind(cube.GetPrim(), phys, "physics")
+
+
+def _wall_slab(stage, path: str, wall: Plane, material) -> None:
+    """A bounded wall's box (``Plane.slab``): a guide-purpose collider like the wall planes."""
+    from pxr import Gf, UsdGeom, UsdPhysics
+
+    centre, yaw, half = wall.slab()
+    cube = UsdGeom.Cube.Define(stage, path)
+    cube.CreateSizeAttr(2.0)
+    cube.CreateExtentAttr([Gf.Vec3f(-1.0, -1.0, -1.0), Gf.Vec3f(1.0, 1.0, 1.0)])
+    cube.CreatePurposeAttr(UsdGeom.Tokens.guide)
+    cube.AddTranslateOp().Set(Gf.Vec3d(*centre.tolist()))
+    cube.AddOrientOp().Set(Gf.Quatf(float(np.cos(yaw / 2)), Gf.Vec3f(0.0, 0.0, float(np.sin(yaw / 2)))))
+    cube.AddScaleOp().Set(Gf.Vec3f(*half.tolist()))
+    UsdPhysics.CollisionAPI.Apply(cube.GetPrim())
+    _bind(cube.GetPrim(), material, "physics")
 
 
 def _plane_transform(plane: Plane) -> np.ndarray:

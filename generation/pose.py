@@ -187,7 +187,11 @@ def _wall_angle(points_m: np.ndarray, angle: float, extent: np.ndarray, walls) -
     best = None
     for wall in walls:
         n = np.asarray(wall.normal, dtype=np.float64)
-        near = float(np.quantile(wall.signed_distance_m(points_m), 0.1))
+        d = wall.clearance_m(points_m)
+        d = d[np.isfinite(d)]  # (points past the wall's ends are not against it)
+        if len(d) < 0.5 * len(points_m):
+            continue
+        near = float(np.quantile(d, 0.1))
         if not -0.05 <= near <= FACE_NEAR_WALL_M:
             continue
         wall_angle = float(np.mod(np.arctan2(n[1], n[0]), np.pi / 2))

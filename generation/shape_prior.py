@@ -73,7 +73,7 @@ def depth_to_walls(fit, walls) -> float:
     for wall in walls:
         rate = float(np.asarray(wall.normal, dtype=np.float64) @ back)  # signed distance per metre of depth
         if rate < -1e-6:
-            limit = min(limit, float(np.min(wall.signed_distance_m(front_world))) / -rate)
+            limit = min(limit, float(np.min(wall.clearance_m(front_world))) / -rate)  # (inf past its ends)
     return limit
 
 
@@ -357,7 +357,7 @@ def box_clear_of_walls(world_from_box: np.ndarray, size_m: np.ndarray, walls) ->
             for wall in walls:
                 if float(np.asarray(wall.normal) @ outward) > -cos_side:
                     continue
-                cut = WALL_CLEARANCE_M - float(np.min(wall.signed_distance_m(world)))
+                cut = WALL_CLEARANCE_M - float(np.min(wall.clearance_m(world)))
                 if 0.0 < cut <= MAX_TRIM_SHARE * size[axis]:
                     if upper:
                         hi[axis] -= cut
@@ -550,7 +550,7 @@ class ShapePriorGenerator:
             generated = assemble(specs, kind, soft, description, cfg)
             samples = transform_points(generated.world_from_asset, surface_samples([q.visual for q in generated.asset.parts], VIOLATION_SAMPLES, seed))
             share = space.violation(samples)
-            behind = max([0.0] + [float(-np.min(w.signed_distance_m(samples))) for w in perception.room.walls])
+            behind = max([0.0] + [float(-np.min(w.clearance_m(samples))) for w in perception.room.walls])
             if (share <= MAX_FREE_SPACE_SHARE or obj.built_in) and behind <= MAX_BEHIND_WALL_M:
                 # (a built-in run stands where its fronts put it, in front of depth that an
                 # estimate painted onto the wall behind it: that depth's free space is no evidence)
@@ -605,7 +605,7 @@ class ShapePriorGenerator:
             p_world = transform_points(fit.world_from_box, p_box)
             out = space.free(p_world, extra_margin_m=0.5 * voxel_m)
             for wall in walls:
-                out |= wall.signed_distance_m(p_world) < WALL_CLEARANCE_M + 0.5 * voxel_m
+                out |= wall.clearance_m(p_world) < WALL_CLEARANCE_M + 0.5 * voxel_m
             if others_tree is not None:
                 d_own, _ = own_tree.query(p_world, workers=2)  # (both cores: the queries are most of the time)
                 # Another object's surface matters only where it is nearer than this one's.

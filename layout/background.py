@@ -91,7 +91,7 @@ def observed_structure(background: Background, walls: tuple[Plane, ...]) -> np.n
     v = background.surface.vertices_m[background.surface_observed]
     keep = v[:, 2] > FLOOR_BAND_M
     for w in walls:
-        keep &= w.signed_distance_m(v) > WALL_BAND_M
+        keep &= w.clearance_m(v) > WALL_BAND_M
     return v[keep]
 
 
@@ -114,7 +114,7 @@ class BackgroundSupport:
         v = background.surface.vertices_m
         keep = background.surface_observed & (v[:, 2] > FLOOR_BAND_M)
         for w in walls:
-            keep &= w.signed_distance_m(v) > WALL_BAND_M
+            keep &= w.clearance_m(v) > WALL_BAND_M
         p = v[keep]
         if not len(p):
             return

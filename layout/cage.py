@@ -93,7 +93,7 @@ class _Slider:
         return out
 
     def wall_blocked(self, shift: np.ndarray) -> bool:
-        return any(float(np.min((self.allv + shift) @ w.normal) + w.offset_m) < -BLOCK_DEPTH_M for w in self.walls)
+        return any(float(np.min(w.clearance_m(self.allv + shift))) < -BLOCK_DEPTH_M for w in self.walls)
 
     def blockers(self, u: np.ndarray) -> set[int] | None:
         """Static pieces the slide along ``u`` runs into (None: a wall stops it)."""

@@ -80,6 +80,13 @@ class Solver:
         self.wall_min_rel = np.array(
             [[float(np.min(np.concatenate([p.verts_rel_m for p in b.pieces]) @ n)) for n in self.wall_n] for b in bodies]
         ).reshape(len(bodies), len(walls))
+        # A bounded wall holds back only the bodies beside its span (where they were seen when
+        # the solver was made): one past its end stands where the room goes on (an opening).
+        for i, b in enumerate(bodies):
+            v = b.world_vertices()
+            for w, wall in enumerate(walls):
+                if wall.bounded and not np.isfinite(wall.clearance_m(v)).any():
+                    self.wall_min_rel[i, w] = np.inf
         for i, b in enumerate(bodies):
             self.world.set_position(i, b.position_m)
         # Pairs found fine, with the body versions they were checked at: re-checked only after
@@ -359,6 +366,8 @@ class Solver:
         for k in subtree(self.bodies, i):
             off = self.bodies[k].position_m - b.position_m
             for w in range(len(self.wall_n)):
+                if not np.isfinite(self.wall_min_rel[k, w]):
+                    continue  # (past the wall's end)
                 n = self.wall_n[w]
                 # gap = wall_min_rel + n . (pos + off) + wall_off >= clearance
                 rhs = self.clearance - self.wall_min_rel[k, w] - self.wall_off[w] - float(n @ off) - n[2] * b.position_m[2]
@@ -572,5 +581,5 @@ class Solver:
             worst = max(worst, -b.bottom_m)
             if self.walls:
                 v = b.world_vertices()
-                worst = max(worst, max(-float(np.min(w.signed_distance_m(v))) for w in self.walls))
+                worst = max(worst, max(-float(np.min(w.clearance_m(v))) for w in self.walls))
         return worst

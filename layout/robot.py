@@ -4,7 +4,8 @@ reaches, preferably seen by the input camera and not hiding the target from it.
 The floor plan (shapely polygons, the well-kept library for 2-D geometry): every collision piece
 of the scene (objects, fixed furniture, the background's boxes and pieces) that rises above the
 floor and starts below the robot's height is an obstacle, as its footprint (a convex piece
-projects to the convex hull of its vertices); walls are half-planes. Candidate spots lie on a
+projects to the convex hull of its vertices); walls are half-planes over their spans (past a
+bounded wall's end the floor goes on: ``Plane.clearance_m``). Candidate spots lie on a
 :data:`GRID_M` grid; a spot is free when the robot's footprint circle (measured on its model at
 the start pose) keeps :data:`CLEARANCE_M` from every obstacle and wall.
 
@@ -328,7 +329,7 @@ def _clearance(scene: Scene, pieces: list[tuple[str, np.ndarray]], model: RobotM
         idx, dist = shapely.STRtree(obstacles).query_nearest(shapely.points(xy), return_distance=True, all_matches=False)
         clearance[idx[0]] = dist
     for wall in scene.room.walls:
-        clearance = np.minimum(clearance, np.column_stack([xy, np.zeros(len(xy))]) @ wall.normal + wall.offset_m)
+        clearance = np.minimum(clearance, wall.clearance_m(np.column_stack([xy, np.zeros(len(xy))])))
     return clearance - float(model.footprint_radius_m)
 
 
@@ -348,7 +349,7 @@ def reach_targets(scene: Scene) -> tuple[np.ndarray, tuple[str, ...]]:
     points, owner_index, _, owners = _targets(height_map, np.inf, set())
     inside = np.ones(len(points), dtype=bool)
     for wall in scene.room.walls:
-        inside &= points @ wall.normal + wall.offset_m > 0.0
+        inside &= wall.clearance_m(points) > 0.0
     points, owner_index = points[inside], owner_index[inside]
     if not len(points):
         return np.zeros((0, 3)), ()
@@ -416,7 +417,7 @@ def place_robot(scene: Scene, model: RobotModel) -> tuple[RobotPlacement, ...]:
     targets, target_owner, target_kind, owners = _targets(height_map, mount_z + free_reach - LOW_TARGET_HEIGHT_M, movable)
     inside = np.ones(len(targets), dtype=bool)  # a top behind a wall is not the room's
     for wall in scene.room.walls:
-        inside &= targets @ wall.normal + wall.offset_m > 0.0
+        inside &= wall.clearance_m(targets) > 0.0
     targets, target_owner, target_kind = targets[inside], target_owner[inside], target_kind[inside]
     if not len(targets):
         raise InputError(

@@ -139,7 +139,7 @@ def _near_wall(b: Body, walls: tuple[Plane, ...], reach_m: float = WALL_CONTACT_
     if not walls:
         return False
     v = b.world_vertices()
-    return any(float(np.min(w.signed_distance_m(v))) < reach_m for w in walls)
+    return any(float(np.min(w.clearance_m(v))) < reach_m for w in walls)
 
 
 def _mount(b: Body, where: str) -> None:

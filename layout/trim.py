@@ -266,11 +266,13 @@ def trim_to_walls(asset: ObjectAsset, t: np.ndarray, walls, clearance_m: float, 
             n = np.asarray(w.normal, dtype=np.float64)
             reach = 0.0
             for m in pieces:
-                if m is not None:
-                    reach = max(reach, clearance_m - float(np.min(_world(m, t) @ n + w.offset_m)))
+                if m is not None:  # (a piece wholly past a bounded wall's end is not in it)
+                    reach = max(reach, clearance_m - float(np.min(w.clearance_m(_world(m, t)))))
             if reach <= 1e-5 or reach > MAX_WALL_TRIM_M + clearance_m:
                 continue
-            if observed is not None and len(observed) and float(np.quantile(observed @ n + w.offset_m, 0.02)) < -0.01:
+            seen = w.clearance_m(observed) if observed is not None and len(observed) else np.zeros(0)
+            seen = seen[np.isfinite(seen)]
+            if len(seen) and float(np.quantile(seen, 0.02)) < -0.01:
                 continue  # the camera saw it behind the wall plane: the plane is off, not the object
             # Room side: n . (R v + tr) + off >= clearance  <=>  (-R^T n) . v <= off - clearance + n . tr
             na = -(t[:3, :3].T @ n)

@@ -221,7 +221,7 @@ def built_in_runs(
             if run is None:
                 continue
             fronts, world_quad = run
-            if any(float(wl.signed_distance_m(world_quad.mean(axis=0)[None])[0]) < -BEHIND_WALL_M for wl in walls):
+            if any(float(wl.clearance_m(world_quad.mean(axis=0)[None])[0]) < -BEHIND_WALL_M for wl in walls):
                 continue  # (nyuv2_metric3d_00100: a "cabinet" 1.1 m behind the wall, welded there, 1.6 m into it)
             quad = _project(camera, world_quad)
             rr, cc = polygon(quad[:, 1], quad[:, 0], (h, w))

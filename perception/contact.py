@@ -89,14 +89,15 @@ def _height_distance(ray: np.ndarray, rot: np.ndarray, cam: np.ndarray, height_m
 
 def _in_front_of_walls(ray: np.ndarray, s: float, rot: np.ndarray, cam: np.ndarray, walls, margin_m: float = 0.15) -> float:
     """``s`` shortened so that the point at planar depth ``s`` on ``ray`` stays ``margin_m`` in
-    front of every wall it would pass (a coarse room box may stand its walls too near)."""
+    front of every wall it would pass where the wall stands (a ray past a wall's end goes on; a
+    coarse room box may stand its walls too near)."""
     d = rot @ ray
     for wall in walls:
         n = np.asarray(wall.normal, dtype=np.float64)
         rate = float(n @ d)
         if rate < -1e-6:
             s_wall = (margin_m - float(n @ cam) - float(wall.offset_m)) / rate
-            if s_wall > 0.3:
+            if s_wall > 0.3 and np.isfinite(wall.clearance_m(cam + s_wall * d)[0]):
                 s = min(s, s_wall)
     return s
 

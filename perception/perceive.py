@@ -150,13 +150,15 @@ def _select_instances(
                 unmeasured += 1
                 continue
         if frame.room.walls:
-            # The room is the space in front of its (infinite) walls. What lies mostly behind one
-            # is in the next room, seen through a doorway or past the wall's end: not part of
-            # this scene. Stray points of a kept object behind a wall are trimmed.
+            # The room is the space in front of its walls where they stand (their span). What
+            # lies mostly behind one, along it, is in the next room, seen through a doorway: not
+            # part of this scene. What lies past a wall's end (behind its plane, beside it) is
+            # still the room: an L-shaped room, the opening beside a partition (nyuv2_metric3d
+            # 00000's table and chairs). Stray points of a kept object behind a wall are trimmed.
             pts_w = transform_points(frame.world_from_camera, points_cam[pix])
             behind = np.zeros(len(pts_w), dtype=bool)
             for wall in frame.room.walls:
-                behind |= wall.signed_distance_m(pts_w) < -BEHIND_WALL_TOLERANCE_M
+                behind |= wall.clearance_m(pts_w) < -BEHIND_WALL_TOLERANCE_M
             if behind.mean() > 0.5:
                 behind_walls += 1
                 continue

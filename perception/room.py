@@ -105,12 +105,15 @@ def inlier_threshold_m(depth_m: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True, eq=False)
 class CameraPlane:
     """A plane ``normal . p + offset_m = 0`` in the camera frame, normal towards the camera
-    (so ``offset_m`` > 0 is the camera's distance to it). inliers: (H, W) bool."""
+    (so ``offset_m`` > 0 is the camera's distance to it). inliers: (H, W) bool. span_m: for a
+    wall, the extent of its inliers along up x normal (``Plane.span_m``; the same in the world
+    frame, whose origin is under the camera), set by :func:`_with_span`."""
 
     normal: np.ndarray
     offset_m: float
     kind: str
     inliers: np.ndarray
+    span_m: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -536,8 +539,24 @@ def _world_walls(world_from_camera: np.ndarray, planes: list[CameraPlane]) -> tu
         n_w[2] = 0.0
         n_w = _unit(n_w)
         # Vertical planes: the camera's height does not change the offset (n_w . t = 0).
-        walls.append(Plane(n_w, float(p.offset_m - n_w @ world_from_camera[:3, 3]), "wall", int(p.inliers.sum())))
+        walls.append(Plane(n_w, float(p.offset_m - n_w @ world_from_camera[:3, 3]), "wall", int(p.inliers.sum()), p.span_m))
     return tuple(walls)
+
+
+#: A wall's span is its inliers' extent along it between these percentiles (a few stray inliers
+#: where a coplanar surface of the next room lines up with it do not stretch it).
+SPAN_PERCENTILES = (0.5, 99.5)
+
+
+def _with_span(p: CameraPlane, points_cam: np.ndarray, up_cam: np.ndarray) -> CameraPlane:
+    """A wall or partial wall with its span: where along it the camera saw it. The world frame's
+    origin lies under the camera and it turns about up only, so the position along the wall,
+    ``p . (up x n)``, is the same in the camera frame and in the world frame."""
+    if p.kind not in ("wall", "partial-wall") or not p.inliers.any():
+        return p
+    s = points_cam[p.inliers] @ np.cross(up_cam, p.normal)
+    lo, hi = (float(v) for v in np.percentile(s, SPAN_PERCENTILES))
+    return replace(p, span_m=(lo, hi)) if hi > lo else p
 
 
 def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0, up_hint: np.ndarray | None = None, normals: str = "open3d") -> RoomFrame:
@@ -652,7 +671,7 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0, up_h
             above = (pts @ n + d) < -thr
             cam_planes.append(CameraPlane(n, d, "ceiling", to_image(inl | above)))
 
-    # Walls are infinite planes (what lies behind one is left out of the room): a vertical plane
+    # What lies behind a wall along its span is left out of the room: a vertical plane
     # with a wall parallel to it behind it that shows more of itself is no wall. Single-view
     # depth stands a bed as a cuboid whose headboard is such a plane; with the ceiling band it
     # crosses it passed `_is_wall`, and it left a dresser out of sunrgbd_imvotenet_000003 and cut
@@ -665,7 +684,7 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0, up_h
     ]
     walls_cam = [p.normal for p in sorted((p for p in cam_planes if p.kind == "wall"), key=lambda p: -int(p.inliers.sum()))]
     world_from_camera = world_from_camera_for(up, height, walls_cam)
-    cam_planes = _merge_parallel([_manhattan(p, world_from_camera, points_cam) for p in cam_planes])
+    cam_planes = [_with_span(p, points_cam, up) for p in _merge_parallel([_manhattan(p, world_from_camera, points_cam) for p in cam_planes])]
     background = np.zeros((h, w), dtype=bool)
     for p in cam_planes:
         if p.kind != "partial-wall":  # (a partial wall may be a tall cabinet's front: left to the segmenter)

@@ -81,6 +81,7 @@ __all__ = [
 from scene_builder.arrays import MIN_PIECE_THICKNESS_M, _check_rigid, _freeze, as_array, inertia_problem, thickness_m  # noqa: E402  (as_array is public)
 from scene_builder.robot import RobotModel, RobotPlacement  # noqa: E402  (re-exported)
 from scene_builder.fronts import Front  # noqa: E402  (re-exported)
+from scene_builder.planes import Plane  # noqa: E402  (re-exported)
 
 
 # --------------------------------------------------------------------------------------------
@@ -246,32 +247,6 @@ class Observation:
 # --------------------------------------------------------------------------------------------
 # Perception
 # --------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True, eq=False)
-class Plane:
-    """An infinite plane ``normal . x + offset_m = 0`` in the world frame.
-
-    normal: (3,) float64 unit vector; for floors it is +Z, for walls it is horizontal and points
-      into the room (towards the camera).
-    kind: ``"floor"``, ``"wall"`` or ``"ceiling"``.
-    inlier_count: number of observed depth points that support the plane.
-    """
-
-    normal: np.ndarray
-    offset_m: float
-    kind: str
-    inlier_count: int = 0
-
-    def __post_init__(self) -> None:
-        _freeze(self, "normal", np.float64, (3,))
-        n = float(np.linalg.norm(self.normal))
-        if not np.isclose(n, 1.0, atol=1e-6):
-            raise ValueError(f"Plane.normal must be a unit vector, got norm {n}")
-
-    def signed_distance_m(self, points_m: np.ndarray) -> np.ndarray:
-        """(N,) signed distance of (N, 3) points; positive on the side the normal points to."""
-        return np.asarray(points_m, dtype=np.float64) @ self.normal + self.offset_m
 
 
 @dataclass(frozen=True, eq=False)

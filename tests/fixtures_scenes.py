@@ -10,6 +10,8 @@ inertia integrated over the mesh by trimesh. Reusable by any stage's tests:
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from scene_builder.frames import pose, rot_z
@@ -174,6 +176,15 @@ def fixture_room() -> Room:
             Plane(np.array([0.0, -1.0, 0.0]), 2.0, "wall", 800),
         )
     )
+
+
+def bounded_walls_scene() -> Scene:
+    """:func:`boxes_scene` in a room whose walls were seen over bounded spans (``Plane.span_m``):
+    the back wall from y = -1.5 to 1.2 m, a side wall from x = -2 to 1.5 m, one unbounded."""
+    base = boxes_scene()
+    back, left, right = base.room.walls
+    walls = (dataclasses.replace(back, span_m=(-1.2, 1.5)), dataclasses.replace(left, span_m=(-1.5, 2.0)), right)
+    return dataclasses.replace(base, room=Room(walls=walls))
 
 
 def boxes_scene() -> Scene:

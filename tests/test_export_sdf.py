@@ -18,7 +18,7 @@ from exporters import write_mjcf
 from exporters.sdf import CHECKER_ENV, run_checker, structural_problems, validate_sdf, write_sdf
 from scene_builder.errors import ExportError
 from scene_builder.model import JointType, Scene
-from tests.fixtures_scenes import boxes_scene, cabinet_scene, mixed_scene, pillow_scene
+from tests.fixtures_scenes import bounded_walls_scene, boxes_scene, cabinet_scene, mixed_scene, pillow_scene
 
 
 def _revolute_prismatic_scene() -> Scene:
@@ -38,6 +38,7 @@ SCENES = {
     "fixed_cabinet": lambda: cabinet_scene(is_fixed=True),
     "mixed": mixed_scene,
     "pillow": pillow_scene,
+    "bounded_walls": bounded_walls_scene,
     "revolute_prismatic": _revolute_prismatic_scene,
 }
 
@@ -250,3 +251,29 @@ def test_the_robot_is_a_model_that_libsdformat_reads_as_mujoco_compiles_it(name,
     heavier.write_text(text[:start] + re.sub(r"<mass>([0-9.e+-]+)</mass>", "<mass>99</mass>", text[start:], count=1))
     with pytest.raises(ExportError, match="kg of robot"):
         validate_sdf(heavier, scene, sdf_checker)
+
+
+def test_a_bounded_wall_is_the_same_box_slab_in_sdf_and_mjcf(tmp_path):
+    """A wall seen over a bounded span is a box behind its face in both formats, at the same pose
+    and size (an infinite plane would push what stands past its end into the room)."""
+    import mujoco
+
+    scene = bounded_walls_scene()
+    model = mujoco.MjModel.from_xml_path(str(write_mjcf(scene, tmp_path)))
+    root = ET.parse(write_sdf(scene, tmp_path)).getroot()
+    for i, wall in enumerate(scene.room.walls):
+        col = root.find(f".//model[@name='room']/link[@name='room']/collision[@name='wall_{i}']")
+        g = model.geom(f"wall_{i}")
+        if not wall.bounded:
+            assert col.find("geometry/plane") is not None and g.type[0] == mujoco.mjtGeom.mjGEOM_PLANE
+            continue
+        assert g.type[0] == mujoco.mjtGeom.mjGEOM_BOX
+        size = np.array(col.find("geometry/box/size").text.split(), dtype=float)
+        np.testing.assert_allclose(size, 2.0 * g.size, atol=1e-6)
+        pose_ = np.array(col.find("pose").text.split(), dtype=float)
+        np.testing.assert_allclose(pose_[:3], g.pos, atol=1e-6)
+        yaw = 2.0 * np.arctan2(g.quat[3], g.quat[0])
+        assert np.cos(pose_[5] - yaw) == pytest.approx(1.0, abs=1e-9)
+        # Its room-side face lies on the wall's plane.
+        centre, _, half = wall.slab()
+        assert float(wall.signed_distance_m(centre[None])[0]) == pytest.approx(-half[1])

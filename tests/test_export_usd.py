@@ -13,7 +13,7 @@ from exporters import names, write_usd
 from exporters.usd import build_stage, validate_stage
 from scene_builder.frames import transform_points
 from scene_builder.model import PlacedObject, Scene
-from tests.fixtures_scenes import DOOR_RANGE_RAD, DRAWER_RANGE_M, box_asset, cabinet_scene, mixed_scene, pillow_scene
+from tests.fixtures_scenes import DOOR_RANGE_RAD, bounded_walls_scene, DRAWER_RANGE_M, box_asset, cabinet_scene, mixed_scene, pillow_scene
 
 
 @pytest.fixture(scope="module")
@@ -173,3 +173,28 @@ def test_deformable_rigid_fallback_keeps_soft_parameters():
     assert prim.GetAttribute("sceneBuilder:deformable:youngsModulusPa").Get() == pytest.approx(5.0e4)
     assert prim.GetAttribute("sceneBuilder:deformable:poissonRatio").Get() == pytest.approx(0.3)
     assert validate_stage(stage) == []
+
+
+def test_a_bounded_wall_is_a_cube_collider_behind_its_face(tmp_path):
+    """A wall seen over a bounded span is a guide-purpose UsdGeom.Cube collider: its world box is
+    the wall's slab (face on the plane, over the span); an unbounded wall stays a plane."""
+    from pxr import Usd, UsdGeom, UsdPhysics
+
+    scene = bounded_walls_scene()
+    stage = Usd.Stage.Open(str(write_usd(scene, tmp_path)))
+    assert validate_stage(stage) == []
+    cache = UsdGeom.BBoxCache(Usd.TimeCode.Default(), [UsdGeom.Tokens.guide])
+    for i, wall in enumerate(scene.room.walls):
+        prim = stage.GetPrimAtPath(f"/World/Room/Wall_{i}")
+        assert prim.HasAPI(UsdPhysics.CollisionAPI)
+        if not wall.bounded:
+            assert prim.IsA(UsdGeom.Plane)
+            continue
+        assert prim.IsA(UsdGeom.Cube)
+        box = cache.ComputeWorldBound(prim).ComputeAlignedRange()
+        centre, _, half = wall.slab()
+        lo, hi = np.array(box.GetMin()), np.array(box.GetMax())
+        np.testing.assert_allclose((lo + hi) / 2, centre, atol=1e-5)
+        # Axis-aligned walls here: the box's extent along the wall is the span with its margins.
+        along = np.abs(wall.tangent) > 0.5
+        assert float((hi - lo)[along][0]) == pytest.approx(2.0 * half[0], abs=1e-5)

@@ -600,3 +600,45 @@ def test_a_cut_under_a_small_thing_takes_only_the_blockers_pieces_around_it():
     outside = [z for c, z in tops if not (0.08 < c[0] < 0.32 and abs(c[1]) < 0.095)]
     assert max(inside) < 0.74 and min(outside) == pytest.approx(0.75)
     assert collision_volume_m3(cut) > 0.95 * collision_volume_m3(desk)
+
+
+def test_a_bounded_wall_holds_back_what_stands_along_it_and_not_what_stands_past_its_end(tmp_path):
+    """A wall seen from y = -2 to 1 m (x = -1, room at x > -1) ends there: the room goes on past
+    it (an opening, an L-shaped room). A box 4 cm through it along its span is cut back to the
+    room side (``layout.trim``); a table seen half a metre behind its plane but past its end stands where it was
+    seen, an object, and the MJCF's wall is a slab that does not touch it."""
+    import mujoco
+
+    from exporters.mjcf import write_mjcf
+
+    wall = Plane(np.array([1.0, 0.0, 0.0]), 1.0, "wall", 100, span_m=(-2.0, 1.0))
+    gen = (
+        _gen(box_asset("along", (0.4, 0.4, 0.4)), (-0.84, 0.0, 0.0)),
+        _gen(table_asset("past_end", (0.8, 0.6, 0.72)), (-1.6, 2.0, 0.0)),
+    )
+    result, stats = solve_layout_with_stats(empty_perception((wall,)), gen, CFG)
+    assert stats.converged
+    placed = {o.name: o for o in result.scene.objects}
+    placements = {p.name: p for p in result.placements}
+    assert set(placed) == {"along", "past_end"}
+    along = np.concatenate(_world_pieces(placed["along"]))
+    assert wall.signed_distance_m(along).min() >= CFG.clearance_m - 1e-4
+    assert placements["past_end"].displacement_m < 1e-9 and not placements["past_end"].became_background
+    past = np.concatenate(_world_pieces(placed["past_end"]))
+    assert wall.signed_distance_m(past).max() < -0.1  # wholly behind the wall's plane, as seen
+    # The same wall unbounded pushes the table 1.2 m or leaves it background: the old behaviour.
+    unbounded = Plane(wall.normal, wall.offset_m, "wall", 100)
+    old, _ = solve_layout_with_stats(empty_perception((unbounded,)), gen, CFG)
+    old_past = {p.name: p for p in old.placements}["past_end"]
+    assert old_past.became_background or old_past.displacement_m > 0.5
+    # Exported, the wall is a box behind its face over its span, and the settle check passes.
+    path = write_mjcf(result.scene, tmp_path)
+    m = mujoco.MjModel.from_xml_path(str(path))
+    g = m.geom("wall_0")
+    assert g.type[0] == mujoco.mjtGeom.mjGEOM_BOX
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    past_body = m.body("past_end").id
+    for c in d.contact[: d.ncon]:
+        bodies = {int(m.geom_bodyid[c.geom1]), int(m.geom_bodyid[c.geom2])}
+        assert not (past_body in bodies and "wall_0" in (m.geom(c.geom1).name, m.geom(c.geom2).name))

@@ -119,3 +119,34 @@ def test_inertial_principal_axes_reconstruct_tensor():
     moments, axes = m.Inertial(2.0, (0, 0, 0), tensor).principal()
     assert np.isclose(np.linalg.det(axes), 1.0)
     assert np.allclose(axes @ np.diag(moments) @ axes.T, tensor)
+
+
+def test_a_bounded_wall_stands_only_over_its_span_and_its_slab_lies_behind_its_face():
+    """A wall x = -3 (room at x > -3) seen from y = -1 to 2 m: a point behind its plane along the
+    span is behind it (negative clearance), one behind its plane past either end is not (inf);
+    the slab exporters collide with has its face on the plane, runs the span (widened by the end
+    margin) and stands on the floor."""
+    from scene_builder.planes import WALL_END_MARGIN_M, WALL_SLAB_HEIGHT_M, WALL_SLAB_THICKNESS_M
+
+    wall = m.Plane(np.array([1.0, 0.0, 0.0]), 3.0, "wall", 10, span_m=(-1.0, 2.0))
+    np.testing.assert_allclose(wall.tangent, [0.0, 1.0, 0.0])  # up x normal
+    pts = np.array([[-3.5, 0.0, 1.0], [-3.5, 2.05, 1.0], [-3.5, 2.5, 1.0], [-3.5, -1.5, 0.5], [-2.0, 0.0, 0.0]])
+    c = wall.clearance_m(pts)
+    assert c[0] == pytest.approx(-0.5) and c[1] == pytest.approx(-0.5)  # (2.05 m: within the margin)
+    assert np.isposinf(c[2]) and np.isposinf(c[3])
+    assert c[4] == pytest.approx(1.0)
+    np.testing.assert_allclose(wall.signed_distance_m(pts), [-0.5, -0.5, -0.5, -0.5, 1.0])
+    # Unbounded, the same plane holds back everything behind it.
+    np.testing.assert_allclose(m.Plane(wall.normal, 3.0, "wall").clearance_m(pts), wall.signed_distance_m(pts))
+    centre, yaw, half = wall.slab()
+    rot = np.array([[np.cos(yaw), -np.sin(yaw), 0.0], [np.sin(yaw), np.cos(yaw), 0.0], [0.0, 0.0, 1.0]])
+    corners = centre + (np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * half) @ rot.T
+    np.testing.assert_allclose([corners[:, 0].min(), corners[:, 0].max()], [-3.0 - WALL_SLAB_THICKNESS_M, -3.0])
+    np.testing.assert_allclose([corners[:, 1].min(), corners[:, 1].max()], [-1.0 - WALL_END_MARGIN_M, 2.0 + WALL_END_MARGIN_M])
+    np.testing.assert_allclose([corners[:, 2].min(), corners[:, 2].max()], [0.0, WALL_SLAB_HEIGHT_M])
+    with pytest.raises(ValueError, match="span_m"):
+        m.Plane(np.array([1.0, 0.0, 0.0]), 3.0, "wall", 10, span_m=(2.0, -1.0))
+    with pytest.raises(ValueError, match="walls only"):
+        m.Plane(np.array([0.0, 0.0, 1.0]), 0.0, "floor", 10, span_m=(0.0, 1.0))
+    with pytest.raises(ValueError, match="unbounded"):
+        m.Plane(np.array([0.0, 0.0, 1.0]), 0.0, "floor").slab()

@@ -80,8 +80,8 @@ def test_objects(sample):
         assert len(o.points_world_m) >= CFG.min_object_points
         assert np.quantile(o.points_world_m[:, 2], 0.05) > -0.03, o.name
         assert o.mask.shape == p.observation.depth_m.shape
-        for w in p.room.walls:  # the room is the space in front of its walls
-            assert w.signed_distance_m(o.points_world_m).min() > -0.1, o.name
+        for w in p.room.walls:  # the room is the space in front of its walls where they stand
+            assert w.clearance_m(o.points_world_m).min() > -0.1, o.name
 
 
 def test_sunrgbd_ground_truth_boxes():
@@ -181,7 +181,9 @@ def test_a_kinect_photos_frame_is_not_textured_and_nothing_stands_behind_its_wal
     """nyuv2_metric3d_00100 (white undistortion frame, 6-8 px): the observation's photo, which
     textures the twin, has no frame left, and the report says so. Without it the fronts found on
     the far side of the room's wall made a built-in "cabinet" 1.1 m behind the wall (welded there,
-    1.6 m into it): every object, built-ins included, stands in front of every wall."""
+    1.6 m into it): every object, built-ins included, stands in front of every wall where the
+    wall stands (its span); the laundry past the wall's end, through the opening on the right,
+    is the room going on."""
     from perception.inputs import photo_frame
     from tests.conftest import require
 
@@ -192,4 +194,4 @@ def test_a_kinect_photos_frame_is_not_textured_and_nothing_stands_behind_its_wal
     assert p.room.walls
     for o in p.objects:
         for w in p.room.walls:
-            assert np.median(w.signed_distance_m(o.points_world_m)) > -0.1, o.name
+            assert np.median(w.clearance_m(o.points_world_m)) > -0.1, o.name

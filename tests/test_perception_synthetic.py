@@ -35,10 +35,11 @@ def _camera(height_m, pitch_deg, roll_deg, yaw_deg):
     return t
 
 
-def _render(world_from_camera, boxes, wall=None, doorway=None, far_wall_x=None):
+def _render(world_from_camera, boxes, wall=None, doorway=None, far_wall_x=None, wall_end_y=None):
     """Planar depth (H, W) of the floor z = 0, optional wall (normal, offset) with an optional
-    doorway ((y0, y1) world y range, 2 m high, a hole in the wall), an optional far wall at
-    x = far_wall_x seen through it, and axis-aligned boxes [(min, max)], by exact ray casting."""
+    doorway ((y0, y1) world y range, 2 m high, a hole in the wall) and an optional end (it stands
+    only at y < wall_end_y), an optional far wall at x = far_wall_x seen through or past it, and
+    axis-aligned boxes [(min, max)], by exact ray casting."""
     u, v = np.meshgrid(np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64))
     d_cam = np.stack([(u - (W - 1) / 2) / F, (v - (H - 1) / 2) / F, np.ones_like(u)], axis=-1).reshape(-1, 3)
     d = d_cam @ world_from_camera[:3, :3].T  # t along d is planar depth (d_cam.z = 1)
@@ -53,6 +54,8 @@ def _render(world_from_camera, boxes, wall=None, doorway=None, far_wall_x=None):
             if doorway is not None:
                 hit = o + tw[:, None] * d
                 tw = np.where((hit[:, 1] > doorway[0]) & (hit[:, 1] < doorway[1]) & (hit[:, 2] < 2.0), np.inf, tw)
+            if wall_end_y is not None:
+                tw = np.where((o + tw[:, None] * d)[:, 1] >= wall_end_y, np.inf, tw)
             t = np.where(tw > 0, np.minimum(t, tw), t)
         if far_wall_x is not None:
             tfar = (far_wall_x - o[0]) / d[:, 0]
@@ -217,6 +220,30 @@ def test_wall_with_a_doorway_is_a_wall_and_the_wardrobe_in_front_stays(tmp_path)
     for o in p.objects:
         for w in p.room.walls:
             assert w.signed_distance_m(o.points_world_m).min() > -0.1
+
+
+def test_what_stands_past_a_walls_end_is_an_object_of_the_room(tmp_path):
+    """The wall x = 4 m ends at y = 0.6 m and the room goes on past it to a far wall at x = 7 m
+    (an opening beside a partition: nyuv2_metric3d_00000's table and chairs). The wall is found
+    over the span the camera saw; a chair 1.2 m behind its plane, past its end, is an object of
+    the room (left out as "behind a wall" while walls were infinite planes)."""
+    truth = _camera(1.4, 12.0, 0.0, 0.0)
+    chair = ((5.2, 1.3, 0.0), (5.7, 1.8, 0.9))
+    depth = _render(truth, [chair], wall=(np.array([-1.0, 0.0, 0.0]), 4.0), wall_end_y=0.6, far_wall_x=7.0)
+    p = perceive(_write(tmp_path, depth, "wall_end"), CFG)
+    true_from_found = truth @ np.linalg.inv(p.camera.world_from_camera)
+    (wall,) = [w for w in p.room.walls if abs(w.signed_distance_m(p.camera.position_m[None])[0] - 4.0) < 0.05]
+    assert wall.bounded
+    # Its span, mapped to the true frame, ends at y = 0.6 m (where it was seen up to).
+    ends = np.array([-wall.offset_m * wall.normal + s * wall.tangent for s in wall.span_m])
+    ends_true = transform_points(true_from_found, ends)
+    assert sorted(ends_true[:, 1])[1] == pytest.approx(0.6, abs=0.1)
+    assert p.left_out_behind_walls == 0
+    found = [transform_points(true_from_found, o.points_world_m) for o in p.objects]
+    (pts,) = [q for q in found if np.median(q[:, 0]) > 4.5]
+    assert np.percentile(pts[:, 2], 99) == pytest.approx(0.9, abs=0.05)
+    assert 1.3 - 0.05 < np.median(pts[:, 1]) < 1.8 + 0.05
+    assert np.isposinf(wall.clearance_m(transform_points(np.linalg.inv(true_from_found), pts))).all()
 
 
 def test_close_up_of_a_corner_takes_gravity_from_two_vertical_planes(tmp_path):
