@@ -106,14 +106,14 @@ def inlier_threshold_m(depth_m: np.ndarray) -> np.ndarray:
 class CameraPlane:
     """A plane ``normal . p + offset_m = 0`` in the camera frame, normal towards the camera
     (so ``offset_m`` > 0 is the camera's distance to it). inliers: (H, W) bool. span_m: for a
-    wall, the extent of its inliers along up x normal (``Plane.span_m``; the same in the world
-    frame, whose origin is under the camera), set by :func:`_with_span`."""
+    wall, its known ends along up x normal (``Plane.span_m``; the same in the world frame, whose
+    origin is under the camera), set by :func:`_with_span`."""
 
     normal: np.ndarray
     offset_m: float
     kind: str
     inliers: np.ndarray
-    span_m: tuple[float, float] | None = None
+    span_m: tuple[float | None, float | None] | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -543,20 +543,41 @@ def _world_walls(world_from_camera: np.ndarray, planes: list[CameraPlane]) -> tu
     return tuple(walls)
 
 
-#: A wall's span is its inliers' extent along it between these percentiles (a few stray inliers
-#: where a coplanar surface of the next room lines up with it do not stretch it).
+#: A wall's inliers are taken to reach between these percentiles of their positions along it (a
+#: few stray inliers where a surface of the next room lines up with it do not stretch it).
 SPAN_PERCENTILES = (0.5, 99.5)
+#: A point seen this far behind a wall's plane: its ray passed through the plane, where the wall
+#: is not (the crossing counts between SEEN_THROUGH_Z_M above the floor, where things stand).
+SEEN_THROUGH_M = 0.3
+SEEN_THROUGH_Z_M = (0.05, 2.0)
+#: At least this many rays through the plane beyond the wall's inliers end it there.
+MIN_SEEN_THROUGH = 200
 
 
-def _with_span(p: CameraPlane, points_cam: np.ndarray, up_cam: np.ndarray) -> CameraPlane:
-    """A wall or partial wall with its span: where along it the camera saw it. The world frame's
-    origin lies under the camera and it turns about up only, so the position along the wall,
-    ``p . (up x n)``, is the same in the camera frame and in the world frame."""
+def _with_span(p: CameraPlane, points_cam: np.ndarray, pts: np.ndarray, up_cam: np.ndarray, height_m: float) -> CameraPlane:
+    """A wall or partial wall with its known ends (``Plane.span_m``): beyond the extent of its
+    inliers (points_cam: (H, W, 3)) along it, the first place where rays of the seen points
+    (pts: (N, 3)) pass through its plane between SEEN_THROUGH_Z_M, by MIN_SEEN_THROUGH rays or
+    more. Between its inliers and there, whatever stands in front hides the wall, which goes on
+    behind it (a sofa against the wall's last metre); with nothing seen through the plane beyond
+    a side, the wall goes on past the photo there (None). Rays through the plane between its
+    inliers are doorways and windows: the wall stands around them. The world frame's origin lies
+    under the camera and turns about up only, so the position along the wall, ``p . (up x n)``,
+    is the same in the camera frame and in the world frame."""
     if p.kind not in ("wall", "partial-wall") or not p.inliers.any():
         return p
-    s = points_cam[p.inliers] @ np.cross(up_cam, p.normal)
-    lo, hi = (float(v) for v in np.percentile(s, SPAN_PERCENTILES))
-    return replace(p, span_m=(lo, hi)) if hi > lo else p
+    along = np.cross(up_cam, p.normal)
+    a, b = (float(v) for v in np.percentile(points_cam[p.inliers] @ along, SPAN_PERCENTILES))
+    dist = pts @ p.normal + p.offset_m
+    through = pts[dist < -SEEN_THROUGH_M]
+    # Where the ray from the camera (the origin) to each such point crosses the plane.
+    cross = through * (p.offset_m / -(through @ p.normal))[:, None]
+    z = cross @ up_cam + height_m
+    s = (cross @ along)[(z > SEEN_THROUGH_Z_M[0]) & (z < SEEN_THROUGH_Z_M[1])]
+    beyond_lo, beyond_hi = s[s < a], s[s > b]
+    lo = float(np.percentile(beyond_lo, 98)) if len(beyond_lo) >= MIN_SEEN_THROUGH else None
+    hi = float(np.percentile(beyond_hi, 2)) if len(beyond_hi) >= MIN_SEEN_THROUGH else None
+    return replace(p, span_m=(lo, hi)) if (lo, hi) != (None, None) else p
 
 
 def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0, up_hint: np.ndarray | None = None, normals: str = "open3d") -> RoomFrame:
@@ -684,7 +705,7 @@ def estimate_room(points_cam: np.ndarray, valid: np.ndarray, seed: int = 0, up_h
     ]
     walls_cam = [p.normal for p in sorted((p for p in cam_planes if p.kind == "wall"), key=lambda p: -int(p.inliers.sum()))]
     world_from_camera = world_from_camera_for(up, height, walls_cam)
-    cam_planes = [_with_span(p, points_cam, up) for p in _merge_parallel([_manhattan(p, world_from_camera, points_cam) for p in cam_planes])]
+    cam_planes = [_with_span(p, points_cam, pts, up, height) for p in _merge_parallel([_manhattan(p, world_from_camera, points_cam) for p in cam_planes])]
     background = np.zeros((h, w), dtype=bool)
     for p in cam_planes:
         if p.kind != "partial-wall":  # (a partial wall may be a tall cabinet's front: left to the segmenter)

@@ -180,10 +180,11 @@ def fixture_room() -> Room:
 
 def bounded_walls_scene() -> Scene:
     """:func:`boxes_scene` in a room whose walls were seen over bounded spans (``Plane.span_m``):
-    the back wall from y = -1.5 to 1.2 m, a side wall from x = -2 to 1.5 m, one unbounded."""
+    the back wall from y = -1.5 to 1.2 m, a side wall ending at x = -2 m and going on towards
+    +x (an open end), one unbounded."""
     base = boxes_scene()
     back, left, right = base.room.walls
-    walls = (dataclasses.replace(back, span_m=(-1.2, 1.5)), dataclasses.replace(left, span_m=(-1.5, 2.0)), right)
+    walls = (dataclasses.replace(back, span_m=(-1.2, 1.5)), dataclasses.replace(left, span_m=(None, 2.0)), right)
     return dataclasses.replace(base, room=Room(walls=walls))
 
 

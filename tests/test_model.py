@@ -126,7 +126,7 @@ def test_a_bounded_wall_stands_only_over_its_span_and_its_slab_lies_behind_its_f
     span is behind it (negative clearance), one behind its plane past either end is not (inf);
     the slab exporters collide with has its face on the plane, runs the span (widened by the end
     margin) and stands on the floor."""
-    from scene_builder.planes import WALL_END_MARGIN_M, WALL_SLAB_HEIGHT_M, WALL_SLAB_THICKNESS_M
+    from scene_builder.planes import WALL_END_MARGIN_M, WALL_OPEN_LENGTH_M, WALL_SLAB_HEIGHT_M, WALL_SLAB_THICKNESS_M
 
     wall = m.Plane(np.array([1.0, 0.0, 0.0]), 3.0, "wall", 10, span_m=(-1.0, 2.0))
     np.testing.assert_allclose(wall.tangent, [0.0, 1.0, 0.0])  # up x normal
@@ -144,8 +144,18 @@ def test_a_bounded_wall_stands_only_over_its_span_and_its_slab_lies_behind_its_f
     np.testing.assert_allclose([corners[:, 0].min(), corners[:, 0].max()], [-3.0 - WALL_SLAB_THICKNESS_M, -3.0])
     np.testing.assert_allclose([corners[:, 1].min(), corners[:, 1].max()], [-1.0 - WALL_END_MARGIN_M, 2.0 + WALL_END_MARGIN_M])
     np.testing.assert_allclose([corners[:, 2].min(), corners[:, 2].max()], [0.0, WALL_SLAB_HEIGHT_M])
+    # One end known (seen past at y = 2 m), the other open: the wall goes on towards -y.
+    half_open = m.Plane(np.array([1.0, 0.0, 0.0]), 3.0, "wall", 10, span_m=(None, 2.0))
+    c = half_open.clearance_m(pts)
+    assert c[3] == pytest.approx(-0.5) and np.isposinf(c[2])
+    centre, yaw, half = half_open.slab()
+    assert centre[1] + half[0] == pytest.approx(2.0 + WALL_END_MARGIN_M)
+    assert centre[1] - half[0] == pytest.approx(2.0 + WALL_END_MARGIN_M - WALL_OPEN_LENGTH_M)
+    assert m.Plane(np.array([1.0, 0.0, 0.0]), 3.0, "wall", 10, span_m=(None, None)).span_m is None
     with pytest.raises(ValueError, match="span_m"):
         m.Plane(np.array([1.0, 0.0, 0.0]), 3.0, "wall", 10, span_m=(2.0, -1.0))
+    with pytest.raises(ValueError, match="span_m"):
+        m.Plane(np.array([1.0, 0.0, 0.0]), 3.0, "wall", 10, span_m=(float("inf"), None))
     with pytest.raises(ValueError, match="walls only"):
         m.Plane(np.array([0.0, 0.0, 1.0]), 0.0, "floor", 10, span_m=(0.0, 1.0))
     with pytest.raises(ValueError, match="unbounded"):
