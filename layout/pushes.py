@@ -80,13 +80,15 @@ class Solver:
         self.wall_min_rel = np.array(
             [[float(np.min(np.concatenate([p.verts_rel_m for p in b.pieces]) @ n)) for n in self.wall_n] for b in bodies]
         ).reshape(len(bodies), len(walls))
-        # A bounded wall holds back only the bodies beside its span (where they were seen when
-        # the solver was made): one past its end stands where the room goes on (an opening).
+        # A bounded wall holds back only the vertices along its span (where the bodies stand when
+        # the solver is made): past its end the room goes on (an opening), and a body wholly
+        # there is not held back by it at all.
         for i, b in enumerate(bodies):
             v = b.world_vertices()
             for w, wall in enumerate(walls):
-                if wall.bounded and not np.isfinite(wall.clearance_m(v)).any():
-                    self.wall_min_rel[i, w] = np.inf
+                if wall.bounded:
+                    along = np.isfinite(wall.clearance_m(v))
+                    self.wall_min_rel[i, w] = float(np.min((v[along] - b.position_m) @ wall.normal)) if along.any() else np.inf
         for i, b in enumerate(bodies):
             self.world.set_position(i, b.position_m)
         # Pairs found fine, with the body versions they were checked at: re-checked only after
