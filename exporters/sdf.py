@@ -211,17 +211,22 @@ def _plane(parent: ET.Element, kind: str, name: str, normal, point, rgba=None, m
         _material(el, rgba)
 
 
+def _box(parent: ET.Element, kind: str, name: str, centre_m, yaw_rad: float, half_m, rgba=None) -> None:
+    """A box turned by ``yaw_rad`` about Z at ``centre_m``: a collision (floor friction) or a
+    visual (``rgba``). Background boxes and bounded walls' slabs."""
+    el = _sub(parent, kind, name=name)
+    _pose(el, centre_m, (0.0, 0.0, yaw_rad))
+    _sub(_sub(_sub(el, "geometry"), "box"), "size", 2.0 * np.asarray(half_m, dtype=float))
+    if kind == "collision":
+        _surface(el, FLOOR_DYNAMIC_FRICTION)
+    else:
+        _material(el, rgba)
+
+
 def _slab(parent: ET.Element, name: str, wall: Plane, rgba) -> None:
     """A bounded wall's box (``Plane.slab``): collision, and visual when ``rgba`` is given."""
-    centre, yaw, half = wall.slab()
     for kind in ("collision", "visual") if rgba is not None else ("collision",):
-        el = _sub(parent, kind, name=name)
-        _pose(el, centre, (0.0, 0.0, yaw))
-        _sub(_sub(_sub(el, "geometry"), "box"), "size", 2.0 * half)
-        if kind == "collision":
-            _surface(el, FLOOR_DYNAMIC_FRICTION)
-        else:
-            _material(el, rgba)
+        _box(parent, kind, name, *wall.slab(), rgba)
 
 
 def _add_room(world: ET.Element, scene: Scene, out_dir: Path) -> None:
@@ -256,10 +261,7 @@ def _add_room(world: ET.Element, scene: Scene, out_dir: Path) -> None:
         _mesh(col, fname)
         _surface(col, FLOOR_DYNAMIC_FRICTION)
     for k in range(bg.box_count):
-        col = _sub(link, "collision", name=f"box_{k}")
-        _pose(col, bg.box_centers_m[k], (0.0, 0.0, float(bg.box_yaws_rad[k])))
-        _sub(_sub(_sub(col, "geometry"), "box"), "size", 2.0 * bg.box_half_extents_m[k])
-        _surface(col, FLOOR_DYNAMIC_FRICTION)
+        _box(link, "collision", f"box_{k}", bg.box_centers_m[k], float(bg.box_yaws_rad[k]), bg.box_half_extents_m[k])
 
 
 def _mesh_rgba(mesh: TriangleMesh) -> tuple[float, ...]:

@@ -237,7 +237,7 @@ def _add_room(ctx: _Context, scene: Scene) -> None:
     planes: list[tuple[str, np.ndarray]] = [("Floor", np.eye(4))]
     for i, wall in enumerate(scene.room.walls):
         if wall.bounded:  # (the room goes on past its ends: a slab, as in the MJCF)
-            _wall_slab(stage, f"/World/Room/Wall_{i}", wall, floor_mat)
+            _collision_box(stage, f"/World/Room/Wall_{i}", *wall.slab(), floor_mat)  # (Plane.slab)
         else:
             planes.append((f"Wall_{i}", _plane_transform(wall)))
     for name, t in planes:
@@ -255,7 +255,7 @@ def _add_background(ctx: _Context, bg: Background) -> None:
     """The static background (no RigidBodyAPI: colliders that never move): the textured observed
     surface, collided as a triangle mesh (approximation "none", allowed for static colliders), the
     visual meshes and convex pieces of objects that became background, and the collision boxes."""
-    from pxr import Gf, Sdf, UsdGeom, UsdPhysics
+    from pxr import Sdf, UsdGeom, UsdPhysics
 
     stage = ctx.stage
     root = Sdf.Path("/World/Background")
@@ -285,31 +285,21 @@ def _add_background(ctx: _Context, bg: Background) -> None:
         UsdPhysics.MeshCollisionAPI.Apply(c.GetPrim()).CreateApproximationAttr(UsdPhysics.Tokens.convexHull)
         _bind(c.GetPrim(), phys, "physics")
     for k in range(bg.box_count):
-        cube = UsdGeom.Cube.Define(stage, col.AppendChild(f"box_{k}"))
-        cube.CreateSizeAttr(2.0)
-        cube.CreatePurposeAttr(UsdGeom.Tokens.guide)
-        half = bg.box_half_extents_m[k]
-        cube.CreateExtentAttr([Gf.Vec3f(-1.0, -1.0, -1.0), Gf.Vec3f(1.0, 1.0, 1.0)])
-        yaw = float(bg.box_yaws_rad[k])
-        cube.AddTranslateOp().Set(Gf.Vec3d(*bg.box_centers_m[k].tolist()))
-        cube.AddOrientOp().Set(Gf.Quatf(float(np.cos(yaw / 2)), Gf.Vec3f(0.0, 0.0, float(np.sin(yaw / 2)))))
-        cube.AddScaleOp().Set(Gf.Vec3f(*half.tolist()))
-        UsdPhysics.CollisionAPI.Apply(cube.GetPrim())
-        _bind(cube.GetPrim(), phys, "physics")
+        _collision_box(stage, col.AppendChild(f"box_{k}"), bg.box_centers_m[k], float(bg.box_yaws_rad[k]), bg.box_half_extents_m[k], phys)
 
 
-def _wall_slab(stage, path: str, wall: Plane, material) -> None:
-    """A bounded wall's box (``Plane.slab``): a guide-purpose collider like the wall planes."""
+def _collision_box(stage, path, centre_m: np.ndarray, yaw_rad: float, half_m: np.ndarray, material) -> None:
+    """A static, guide-purpose box collider (a background box, a bounded wall's slab): a cube of
+    size 2 scaled by the half extents, turned by ``yaw_rad`` about Z, at ``centre_m``."""
     from pxr import Gf, UsdGeom, UsdPhysics
 
-    centre, yaw, half = wall.slab()
     cube = UsdGeom.Cube.Define(stage, path)
     cube.CreateSizeAttr(2.0)
     cube.CreateExtentAttr([Gf.Vec3f(-1.0, -1.0, -1.0), Gf.Vec3f(1.0, 1.0, 1.0)])
     cube.CreatePurposeAttr(UsdGeom.Tokens.guide)
-    cube.AddTranslateOp().Set(Gf.Vec3d(*centre.tolist()))
-    cube.AddOrientOp().Set(Gf.Quatf(float(np.cos(yaw / 2)), Gf.Vec3f(0.0, 0.0, float(np.sin(yaw / 2)))))
-    cube.AddScaleOp().Set(Gf.Vec3f(*half.tolist()))
+    cube.AddTranslateOp().Set(Gf.Vec3d(*np.asarray(centre_m, dtype=float).tolist()))
+    cube.AddOrientOp().Set(Gf.Quatf(float(np.cos(yaw_rad / 2)), Gf.Vec3f(0.0, 0.0, float(np.sin(yaw_rad / 2)))))
+    cube.AddScaleOp().Set(Gf.Vec3f(*np.asarray(half_m, dtype=float).tolist()))
     UsdPhysics.CollisionAPI.Apply(cube.GetPrim())
     _bind(cube.GetPrim(), material, "physics")
 
