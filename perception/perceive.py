@@ -8,6 +8,7 @@ import dataclasses
 import numpy as np
 
 from perception.backends import PerceptionRegistries, build_registries
+from perception.bed_foot import split_foot_benches
 from perception.inputs import LoadedInput, check_depth, load_input, photo_frame, without_frame
 from perception.lying_on import split_lying, top_height, without_points
 from perception.naming_prior import GeometricPriorNamer
@@ -564,6 +565,9 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     kept, points_world, cut = _cut_above_tops(kept, points_world, [n for n, _ in names])
     if cut:
         backends.append(BackendUse("table-tops", "height-layers", f"{cut} tables or desks kept to their top: what rose above it (a partition behind a desk) is background"))
+    kept, points_world, names, benches = split_foot_benches(kept, points_world, names)
+    if benches:
+        backends.append(BackendUse("bed-foot", "height-layers", f"{benches} benches at the foot of a bed cut out of it as objects"))
     kept, points_world, names, pillows = split_lying(kept, points_world, names)
     if pillows:
         backends.append(BackendUse("lying-on", "height-layers", f"{pillows} pillows lying on a bed or sofa cut out of it as objects"))
