@@ -215,6 +215,11 @@ def extend_depth(fit: BoxFit, depth_m: float) -> BoxFit:
     return BoxFit(world_from_box, size, fit.on_floor, fit.observed_depth_m)
 
 
+#: Another object is a support under an object (floor_snap_height_m) only when its plan box
+#: covers at least this share of the object's.
+SUPPORT_PLAN_SHARE = 0.25
+
+
 def floor_snap_height_m(
     points_world_m: np.ndarray,
     other_points_world_m: list[np.ndarray] | tuple[np.ndarray, ...],
@@ -237,7 +242,9 @@ def floor_snap_height_m(
     is at most ``max_gap_m`` high and no other object's top (robust ``1 - q`` quantile of its
     heights) lies between ``min_surface_m`` and the lowest point + ``support_tol_m`` under the
     object's plan rectangle (axis-aligned, grown by ``margin_m``, since the support's top under
-    the object is hidden by the object itself), the answer is that height; else ``default_m``.
+    the object is hidden by the object itself; the other's plan box covering
+    :data:`SUPPORT_PLAN_SHARE` of the object's), the answer is that height (as :func:`fit_box`
+    finds the lowest point); else ``default_m``.
 
     points_world_m: (N, 3); other_points_world_m: (M_k, 3) per other object; world frame, Z up,
     floor z = 0.
@@ -257,8 +264,17 @@ def floor_snap_height_m(
         inside = np.all((o[:, :2] >= lo) & (o[:, :2] <= hi), axis=1)
         if not np.any(inside):
             continue
+        # A support lies under a share of the object's plan (its top seen around the object): a
+        # bench before a bed's foot reaches only the margin of the bed's rectangle.
+        o_lo, o_hi = np.quantile(o[:, :2], q, axis=0), np.quantile(o[:, :2], 1.0 - q, axis=0)
+        own = np.maximum(hi - lo - 2.0 * margin_m, 1e-6)
+        cover = np.clip(np.minimum(o_hi, hi - margin_m) - np.maximum(o_lo, lo + margin_m), 0.0, None)
+        if float(np.prod(cover / own)) < SUPPORT_PLAN_SHARE:
+            continue
         top = float(np.quantile(o[:, 2], 1.0 - q))
         if min_surface_m < top <= z_lo + support_tol_m:
             return default_m
-    # the lowest points themselves (fit_box compares its widened lowest point with this)
-    return float(pts[:, 2].min()) + 1e-6
+    # the lowest point as fit_box finds it (its widened robust bottom, which it compares with
+    # this): the raw lowest point, a stray post or a speck under a bed seen over a bench, lay
+    # under it and kept the box off the floor
+    return float(_robust_extent(pts[:, 2:3], q)[0][0]) + 1e-6
