@@ -46,6 +46,36 @@ def test_wall_in_front_or_beside_does_not_limit_depth():
     np.testing.assert_allclose(complete_box(fit, "table", (behind_camera, side)).size_m, complete_box(fit, "table").size_m)
 
 
+def test_completed_depth_stops_before_what_another_object_showed_behind_it():
+    """sunrgbd_imvotenet_000005: a bed seen from its foot-side corner, completed to a bed's
+    proportions, grew 0.9 m past its seen side over the bench at the foot of the bed beyond it,
+    which the camera saw there. Its back now stops 2 cm before the bench's seen front; a pillow
+    lying on it, a few stray points, or something beside its width do not stop it."""
+    from generation.shape_prior import OTHERS_CLEARANCE_M, depth_to_others
+
+    rng = np.random.default_rng(5)
+    camera = np.array([3.5, 0.0, 1.4])  # looking along -x at the bed's side
+    seen = np.vstack([_slab([0.9, -1.0, 0.02], [1.0, 1.0, 0.6], 1500, rng),  # its side face, down to the floor
+                      _slab([0.3, -1.0, 0.58], [1.0, 1.0, 0.6], 1500, rng)])  # the near 70 cm of its top
+    fit = fit_box(seen, camera)
+    alone = complete_box(fit, "bed")
+    assert alone.size_m[0] > 1.5  # a bed's length: the back grows past x = -0.5
+    bench = _slab([-0.6, -0.5, 0.0], [-0.2, 0.5, 0.4], 800, rng)  # its seen front at x = -0.2
+    stopped = complete_box(fit, "bed", others_world_m=[bench])
+    back = stopped.world_from_box[0, 3] - stopped.size_m[0] / 2
+    assert back == pytest.approx(-0.2 + OTHERS_CLEARANCE_M, abs=0.02)
+    front = lambda f: f.world_from_box[0, 3] + f.size_m[0] / 2  # noqa: E731
+    assert front(stopped) == pytest.approx(front(fit), abs=1e-6)  # what was seen stays where it was
+    pillow = _slab([-0.6, -0.3, 0.6], [-0.2, 0.3, 0.75], 800, rng)  # lying on it
+    stray = _slab([-0.4, -0.1, 0.1], [-0.3, 0.1, 0.2], 10, rng)
+    beside = _slab([-0.6, 1.3, 0.0], [-0.2, 1.8, 0.4], 800, rng)  # past its width
+    assert depth_to_others(fit, [pillow, stray, beside]) == np.inf
+    np.testing.assert_allclose(complete_box(fit, "bed", others_world_m=[pillow, stray, beside]).size_m, alone.size_m)
+    # a bench farther than a bed's depth does not shorten it either
+    far = _slab([-3.0, -0.5, 0.0], [-2.6, 0.5, 0.4], 800, rng)
+    np.testing.assert_allclose(complete_box(fit, "bed", others_world_m=[far]).size_m, alone.size_m)
+
+
 def test_a_face_tilted_by_estimated_depth_near_a_wall_takes_the_wall_direction():
     """A microwave's front 20-40 cm before a wall, read 25 degrees off it (depth from one photo):
     its box is parallel to the wall, holds every point, and completes a body behind the face, short

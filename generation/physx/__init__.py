@@ -107,7 +107,7 @@ class PhysxVlmGenerator:
         crop = object_crop(perception.observation.rgb, obj.mask, config.vlm_crop_px, config.vlm_crop_fill)
         others = [o.points_world_m for o in perception.objects if o.name != obj.name]
         snap_m = floor_snap_height_m(obj.points_world_m, others)
-        fit = fitted_box(obj.points_world_m, perception.camera.position_m, obj.label, perception.room.walls, floor_snap_m=snap_m)
+        fit = fitted_box(obj.points_world_m, perception.camera.position_m, obj.label, perception.room.walls, floor_snap_m=snap_m, others_world_m=others)
         conv = self.converse(crop, config)
         description, grids, _ = decode_conversation(conv)
         observed = np.asarray(fit.size_m, dtype=np.float64)
