@@ -69,8 +69,10 @@ def test_completed_depth_stops_before_what_another_object_showed_behind_it():
     pillow = _slab([-0.6, -0.3, 0.6], [-0.2, 0.3, 0.75], 800, rng)  # lying on it
     stray = _slab([-0.4, -0.1, 0.1], [-0.3, 0.1, 0.2], 10, rng)
     beside = _slab([-0.6, 1.3, 0.0], [-0.2, 1.8, 0.4], 800, rng)  # past its width
-    assert depth_to_others(fit, [pillow, stray, beside]) == np.inf
-    np.testing.assert_allclose(complete_box(fit, "bed", others_world_m=[pillow, stray, beside]).size_m, alone.size_m)
+    # a night stand beside its seen side, reaching into its width: mostly beside, not behind it
+    neighbour = _slab([-0.2, 0.8, 0.0], [1.0, 1.4, 0.5], 800, rng)
+    assert depth_to_others(fit, [pillow, stray, beside, neighbour]) == np.inf
+    np.testing.assert_allclose(complete_box(fit, "bed", others_world_m=[pillow, stray, beside, neighbour]).size_m, alone.size_m)
     # a bench farther than a bed's depth does not shorten it either
     far = _slab([-3.0, -0.5, 0.0], [-2.6, 0.5, 0.4], 800, rng)
     np.testing.assert_allclose(complete_box(fit, "bed", others_world_m=[far]).size_m, alone.size_m)
