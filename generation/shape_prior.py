@@ -126,8 +126,9 @@ def complete_box(fit, label: str, walls=(), others_world_m=()):
     proportions, scaled by the measured width and height (geometric mean of both ratios),
     when the observed depth is less than 60 % of it; never past a wall of ``walls`` (the room's
     walls, :func:`depth_to_walls`) nor into what another object of ``others_world_m`` ((N_k, 3)
-    seen points each) showed of itself (:func:`depth_to_others`). Flat categories (towel,
-    blanket) keep the observed depth."""
+    seen points each) showed of itself (:func:`depth_to_others`; not for :data:`HOLDS_INSIDE`
+    categories, whose contents stand inside them). Flat categories (towel, blanket) keep the
+    observed depth."""
     from generation.pose import extend_depth
     from scene_builder.vocabulary import category
 
@@ -140,7 +141,10 @@ def complete_box(fit, label: str, walls=(), others_world_m=()):
     else:
         expected = td * float(np.sqrt((w / tw) * (h / th)))
     if d < _DEPTH_COMPLETE_FRACTION * expected:
-        return extend_depth(fit, min(expected, depth_to_walls(fit, walls), depth_to_others(fit, others_world_m)))
+        # (a shelf's completion holds what stands inside it: promptda_arkit's books, seen in the
+        # bookcase's cubbies behind its front, stopped it at its front frame)
+        others = depth_to_others(fit, others_world_m) if label not in HOLDS_INSIDE else np.inf
+        return extend_depth(fit, min(expected, depth_to_walls(fit, walls), others))
     return fit
 
 

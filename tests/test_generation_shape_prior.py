@@ -73,6 +73,14 @@ def test_completed_depth_stops_before_what_another_object_showed_behind_it():
     neighbour = _slab([-0.2, 0.8, 0.0], [1.0, 1.4, 0.5], 800, rng)
     assert depth_to_others(fit, [pillow, stray, beside, neighbour]) == np.inf
     np.testing.assert_allclose(complete_box(fit, "bed", others_world_m=[pillow, stray, beside, neighbour]).size_m, alone.size_m)
+    # a shelf's completion holds what stands inside it (promptda_arkit: books seen in the
+    # cubbies behind the bookcase's front frame)
+    frame = fit_box(_slab([0.98, -0.5, 0.0], [1.0, 0.5, 1.8], 2000, rng), camera)
+    shelf = complete_box(frame, "shelf")
+    assert shelf.size_m[0] > 0.2
+    books = _slab([0.85, -0.4, 0.4], [0.9, 0.4, 0.6], 800, rng)
+    assert depth_to_others(frame, [books]) < 0.2  # they would stop anything else
+    assert complete_box(frame, "shelf", others_world_m=[books]).size_m[0] == pytest.approx(shelf.size_m[0])
     # a bench farther than a bed's depth does not shorten it either
     far = _slab([-3.0, -0.5, 0.0], [-2.6, 0.5, 0.4], 800, rng)
     np.testing.assert_allclose(complete_box(fit, "bed", others_world_m=[far]).size_m, alone.size_m)
