@@ -250,6 +250,14 @@ def _inside_column(points_world_m: np.ndarray, column) -> bool:
     return float(np.mean(shapely.contains_xy(outline, p[:, 0], p[:, 1]))) >= 0.5
 
 
+def completion_blockers(obj: PerceivedObject, others: list[PerceivedObject]) -> list[np.ndarray]:
+    """The seen points of the objects of ``others`` that stop ``obj``'s box completion
+    (:func:`depth_to_others`): every one but a shelf that holds ``obj`` inside its column (a book
+    row in a bookcase's cubby stopped at the back panel's blurred depth was a 1 cm sliver that
+    toppled, promptda_arkit; the shelf's column does not carve it either)."""
+    return [o.points_world_m for o in others if not (o.label in HOLDS_INSIDE and _inside_column(obj.points_world_m, _ownership(o)[2]))]
+
+
 def _thin(points_m: np.ndarray, spacing_m: float) -> np.ndarray:
     """One point per occupied ``spacing_m`` grid cell of (N, 3) points (the first, in input
     order: deterministic)."""
@@ -523,7 +531,8 @@ class ShapePriorGenerator:
         # The plan orientation of large furniture follows the category's proportions (a sofa
         # seen end-on), unless fronts seen on a face say which face is the front.
         typical = cat.typical_size_m if label in PLAN_BY_PROPORTIONS and not obj.fronts else None
-        fit = fitted_box(obj.points_world_m, cam_world, label, perception.room.walls, floor_snap_m=snap_m, typical_size_m=typical, others_world_m=others)
+        blockers = completion_blockers(obj, other_objects)
+        fit = fitted_box(obj.points_world_m, cam_world, label, perception.room.walls, floor_snap_m=snap_m, typical_size_m=typical, others_world_m=blockers)
         box_from_world = np.linalg.inv(fit.world_from_box)
         pts = transform_points(box_from_world, obj.points_world_m)
         cam = transform_points(box_from_world, cam_world[None])[0]
@@ -614,7 +623,7 @@ class ShapePriorGenerator:
                 # box that other objects stand inside (a bookcase's books: promptda_arkit's
                 # cubbies read as fronts), which is no closed carcass of doors and drawers.
                 refitted = True
-                fit, size = face_fitted_box(obj, space, cam_world, perception.room.walls, snap_m, others)
+                fit, size = face_fitted_box(obj, space, cam_world, perception.room.walls, snap_m, blockers)
                 box_from_world = np.linalg.inv(fit.world_from_box)
                 pts = transform_points(box_from_world, obj.points_world_m)
                 rects = _seen_rects(obj, fit.world_from_box, size, perception.room.walls)

@@ -303,6 +303,24 @@ def test_a_shelf_column_holds_what_stands_inside_it_but_not_what_lies_on_top_or_
     assert not _inside_column(thing(-0.5, 0.0, 0.8), column)  # a chair in front of it
 
 
+def test_a_shelf_does_not_stop_the_completion_of_what_it_holds():
+    """promptda_arkit: a book row in a cubby, its completion stopped at the bookcase's back panel,
+    was a 1 cm sliver that toppled. The shelf holding it is no blocker; a cabinet there would be,
+    and so is the shelf for what stands in front of it."""
+    from generation.shape_prior import completion_blockers
+    from tests.test_degenerate_shapes import _perception
+
+    rng = np.random.default_rng(0)
+    shelf = np.column_stack([rng.uniform(0.0, 0.3, 2000), rng.uniform(-1.0, 1.0, 2000), rng.uniform(0.0, 2.0, 2000)])
+    book = np.column_stack([rng.uniform(0.05, 0.08, 200), rng.uniform(0.0, 0.1, 200), rng.uniform(0.8, 1.0, 200)])
+    chair = np.column_stack([rng.uniform(-0.9, -0.5, 400), rng.uniform(-0.2, 0.2, 400), rng.uniform(0.0, 0.9, 400)])
+    shelf_o, book_o, chair_o = _perception([shelf, book, chair], ["shelf", "book", "chair"]).objects
+    assert len(completion_blockers(book_o, [shelf_o, chair_o])) == 1
+    assert completion_blockers(chair_o, [shelf_o, book_o])[0] is shelf_o.points_world_m
+    cabinet_o = _perception([shelf], ["cabinet"]).objects[0]
+    assert len(completion_blockers(book_o, [cabinet_o])) == 1
+
+
 class _SeenUpTo:
     """Seen free space above ``top_m`` (world z), everywhere: what a silhouette whose top edge is
     at that height says of a box's top face."""
