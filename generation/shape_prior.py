@@ -42,14 +42,14 @@ OWNERSHIP_SPACING_M = 0.01
 #: Visual vertices within this many voxels of the observed depth on the object's own pixels are
 #: moved onto it.
 SNAP_VOXELS = 1.5
-#: Large furniture whose front is not always the side the camera sees best (a sofa seen end-on
-#: or from behind): its box fit reads the plan by the category's proportions
-#: (:func:`generation.pose.fit_box`). Not screens, clocks or bags, whose seen face is their front
-#: (a monitor read by its proportions stood its template on a 10 cm foot and toppled).
 #: How high a category's lowest seen point may be for its box to reach the floor when nothing
 #: seen stands under it (others: generation.pose.floor_snap_height_m's 0.3 m); where the camera
 #: saw under it, the free space seen carves the box back.
 BASE_GAP_M = {"bed": 0.6}
+#: Large furniture whose front is not always the side the camera sees best (a sofa seen end-on
+#: or from behind): its box fit reads the plan by the category's proportions
+#: (:func:`generation.pose.fit_box`). Not screens, clocks or bags, whose seen face is their front
+#: (a monitor read by its proportions stood its template on a 10 cm foot and toppled).
 PLAN_BY_PROPORTIONS = frozenset({"sofa", "bench", "desk", "table", "shelf", "wardrobe", "cabinet", "counter"})
 #: Completed voxels keep this far in front of the walls.
 WALL_CLEARANCE_M = 0.005
@@ -100,8 +100,8 @@ def depth_to_others(fit, others_world_m) -> float:
     seen points behind the box's observed back, within its width and height), less
     OTHERS_CLEARANCE_M; inf when nothing stands there. Objects lying on it
     (:data:`BLOCKING_BOTTOM_SHARE`), standing beside what was seen (:data:`BLOCKING_BEHIND_SHARE`)
-    and a few stray points (:data:`MIN_BLOCKING_POINTS`) do not stop it. The hidden back of a bed completed to a bed's proportions reached 0.9 m past its
-    seen side, over the bench at the foot of the bed beyond it (sunrgbd_imvotenet_000005): the
+    and a few stray points (:data:`MIN_BLOCKING_POINTS`) do not stop it. The hidden back of a bed
+    completed to a bed's proportions reached 0.9 m past its seen side, over the bench at the foot of the bed beyond it (sunrgbd_imvotenet_000005): the
     camera saw that bench where the completion put the bed."""
     box_from_world = np.linalg.inv(fit.world_from_box)
     d, w, h = (float(v) for v in fit.size_m)
