@@ -101,8 +101,9 @@ def depth_to_others(fit, others_world_m) -> float:
     OTHERS_CLEARANCE_M; inf when nothing stands there. Objects lying on it
     (:data:`BLOCKING_BOTTOM_SHARE`), standing beside what was seen (:data:`BLOCKING_BEHIND_SHARE`)
     and a few stray points (:data:`MIN_BLOCKING_POINTS`) do not stop it. The hidden back of a bed
-    completed to a bed's proportions reached 0.9 m past its seen side, over the bench at the foot of the bed beyond it (sunrgbd_imvotenet_000005): the
-    camera saw that bench where the completion put the bed."""
+    completed to a bed's proportions reached 0.9 m past its seen side, over the bench at the foot
+    of the bed beyond it (sunrgbd_imvotenet_000005): the camera saw that bench where the
+    completion put the bed."""
     box_from_world = np.linalg.inv(fit.world_from_box)
     d, w, h = (float(v) for v in fit.size_m)
     limit = np.inf
@@ -250,12 +251,13 @@ def _inside_column(points_world_m: np.ndarray, column) -> bool:
     return float(np.mean(shapely.contains_xy(outline, p[:, 0], p[:, 1]))) >= 0.5
 
 
-def completion_blockers(obj: PerceivedObject, others: list[PerceivedObject]) -> list[np.ndarray]:
-    """The seen points of the objects of ``others`` that stop ``obj``'s box completion
-    (:func:`depth_to_others`): every one but a shelf that holds ``obj`` inside its column (a book
-    row in a bookcase's cubby stopped at the back panel's blurred depth was a 1 cm sliver that
-    toppled, promptda_arkit; the shelf's column does not carve it either)."""
-    return [o.points_world_m for o in others if not (o.label in HOLDS_INSIDE and _inside_column(obj.points_world_m, _ownership(o)[2]))]
+def completion_blockers(obj: PerceivedObject, others: list[PerceivedObject]) -> list[PerceivedObject]:
+    """The objects of ``others`` whose seen points stop ``obj``'s box completion
+    (:func:`depth_to_others`) and whose columns carve its voxels: every one but a shelf that holds
+    ``obj`` inside its column (a book row in a bookcase's cubby stopped at the back panel's
+    blurred depth was a 1 cm sliver that toppled, promptda_arkit; carved to the column, a sliver
+    of its front face)."""
+    return [o for o in others if not (o.label in HOLDS_INSIDE and _inside_column(obj.points_world_m, _ownership(o)[2]))]
 
 
 def _thin(points_m: np.ndarray, spacing_m: float) -> np.ndarray:
@@ -531,7 +533,8 @@ class ShapePriorGenerator:
         # The plan orientation of large furniture follows the category's proportions (a sofa
         # seen end-on), unless fronts seen on a face say which face is the front.
         typical = cat.typical_size_m if label in PLAN_BY_PROPORTIONS and not obj.fronts else None
-        blockers = completion_blockers(obj, other_objects)
+        blocking = completion_blockers(obj, other_objects)
+        blockers = [o.points_world_m for o in blocking]
         fit = fitted_box(obj.points_world_m, cam_world, label, perception.room.walls, floor_snap_m=snap_m, typical_size_m=typical, others_world_m=blockers)
         box_from_world = np.linalg.inv(fit.world_from_box)
         pts = transform_points(box_from_world, obj.points_world_m)
@@ -655,10 +658,8 @@ class ShapePriorGenerator:
         # stand inside the bookcase's column, and carving them to it left each a sliver of its
         # front face that toppled (promptda_arkit). A bed's or table's column still carves under
         # what lies on it (a pillow lies below a headboard's height, on the bed, not in it).
-        columns = []
-        for o, (_, _, c) in zip(other_objects, owned):
-            if not (o.label in HOLDS_INSIDE and _inside_column(obj.points_world_m, c)):
-                columns.append(c)
+        # (completion_blockers, found above; _ownership is cached per object)
+        columns = [_ownership(o)[2] for o in blocking]
 
         def blocked(p_box: np.ndarray) -> np.ndarray:
             """Voxel centres this object may not fill: seen free space, behind a wall, or nearer

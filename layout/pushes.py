@@ -77,18 +77,16 @@ class Solver:
         # (fixed-rotation) vertices of n . v, precomputed once, plus n . position.
         self.wall_n = np.array([w.normal for w in walls], dtype=np.float64).reshape(-1, 3)
         self.wall_off = np.array([w.offset_m for w in walls], dtype=np.float64)
-        self.wall_min_rel = np.array(
-            [[float(np.min(np.concatenate([p.verts_rel_m for p in b.pieces]) @ n)) for n in self.wall_n] for b in bodies]
-        ).reshape(len(bodies), len(walls))
         # A bounded wall holds back only the vertices along its span (where the bodies stand when
         # the solver is made): past its end the room goes on (an opening), and a body wholly
         # there is not held back by it at all.
+        self.wall_min_rel = np.full((len(bodies), len(walls)), np.inf)
         for i, b in enumerate(bodies):
-            v = b.world_vertices()
-            for w, wall in enumerate(walls):
-                if wall.bounded:
-                    along = np.isfinite(wall.clearance_m(v))
-                    self.wall_min_rel[i, w] = float(np.min((v[along] - b.position_m) @ wall.normal)) if along.any() else np.inf
+            rel = np.concatenate([p.verts_rel_m for p in b.pieces])
+            for w, (wall, n) in enumerate(zip(walls, self.wall_n)):
+                held = rel[np.isfinite(wall.clearance_m(rel + b.position_m))] if wall.bounded else rel
+                if len(held):
+                    self.wall_min_rel[i, w] = float(np.min(held @ n))
         for i, b in enumerate(bodies):
             self.world.set_position(i, b.position_m)
         # Pairs found fine, with the body versions they were checked at: re-checked only after
