@@ -495,6 +495,54 @@ def _median_rgba(colors_rgb: np.ndarray) -> tuple[float, float, float, float]:
     return (float(c[0]), float(c[1]), float(c[2]), 1.0)
 
 
+@dataclasses.dataclass(frozen=True, eq=False)
+class ObservedBox:
+    """An object's box as the photo showed it (:func:`observed_box`): ``fit`` the completed,
+    gravity-aligned box (``generation.pose.fit_box``'s result after :func:`complete_box`),
+    ``floor_snap_m`` the largest gap under its lowest seen point that its box closes down to the
+    floor (inf: cut by the photo's bottom edge, down to the floor whatever the gap),
+    ``cut_to_floor`` whether it was so cut, ``blockers`` the other
+    objects whose seen points stopped its completion (:func:`completion_blockers`)."""
+
+    fit: object
+    floor_snap_m: float
+    cut_to_floor: bool
+    blockers: tuple
+
+
+def observed_box(obj: PerceivedObject, perception: Perception) -> ObservedBox:
+    """The box of ``obj`` every generator poses its asset on: snapped to the floor from up to its
+    category's base gap (:data:`BASE_GAP_M`, else 0.3 m), down to the floor when the photo's
+    bottom edge cut floor furniture over a seen floor, its plan read by the category's
+    proportions for :data:`PLAN_BY_PROPORTIONS` without fronts, completed no farther than the
+    walls and what its :func:`completion_blockers` showed of themselves."""
+    from generation.pose import floor_snap_height_m
+    from scene_builder.vocabulary import category
+
+    label = obj.label
+    cat = category(label)
+    other_objects = [o for o in perception.objects if o.name != obj.name]
+    others = [o.points_world_m for o in other_objects]
+    # A bed's base reaches the floor: seen from its mattress down to 0.47 m only (a bench at
+    # its foot hides the rest, sunrgbd_imvotenet_000004), it is no mattress on 0.47 m legs.
+    snap_m = floor_snap_height_m(obj.points_world_m, others, max_gap_m=BASE_GAP_M.get(label, 0.3))
+    floor_seen = any(b.task == "floor" and b.backend == "floor-plane" for b in perception.backends)
+    if floor_seen and cat.on_floor and cut_by_photo_bottom(obj.mask, perception.observation.valid_depth):
+        # The photo's bottom edge cut it (a sideboard's top and upper front in the photo's
+        # corner): what is below it was never seen, so floor furniture reaches the floor,
+        # unless another object's top lies under it (the snap height is then the default).
+        # (Not to a floor put under what was seen: a close-up of a cabinet shows no floor.)
+        if floor_snap_height_m(obj.points_world_m, others, max_gap_m=np.inf) > snap_m:
+            snap_m = np.inf
+    # The plan orientation of large furniture follows the category's proportions (a sofa
+    # seen end-on), unless fronts seen on a face say which face is the front.
+    typical = cat.typical_size_m if label in PLAN_BY_PROPORTIONS and not obj.fronts else None
+    blocking = tuple(completion_blockers(obj, other_objects))
+    fit = fitted_box(obj.points_world_m, perception.camera.position_m, label, perception.room.walls, floor_snap_m=snap_m,
+                     typical_size_m=typical, others_world_m=[o.points_world_m for o in blocking])
+    return ObservedBox(fit, float(snap_m), bool(np.isinf(snap_m)), blocking)
+
+
 class ShapePriorGenerator:
     """Category shape priors + observed-shell completion on the CPU (always available)."""
 
@@ -509,7 +557,6 @@ class ShapePriorGenerator:
         from generation.physics import too_small
         from scipy.spatial import cKDTree
 
-        from generation.pose import floor_snap_height_m
         from generation.priors import PRIOR_LABELS, prior_parts, shelf_boards
         from scene_builder.vocabulary import category
 
@@ -518,24 +565,9 @@ class ShapePriorGenerator:
         cam_world = perception.camera.position_m
         other_objects = [o for o in perception.objects if o.name != obj.name]
         others = [o.points_world_m for o in other_objects]
-        # A bed's base reaches the floor: seen from its mattress down to 0.47 m only (a bench at
-        # its foot hides the rest, sunrgbd_imvotenet_000004), it is no mattress on 0.47 m legs.
-        snap_m = floor_snap_height_m(obj.points_world_m, others, max_gap_m=BASE_GAP_M.get(label, 0.3))
-        floor_seen = any(b.task == "floor" and b.backend == "floor-plane" for b in perception.backends)
-        if floor_seen and cat.on_floor and cut_by_photo_bottom(obj.mask, perception.observation.valid_depth):
-            # The photo's bottom edge cut it (a sideboard's top and upper front in the photo's
-            # corner): what is below it was never seen, so floor furniture reaches the floor,
-            # unless another object's top lies under it (the snap height is then the default).
-            # (Not to a floor put under what was seen: a close-up of a cabinet shows no floor.)
-            if floor_snap_height_m(obj.points_world_m, others, max_gap_m=np.inf) > snap_m:
-                snap_m = np.inf
-        cut_to_floor = bool(np.isinf(snap_m))
-        # The plan orientation of large furniture follows the category's proportions (a sofa
-        # seen end-on), unless fronts seen on a face say which face is the front.
-        typical = cat.typical_size_m if label in PLAN_BY_PROPORTIONS and not obj.fronts else None
-        blocking = completion_blockers(obj, other_objects)
+        seen_box = observed_box(obj, perception)
+        fit, snap_m, cut_to_floor, blocking = seen_box.fit, seen_box.floor_snap_m, seen_box.cut_to_floor, seen_box.blockers
         blockers = [o.points_world_m for o in blocking]
-        fit = fitted_box(obj.points_world_m, cam_world, label, perception.room.walls, floor_snap_m=snap_m, typical_size_m=typical, others_world_m=blockers)
         box_from_world = np.linalg.inv(fit.world_from_box)
         pts = transform_points(box_from_world, obj.points_world_m)
         cam = transform_points(box_from_world, cam_world[None])[0]

@@ -92,22 +92,21 @@ class PhysxVlmGenerator:
     def generate(self, obj, perception, config, seed: int = 0):
         """One ``GeneratedAsset`` for perceived object ``obj``: the single-object crop of the photo
         (:func:`~generation.physx.vlm.object_crop`), the model's articulated object with every part
-        scaled per axis to the observed box (the shape prior's box: gravity-aligned, front towards
-        the camera, completed to the category's depth), posed on that box. When the model's
+        scaled per axis to the observed box (the shape prior's,
+        :func:`generation.shape_prior.observed_box`: gravity-aligned, front towards the camera,
+        down to the floor, completed to the category's depth short of the walls and of what other
+        objects showed behind it), posed on that box. When the model's
         footprint proportions match the box turned by 90 degrees clearly better, the asset is
         turned (its front then faces the box's side)."""
         from generation.physx.convert import model_size_m, physx_object, to_object_asset
         from generation.physx.vlm import decode_conversation, object_crop
-        from generation.pose import floor_snap_height_m
-        from generation.shape_prior import fitted_box
+        from generation.shape_prior import observed_box
 
         from scene_builder.frames import pose, rot_z, transform_points
         from scene_builder.model import GeneratedAsset
 
         crop = object_crop(perception.observation.rgb, obj.mask, config.vlm_crop_px, config.vlm_crop_fill)
-        others = [o.points_world_m for o in perception.objects if o.name != obj.name]
-        snap_m = floor_snap_height_m(obj.points_world_m, others)
-        fit = fitted_box(obj.points_world_m, perception.camera.position_m, obj.label, perception.room.walls, floor_snap_m=snap_m, others_world_m=others)
+        fit = observed_box(obj, perception).fit  # the shape prior's box, so both backends pose alike
         conv = self.converse(crop, config)
         description, grids, _ = decode_conversation(conv)
         observed = np.asarray(fit.size_m, dtype=np.float64)
