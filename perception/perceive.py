@@ -9,6 +9,7 @@ import numpy as np
 
 from perception.backends import PerceptionRegistries, build_registries
 from perception.bed_foot import split_foot_benches
+from perception.headboard import grow_headboards
 from perception.inputs import LoadedInput, check_depth, load_input, photo_frame, without_frame
 from perception.lying_on import split_lying, top_height, without_points
 from perception.naming_prior import GeometricPriorNamer
@@ -571,6 +572,10 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     kept, points_world, names, pillows = split_lying(kept, points_world, names)
     if pillows:
         backends.append(BackendUse("lying-on", "height-layers", f"{pillows} pillows lying on a bed or sofa cut out of it as objects"))
+    world_img = transform_points(frame.world_from_camera, points_cam.reshape(-1, 3)).reshape(points_cam.shape)
+    kept, points_world, headboards = grow_headboards(kept, points_world, names, world_img, valid, frame.room.walls)
+    if headboards:
+        backends.append(BackendUse("headboards", "wall-offset", f"{headboards} beds grown over the headboard standing off the wall at their head (the room's planes had taken it as wall)"))
     per_label: dict[str, int] = {}
     objects = []
     for object_id, ((mask, pix), points_w, (label, conf)) in enumerate(zip(kept, points_world, names), start=1):
