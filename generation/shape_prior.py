@@ -31,6 +31,8 @@ BACKEND_NAME = "shape-prior"
 # a face seen head-on spans less than this fraction of the expected depth: complete the depth
 _DEPTH_COMPLETE_FRACTION = 0.6
 _MIRROR_X = {"lamp", "plant", "bottle", "bowl", "mug", "soft_toy"}
+#: Furniture with a head end (a bed's headboard): mirrored across its width only (mirror_axes).
+HEAD_END_LABELS = frozenset({"bed"})
 #: A shape prior or template whose surface lies this much in seen free space (a sample of
 #: VIOLATION_SAMPLES points) contradicts the observation: the observed shell is used instead.
 MAX_FREE_SPACE_SHARE = 0.10
@@ -495,6 +497,20 @@ def _median_rgba(colors_rgb: np.ndarray) -> tuple[float, float, float, float]:
     return (float(c[0]), float(c[1]), float(c[2]), 1.0)
 
 
+def mirror_axes(label: str, points_box_m: np.ndarray) -> tuple[bool, bool]:
+    """(mirror_x, mirror_y): across which of its box's vertical mid-planes an object's observed
+    shell is mirrored to complete it (``generation.completion.complete_occupancy``), its points
+    ``points_box_m`` (N, 3) in its box frame (x toward the camera, y across). Left to right
+    always; front to back too for the round things of ``_MIRROR_X``. A bed
+    (:data:`HEAD_END_LABELS`) only across its width, the shorter of its seen plan extents:
+    mirrored end to end, a bed seen from its side grew a second headboard at its foot
+    (sunrgbd_imvotenet_000005)."""
+    if label in HEAD_END_LABELS:
+        along_y = bool(np.ptp(points_box_m[:, 1]) > np.ptp(points_box_m[:, 0]))
+        return along_y, not along_y
+    return label in _MIRROR_X, True
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class ObservedBox:
     """An object's box as the photo showed it (:func:`observed_box`): ``fit`` the completed,
@@ -727,7 +743,8 @@ class ShapePriorGenerator:
             return out
 
         resting, resting_bottom = _resting_on(obj, other_objects, fit.world_from_box, size)
-        geometry = complete_occupancy(pts, cam, size, config.voxel_resolution, mirror_y=True, mirror_x=label in _MIRROR_X, blocked=blocked,
+        mirror_x, mirror_y = mirror_axes(label, pts)
+        geometry = complete_occupancy(pts, cam, size, config.voxel_resolution, mirror_y=mirror_y, mirror_x=mirror_x, blocked=blocked,
                                       resting_m=resting, resting_bottom_m=resting_bottom)
         specs = [PartSpec("body", None, geometry, cm.material, affordance_rank=3, affordance="pick up or push",
                           description=f"{label}: observed shell extruded and mirrored", shell_thickness_m=cm.shell_thickness_m,

@@ -133,13 +133,35 @@ def headboard_pixels(bed_mask: np.ndarray, bed_points_world_m: np.ndarray, point
     return best
 
 
+def _on_panel(seen_m: np.ndarray, rays_m: np.ndarray, camera_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where the rays ``rays_m`` (M, 3) from ``camera_m`` meet the vertical plane through the
+    points ``seen_m`` (N, 3) (their plan's principal line): ((M, 3) points, (M,) bool where a ray
+    meets it in front of the camera within the points' heights, 5 cm either way)."""
+    xy = seen_m[:, :2]
+    centre = xy.mean(axis=0)
+    _, _, vt = np.linalg.svd(xy - centre, full_matrices=False)
+    normal = np.array([vt[1, 0], vt[1, 1], 0.0])
+    offset = float(np.median(xy @ vt[1]))
+    denom = rays_m @ normal
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (offset - float(camera_m @ normal)) / denom
+    pts = camera_m + t[:, None] * rays_m
+    lo, hi = float(seen_m[:, 2].min()) - 0.05, float(seen_m[:, 2].max()) + 0.05
+    ok = np.isfinite(t) & (t > 0) & (pts[:, 2] >= lo) & (pts[:, 2] <= hi)
+    return pts, ok
+
+
 def grow_headboards(kept: list[tuple[np.ndarray, np.ndarray]], points_world: list[np.ndarray], names: list[tuple[str, float]],
-                    points_world_img: np.ndarray, valid: np.ndarray, walls: tuple[Plane, ...]) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[np.ndarray], int]:
+                    points_world_img: np.ndarray, valid: np.ndarray, walls: tuple[Plane, ...], rays_world_img: np.ndarray,
+                    camera_m: np.ndarray) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[np.ndarray], int]:
     """Each bed of ``kept`` ((mask, pixels with points) per object; ``points_world`` their points in
     raster order; ``names`` (label, confidence)) with its headboard's pixels
-    (:func:`headboard_pixels`) added to its mask and points. ``points_world_img``: (H, W, 3) world
-    point of every pixel; ``valid``: (H, W) bool, measured. Returns the two lists and the number of
-    beds grown."""
+    (:func:`headboard_pixels`) added to its mask and points: the measured ones as they are, the
+    unmeasured ones (a dark headboard's middle) on the vertical plane of the measured ones (a
+    panel; :func:`_on_panel`), those whose ray misses it left out. ``points_world_img``: (H, W, 3)
+    world point of every pixel; ``valid``: (H, W) bool, measured; ``rays_world_img``: (H, W, 3)
+    each pixel's ray direction in the world from the camera's centre ``camera_m`` (3,). Returns
+    the two lists and the number of beds grown."""
     taken = np.zeros(valid.shape, dtype=bool)
     for mask, _ in kept:
         taken |= mask
@@ -151,8 +173,17 @@ def grow_headboards(kept: list[tuple[np.ndarray, np.ndarray]], points_world: lis
         head = headboard_pixels(mask, pts, points_world_img, valid, taken, walls)
         if head is None:
             continue
-        mask, pix = mask | head[0], pix | head[1]
-        taken |= head[0]
-        out_kept[i], out_points[i] = (mask, pix), points_world_img[pix]
+        region, seen = head
+        hidden = region & ~seen
+        img = points_world_img
+        if hidden.any():
+            on, ok = _on_panel(points_world_img[seen], rays_world_img[hidden], np.asarray(camera_m, dtype=np.float64))
+            img = points_world_img.copy()
+            img[hidden] = on
+            hidden.flat[np.flatnonzero(hidden.ravel())[~ok]] = False
+        added = seen | hidden
+        mask, pix = mask | added, pix | added
+        taken |= added
+        out_kept[i], out_points[i] = (mask, pix), img[pix]
         grown += 1
     return out_kept, out_points, grown

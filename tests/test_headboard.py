@@ -77,19 +77,27 @@ def test_what_rises_on_up_behind_a_bed_is_no_headboard():
     assert headboard_pixels(bed, p[bed], p, measured, bed, ()) is None
 
 
+CAMERA = np.array([0.0, 3.0, 1.0])  # before the bed's foot
+
+
 def test_grow_headboards_grows_beds_only_and_keeps_other_objects_pixels():
     p, measured, bed, head = _view()
+    rays = p - CAMERA  # each pixel's ray through the point it shows
     lamp = np.zeros_like(bed)
     lamp[30:40, 40:50] = True  # an object standing before the headboard keeps its pixels
     kept = [(bed, bed & measured), (lamp, lamp & measured)]
     points = [p[bed & measured], p[lamp & measured]]
-    out_kept, out_points, grown = grow_headboards(kept, points, [("bed", 0.9), ("lamp", 0.8)], p, measured, (WALL,))
+    seen = np.where(measured[..., None], p, 0.0)  # what a sensor gives: nothing where unmeasured
+    out_kept, out_points, grown = grow_headboards(kept, points, [("bed", 0.9), ("lamp", 0.8)], seen, measured, (WALL,), rays, CAMERA)
     assert grown == 1
     (bed_mask, bed_pix), (lamp_mask, _) = out_kept
     assert (bed_mask & head & ~lamp).sum() >= 0.9 * (head & ~lamp).sum() and not (bed_mask & lamp).any()
     assert lamp_mask is lamp and out_points[1] is points[1]
-    np.testing.assert_array_equal(out_points[0], p[bed_pix])
+    # every pixel of the bed has its point: the measured ones as measured, the headboard's
+    # unmeasured middle on the plane of its measured edges and studs (3 cm off the wall)
+    assert (bed_pix == bed_mask).all()
+    np.testing.assert_allclose(out_points[0], p[bed_pix], atol=0.015)  # (3 mm of noise on the panel)
     assert out_points[0][:, 2].max() > 1.15  # the bed now rises to its headboard's top
     # a sofa (or anything but a bed) is not grown
-    _, _, grown = grow_headboards(kept, points, [("sofa", 0.9), ("lamp", 0.8)], p, measured, (WALL,))
+    _, _, grown = grow_headboards(kept, points, [("sofa", 0.9), ("lamp", 0.8)], seen, measured, (WALL,), rays, CAMERA)
     assert grown == 0
