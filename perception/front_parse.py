@@ -8,13 +8,15 @@ rules below use it only for sizes that tolerate a factor of about 1.5).
 
 1. **Edges** (scikit-image Canny) split by orientation (Sobel): horizontal and vertical.
 2. **Recursive cuts** (an XY-cut, as document layout analysis splits a page): in the current
-   rectangle, each row (column) is scored by the share of the rectangle's width (height) along
-   which a horizontal (vertical) edge lies within a pixel of it, minus the same share a few pixels
-   away on both sides, so that dense texture (wood grain, cane, carving) does not cut. The best
-   row or column scoring at least ``CUT_MIN_SCORE`` that leaves both pieces at least
+   rectangle, each row (column), at each slope of ``SLOPES``, is scored by the share of the
+   rectangle's width (height) along which a horizontal (vertical) edge lies within a pixel of it.
+   The best row or column scoring at least ``CUT_MIN_SCORE`` that leaves both pieces at least
    ``MIN_PANEL_M`` wide and that reaches both ends of the rectangle splits it; the pieces are cut
    again until no such line is left. Inner panel frames of a door stop short of its edges and do
-   not cut it.
+   not cut it. Dense texture does cut: wood grain's long edges strip a drawer into rows too thin
+   to hold its pull (urdformer_label40's top drawers); thresholds on the edges' strength, global
+   or against their neighbourhood, and lines barred through strong handles were each measured
+   worse on the cabinet photos (BENCHMARKS.md, 2026-11-28).
 3. **Handles**: small dark or bright features (morphological black / white top-hat with a 5 cm
    square) that are compact (a knob) or a bar (a pull), 1-35 cm long and at most 5 cm thick, not
    touching the panel's border: the strongest one in the panel.
