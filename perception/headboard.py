@@ -133,21 +133,33 @@ def headboard_pixels(bed_mask: np.ndarray, bed_points_world_m: np.ndarray, point
     return best
 
 
-def _on_panel(seen_m: np.ndarray, rays_m: np.ndarray, camera_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Where the rays ``rays_m`` (M, 3) from ``camera_m`` meet the vertical plane through the
-    points ``seen_m`` (N, 3) (their plan's principal line): ((M, 3) points, (M,) bool where a ray
-    meets it in front of the camera within the points' heights, 5 cm either way)."""
+def _panel(seen_m: np.ndarray, bed_points_m: np.ndarray) -> tuple[np.ndarray, float, np.ndarray, tuple[float, float], tuple[float, float]]:
+    """The headboard's panel: the vertical plane through its measured points ``seen_m`` (N, 3)
+    (their plan's principal line), as (normal (3,), offset: normal . x = offset, direction (3,)
+    along it, (lo, hi) along it: the bed's width there (``bed_points_m`` and ``seen_m``: a
+    headboard may overhang the mattress; SIDE_MARGIN_M either side), (lo, hi) heights: the measured points', 5 cm either
+    way)."""
     xy = seen_m[:, :2]
     centre = xy.mean(axis=0)
     _, _, vt = np.linalg.svd(xy - centre, full_matrices=False)
     normal = np.array([vt[1, 0], vt[1, 1], 0.0])
-    offset = float(np.median(xy @ vt[1]))
+    direction = np.array([vt[0, 0], vt[0, 1], 0.0])
+    a = np.concatenate([bed_points_m[:, :2] @ vt[0], xy @ vt[0]])
+    lo, hi = float(a.min()), float(a.max())
+    return (normal, float(np.median(xy @ vt[1])), direction, (float(lo) - SIDE_MARGIN_M, float(hi) + SIDE_MARGIN_M),
+            (float(seen_m[:, 2].min()) - 0.05, float(seen_m[:, 2].max()) + 0.05))
+
+
+def _on_panel(panel, rays_m: np.ndarray, camera_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where the rays ``rays_m`` (M, 3) from ``camera_m`` meet ``panel`` (:func:`_panel`): ((M, 3)
+    points, (M,) bool where a ray meets it in front of the camera within its width and heights)."""
+    normal, offset, direction, (a_lo, a_hi), (z_lo, z_hi) = panel
     denom = rays_m @ normal
     with np.errstate(divide="ignore", invalid="ignore"):
         t = (offset - float(camera_m @ normal)) / denom
     pts = camera_m + t[:, None] * rays_m
-    lo, hi = float(seen_m[:, 2].min()) - 0.05, float(seen_m[:, 2].max()) + 0.05
-    ok = np.isfinite(t) & (t > 0) & (pts[:, 2] >= lo) & (pts[:, 2] <= hi)
+    a = pts @ direction
+    ok = np.isfinite(t) & (t > 0) & (pts[:, 2] >= z_lo) & (pts[:, 2] <= z_hi) & (a >= a_lo) & (a <= a_hi)
     return pts, ok
 
 
@@ -156,12 +168,15 @@ def grow_headboards(kept: list[tuple[np.ndarray, np.ndarray]], points_world: lis
                     camera_m: np.ndarray) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[np.ndarray], int]:
     """Each bed of ``kept`` ((mask, pixels with points) per object; ``points_world`` their points in
     raster order; ``names`` (label, confidence)) with its headboard's pixels
-    (:func:`headboard_pixels`) added to its mask and points: the measured ones as they are, the
-    unmeasured ones (a dark headboard's middle) on the vertical plane of the measured ones (a
-    panel; :func:`_on_panel`), those whose ray misses it left out. ``points_world_img``: (H, W, 3)
+    (:func:`headboard_pixels`) added to its mask and points: the measured ones as they are, and
+    the unmeasured ones no object holds whose rays meet the headboard's panel (the vertical
+    plane of the measured ones, as wide as the bed: :func:`_panel`) joined to them, on that
+    panel (a dark headboard's middle and the parts of it measured nowhere). ``points_world_img``: (H, W, 3)
     world point of every pixel; ``valid``: (H, W) bool, measured; ``rays_world_img``: (H, W, 3)
     each pixel's ray direction in the world from the camera's centre ``camera_m`` (3,). Returns
     the two lists and the number of beds grown."""
+    from scipy import ndimage
+
     taken = np.zeros(valid.shape, dtype=bool)
     for mask, _ in kept:
         taken |= mask
@@ -174,14 +189,17 @@ def grow_headboards(kept: list[tuple[np.ndarray, np.ndarray]], points_world: lis
         if head is None:
             continue
         region, seen = head
-        hidden = region & ~seen
-        img = points_world_img
-        if hidden.any():
-            on, ok = _on_panel(points_world_img[seen], rays_world_img[hidden], np.asarray(camera_m, dtype=np.float64))
-            img = points_world_img.copy()
-            img[hidden] = on
-            hidden.flat[np.flatnonzero(hidden.ravel())[~ok]] = False
-        added = seen | hidden
+        # Its unmeasured pixels: those whose rays meet its panel within the bed's width, joined to
+        # what was found (the hull of the measured pieces stops at the last one measured: the
+        # left fifth of 000005's headboard, measured nowhere, was left on the wall).
+        hidden = ~valid & ~taken
+        on, ok = _on_panel(_panel(points_world_img[seen], pts), rays_world_img[hidden], np.asarray(camera_m, dtype=np.float64))
+        img = points_world_img.copy()
+        img[hidden] = on
+        hidden.flat[np.flatnonzero(hidden.ravel())[~ok]] = False
+        lab, _ = ndimage.label(seen | hidden, structure=np.ones((3, 3), dtype=bool))
+        joined = np.unique(lab[seen])
+        added = np.isin(lab, joined[joined > 0])
         mask, pix = mask | added, pix | added
         taken |= added
         out_kept[i], out_points[i] = (mask, pix), img[pix]

@@ -17,10 +17,10 @@ from scene_builder.planes import Plane
 WALL = Plane(np.array([0.0, 1.0, 0.0]), 1.1, "wall")  # y = -1.1, normal into the room
 
 
-def _view(headboard: bool = True, to_ceiling: bool = False, seed: int = 0):
+def _view(headboard: bool = True, to_ceiling: bool = False, dark_left: bool = False, seed: int = 0):
     """(points (100, 100, 3), measured, bed mask, headboard mask) of the module's view.
     ``to_ceiling``: the panel behind the bed runs up the whole wall (a wardrobe, a wall the
-    room's planes missed)."""
+    room's planes missed). ``dark_left``: the headboard's left 12 columns measured nowhere."""
     rng = np.random.default_rng(seed)
     rows, cols = np.mgrid[0:100, 0:100].astype(np.float64)
     x = -0.75 + (cols - 10) / 79 * 1.5
@@ -42,6 +42,8 @@ def _view(headboard: bool = True, to_ceiling: bool = False, seed: int = 0):
         inner = (rows >= 24) & (rows < 57) & (cols >= 14) & (cols < 86)
         studs = ((rows - 30) % 12 < 4) & ((cols - 20) % 20 < 4)
         measured &= ~(inner & ~studs)  # the dark leather: its edges and studs measured only
+        if dark_left:
+            measured &= ~(head & (cols < 22))
     if to_ceiling:
         panel = (rows < 60) & (cols >= 10) & (cols < 90)
         p[panel, 1] = -0.8
@@ -81,7 +83,9 @@ CAMERA = np.array([0.0, 3.0, 1.0])  # before the bed's foot
 
 
 def test_grow_headboards_grows_beds_only_and_keeps_other_objects_pixels():
-    p, measured, bed, head = _view()
+    # (the headboard's left 12 columns measured nowhere: they join it where their rays meet its
+    # panel, past the hull of its measured pieces)
+    p, measured, bed, head = _view(dark_left=True)
     rays = p - CAMERA  # each pixel's ray through the point it shows
     lamp = np.zeros_like(bed)
     lamp[30:40, 40:50] = True  # an object standing before the headboard keeps its pixels
