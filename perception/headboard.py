@@ -22,7 +22,12 @@ The headboard is told apart from the wall by where it is and by standing off it:
    :data:`MIN_POINTS` of them, rising :data:`MIN_RISE_M` or more over the mattress, at least
    :data:`MIN_WIDTH_SHARE` of the bed's width across, and ending under the search's ceiling by
    :data:`TOP_CLEARANCE_M` (what runs on up to it is a wall the room's planes missed, a
-   curtain, a wardrobe behind: no headboard).
+   curtain, a wardrobe behind: no headboard); the convex hull of its measured pieces of
+   :data:`MIN_PIECE_PX` pixels or more, with the unmeasured pixels in it, joins them (a dark
+   headboard is measured at its edges and studs only);
+5. **its unmeasured pixels**: those no object holds whose rays meet its panel (the vertical
+   plane of its measured points, as wide as the bed, up to their heights' 99th percentile),
+   joined to its measured ones, lie on that panel (:func:`grow_headboards`).
 
 Of the two ends, the one with more such pixels is the head. Deterministic: no sampling.
 """
@@ -49,8 +54,8 @@ MAX_RISE_M = 1.0
 #: Off every wall by at least OFF_WALL_M, median-filtered over SMOOTH_PX x SMOOTH_PX pixels.
 OFF_WALL_M = 0.015
 SMOOTH_PX = 7
-#: Joined to the bed's mask within TOUCH_PX pixels; the convex hull of its measured pieces of
-#: MIN_PIECE_PX pixels or more holds its unmeasured pixels.
+#: Joined to the bed's mask within TOUCH_PX pixels, through the convex hull of its measured
+#: pieces of MIN_PIECE_PX pixels or more (no speck of noise).
 TOUCH_PX = 3
 MIN_PIECE_PX = 20
 #: At least MIN_POINTS points, rising MIN_RISE_M over the mattress (98th percentile), at least
