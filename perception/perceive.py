@@ -572,10 +572,12 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     kept, points_world, names, pillows = split_lying(kept, points_world, names)
     if pillows:
         backends.append(BackendUse("lying-on", "height-layers", f"{pillows} pillows lying on a bed or sofa cut out of it as objects"))
-    world_img = transform_points(frame.world_from_camera, points_cam.reshape(-1, 3)).reshape(points_cam.shape)
-    rays_world = k.unproject(np.ones(depth_m.shape)) @ frame.world_from_camera[:3, :3].T
-    kept, points_world, headboards = grow_headboards(kept, points_world, names, world_img, valid, frame.room.walls, rays_world,
-                                                     frame.world_from_camera[:3, 3])
+    headboards = 0
+    if any(label == "bed" for label, _ in names):  # (the whole image's world points and rays: only for a bed)
+        world_img = transform_points(frame.world_from_camera, points_cam.reshape(-1, 3)).reshape(points_cam.shape)
+        rays_world = k.unproject(np.ones(depth_m.shape)) @ frame.world_from_camera[:3, :3].T
+        kept, points_world, headboards = grow_headboards(kept, points_world, names, world_img, valid, frame.room.walls, rays_world,
+                                                         frame.world_from_camera[:3, 3])
     if headboards:
         backends.append(BackendUse("headboards", "wall-offset", f"{headboards} beds grown over the headboard standing off the wall at their head (the room's planes had taken it as wall)"))
     per_label: dict[str, int] = {}
