@@ -7,7 +7,7 @@ it as an ottoman) and the bed's shape was completed over both.
 
 A bench is told apart from the bed by its own top, seen in the bed's points:
 
-1. **the mattress**: the bed's top (:func:`perception.lying_on.top_height`), and its plan axis
+1. **the mattress**: the bed's top and its plan axis (:func:`perception.lying_on.mattress_frame`)
    (the principal axis of the top's points: a bed is longer than wide, and the bench stands
    beyond one of its ends);
 2. **a lower plateau**: the highest dense band of heights :data:`MIN_DROP_M` or more under the
@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from perception.lying_on import TOP_BAND_M, top_height, without_points
+from perception.lying_on import TOP_BAND_M, mattress_frame, without_points
 
 __all__ = ["foot_bench", "split_foot_benches"]
 
@@ -73,21 +73,16 @@ def foot_bench(points_world_m: np.ndarray) -> np.ndarray | None:
     if len(pts) < 2 * MIN_POINTS:
         return None
     z = pts[:, 2]
-    top = top_height(z)
-    if top is None or top - MIN_DROP_M < MIN_SEAT_M:
+    frame = mattress_frame(pts, MIN_POINTS)
+    if frame is None or frame.top_m - MIN_DROP_M < MIN_SEAT_M:
         return None
-    mattress = pts[np.abs(z - top) <= TOP_BAND_M / 2, :2]
-    if len(mattress) < MIN_POINTS:
-        return None
-    centre = mattress.mean(axis=0)
-    _, _, vt = np.linalg.svd(mattress - centre, full_matrices=False)
-    axis, across_axis = vt[0], vt[1]
+    top, centre, axis, across_axis = frame.top_m, frame.centre_m, frame.axis, frame.across_axis
     seat = _plateau(z, top - MIN_DROP_M)
     if seat is None:
         return None
     on_seat = np.abs(z - seat) <= TOP_BAND_M / 2
     along = (pts[:, :2] - centre) @ axis
-    m_lo, m_hi = np.percentile(along[np.abs(z - top) <= TOP_BAND_M / 2], [2, 98])
+    m_lo, m_hi = np.percentile(along[frame.on_top], [2, 98])
     s_along = along[on_seat]
     for sign, end in ((1.0, m_hi), (-1.0, m_lo)):
         past = sign * (s_along - end) > END_MARGIN_M

@@ -9,8 +9,8 @@ it then stays painted on the wall behind a bed that ends at its mattress.
 
 The headboard is told apart from the wall by where it is and by standing off it:
 
-1. **the mattress**: the bed's top (:func:`perception.lying_on.top_height`) and its plan axes
-   (principal axes of the top's points, as :mod:`perception.bed_foot` reads them);
+1. **the mattress**: the bed's top (:func:`perception.lying_on.mattress_frame`) and its plan axes
+   (principal axes of the top's points);
 2. **at one end**: pixels no object holds whose points lie past one end of the bed's points
    along the mattress's axis by at most :data:`HEAD_DEPTH_M` (or up to :data:`INSIDE_M` inside
    it), across no wider than the mattress (:data:`SIDE_MARGIN_M`), from the mattress's top up
@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from perception.lying_on import TOP_BAND_M, top_height
+from perception.lying_on import TOP_BAND_M, mattress_frame
 from scene_builder.model import Plane
 
 __all__ = ["grow_headboards", "headboard_pixels"]
@@ -80,15 +80,11 @@ def headboard_pixels(bed_mask: np.ndarray, bed_points_world_m: np.ndarray, point
     pts = np.asarray(bed_points_world_m, dtype=np.float64)
     if len(pts) < MIN_POINTS:
         return None
-    top = top_height(pts[:, 2])
-    if top is None:
+    frame = mattress_frame(pts, MIN_POINTS)
+    if frame is None:
         return None
-    mattress = pts[np.abs(pts[:, 2] - top) <= TOP_BAND_M / 2, :2]
-    if len(mattress) < MIN_POINTS:
-        return None
-    centre = mattress.mean(axis=0)
-    _, _, vt = np.linalg.svd(mattress - centre, full_matrices=False)
-    axis, across_axis = vt[0], vt[1]
+    top, centre, axis, across_axis = frame.top_m, frame.centre_m, frame.axis, frame.across_axis
+    mattress = pts[frame.on_top, :2]
     m_lo, m_hi = np.percentile((pts[:, :2] - centre) @ axis, [2, 98])
     a_lo, a_hi = np.percentile((mattress - centre) @ across_axis, [2, 98])
 

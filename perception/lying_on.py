@@ -22,9 +22,11 @@ Each part becomes a ``pillow`` and leaves the bed's mask and points. Determinist
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
-__all__ = ["top_height", "split_lying", "lying_parts", "without_points", "HOSTS"]
+__all__ = ["top_height", "mattress_frame", "MattressFrame", "split_lying", "lying_parts", "without_points", "HOSTS"]
 
 #: A top is the highest TOP_BAND_M band of heights holding at least TOP_SHARE of the object's
 #: points, at least MIN_TOP_M above the floor.
@@ -75,6 +77,34 @@ def top_height(z: np.ndarray) -> float | None:
         return None
     lo, hi = edges[dense[-1]], edges[dense[-1] + 3]
     return float(np.median(z[(z >= lo) & (z <= hi)]))
+
+
+class MattressFrame(NamedTuple):
+    """A bed's top and its plan axes (world frame, floor at z = 0)."""
+
+    top_m: float
+    #: (N,) bool: the points within TOP_BAND_M / 2 of the top.
+    on_top: np.ndarray
+    #: (2,) plan centre of the top's points, the unit axis along them (longest spread) and across.
+    centre_m: np.ndarray
+    axis: np.ndarray
+    across_axis: np.ndarray
+
+
+def mattress_frame(points_world_m: np.ndarray, min_points: int) -> MattressFrame | None:
+    """The top (:func:`top_height`) of a bed's (N, 3) points and the plan axes of the points on it
+    (principal axes), or None when there is no top or fewer than ``min_points`` points on it."""
+    pts = np.asarray(points_world_m, dtype=np.float64)
+    top = top_height(pts[:, 2])
+    if top is None:
+        return None
+    on_top = np.abs(pts[:, 2] - top) <= TOP_BAND_M / 2
+    if on_top.sum() < min_points:
+        return None
+    mattress = pts[on_top, :2]
+    centre = mattress.mean(axis=0)
+    _, _, vt = np.linalg.svd(mattress - centre, full_matrices=False)
+    return MattressFrame(top, on_top, centre, vt[0], vt[1])
 
 
 def lying_parts(pix: np.ndarray, points_world_m: np.ndarray) -> list[np.ndarray]:
