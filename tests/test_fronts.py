@@ -451,3 +451,62 @@ def test_an_appliance_keeps_its_door_and_a_drawer_under_it_only(monkeypatch, lab
         door = max(fronts, key=lambda f: np.ptp(f.corners_world_m[:, 2]))
         assert float(np.ptp(door.corners_world_m[:, 2])) == pytest.approx(180 / 400, abs=0.01)
         assert all(f is door or f.kind == "drawer" for f in fronts)
+
+
+def _photo_of_a_turned_face(turn_deg: float, grain: int = 0):
+    """A 640 x 480 photo (500 px focal length, camera 1.2 m up looking along world +x) of a 1.0 m x
+    0.8 m chest of four drawers standing on the floor 2.6 m away, its face turned ``turn_deg``
+    about the vertical from facing the camera, on a grey wall; the camera, the photo, the chest's
+    mask, the world points it shows and its face's normal. ``grain``: as many short darker streaks
+    along the drawers (wood grain), at random."""
+    from scene_builder.model import Camera, CameraIntrinsics
+
+    rot = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+    camera = Camera(CameraIntrinsics(500.0, 500.0, 319.5, 239.5, 640, 480),
+                    np.block([[rot, np.array([[0.0], [0.0], [1.2]])], [np.zeros((1, 3)), np.ones((1, 1))]]))
+    t = np.radians(turn_deg)
+    normal = np.array([-np.cos(t), -np.sin(t), 0.0])
+    right = np.cross([0.0, 0.0, 1.0], normal)
+    centre = np.array([2.6, 0.0, 0.4])
+    rows, cols = np.mgrid[0:480, 0:640]
+    rays = np.stack([np.ones_like(rows, float), -(cols - 319.5) / 500.0, -(rows - 239.5) / 500.0], axis=-1)  # world directions
+    origin = np.array([0.0, 0.0, 1.2])
+    s = ((centre - origin) @ normal) / (rays @ normal)
+    hit = origin + s[..., None] * rays
+    a = (hit - centre) @ right + 0.5  # metres from the face's left edge
+    b = hit[..., 2]  # metres from its bottom
+    mask = (a >= 0) & (a <= 1.0) & (b >= 0) & (b <= 0.8)
+    rgb = np.full((480, 640, 3), 120, np.uint8)
+    face = np.full(a.shape, 200.0)
+    gap = np.zeros(a.shape, bool)
+    for z in (0.0, 0.2, 0.4, 0.6, 0.8):
+        gap |= np.abs(b - z) < 0.006
+    rng = np.random.default_rng(0)
+    for x0, z0, length in zip(rng.uniform(0, 0.9, grain), rng.uniform(0, 0.8, grain), rng.uniform(0.05, 0.15, grain)):
+        face[(a >= x0) & (a <= x0 + length) & (np.abs(b - z0) < 0.002)] = 150.0
+    face[gap] = 40.0
+    pull = (np.abs(a - 0.5) < 0.1) & (np.abs(((b % 0.2) - 0.1)) < 0.012)
+    face[pull] = 30.0
+    rgb[mask] = face[mask][:, None].astype(np.uint8)
+    return camera, rgb, mask, hit[mask], normal
+
+
+def test_a_face_the_depth_shows_head_on_is_turned_until_its_drawer_gaps_run_parallel():
+    """Estimated depth that puts a cabinet seen at an angle head-on (urdformer_label53) leaves the
+    face's drawer gaps fanning out in the face image; the face is turned until they are parallel.
+    Its wood grain hides the fan from the edge count's peak, which kept the face head-on."""
+    from perception.fronts import FAN_PX, _fan, face_of, rectify, refine_yaw
+
+    camera, rgb, mask, seen_m, normal = _photo_of_a_turned_face(10.0, grain=600)
+    head_on = seen_m.copy()
+    head_on[:, 0] = 2.6  # every point on the plane facing the camera
+    face = face_of(head_on, camera.position_m)
+    assert abs(np.degrees(np.arccos(np.clip(face.normal @ normal, -1, 1))) - 10.0) < 1.0
+    fan = _fan(*rectify(rgb, camera, face, mask, max_px=FAN_PX)[:2])
+    assert abs(fan) > 0.05  # the gaps' slopes change by that much (rows per column) from top to bottom
+    turned = refine_yaw(rgb, camera, face, head_on, mask)
+    assert np.degrees(np.arccos(np.clip(turned.normal @ normal, -1, 1))) <= 3.5
+    # A face already on the real plane stays where the points put it.
+    true_face = face_of(seen_m, camera.position_m)
+    kept = refine_yaw(rgb, camera, true_face, seen_m, mask)
+    assert np.allclose(kept.normal, true_face.normal)
