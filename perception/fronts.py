@@ -223,9 +223,11 @@ def _fan_zero(fans: list[tuple[float, float]]) -> float | None:
     if len(fans) < MIN_FAN_YAWS:
         return None
     deg, fan = np.array(fans).T
-    if np.ptp(fan) == 0 or abs(stats.spearmanr(deg, fan)[0]) < FAN_RHO:
+    if np.ptp(fan) == 0 or not abs(stats.spearmanr(deg, fan)[0]) >= FAN_RHO:  # (a NaN correlation fails too)
         return None
     a, b = stats.theilslopes(fan, deg)[:2]
+    if a == 0:
+        return None
     near = np.abs(deg - (-b / a)) <= FAN_NEAR_DEG
     if near.sum() >= 3:
         a_near, b_near = stats.theilslopes(fan[near], deg[near])[:2]

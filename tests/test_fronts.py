@@ -510,3 +510,15 @@ def test_a_face_the_depth_shows_head_on_is_turned_until_its_drawer_gaps_run_para
     true_face = face_of(seen_m, camera.position_m)
     kept = refine_yaw(rgb, camera, true_face, seen_m, mask)
     assert np.allclose(kept.normal, true_face.normal)
+
+
+def test_the_fans_zero_is_found_only_where_the_fan_changes_steadily_with_the_yaw():
+    from perception.fronts import _fan_zero
+
+    yaws = np.arange(-20.0, 20.1, 2.5)
+    ramp = 0.02 * (yaws - 7.0)
+    assert abs(_fan_zero(list(zip(yaws, ramp))) - 7.0) < 0.1
+    noise = np.random.default_rng(1).normal(0.0, 0.03, len(yaws))  # a white cabinet's scatter (coco 164)
+    assert _fan_zero(list(zip(yaws, noise))) is None
+    assert _fan_zero(list(zip(yaws[:4], ramp[:4]))) is None  # too few yaws measured
+    assert _fan_zero(list(zip(yaws, np.zeros_like(yaws)))) is None  # parallel at every yaw: no zero to turn to
