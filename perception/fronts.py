@@ -81,6 +81,12 @@ FAN_NEAR_DEG = 7.5
 MIN_TURN_DEG = 5.0
 #: Fronts smaller than this (m) in either direction are not kept (a sliver of a cut face).
 MIN_FRONT_M = 0.07
+#: A "front" less than PLINTH_MAX_M high whose bottom edge lies within FLOOR_CLEARANCE_M of the
+#: floor is the plinth or the floor under the piece, not a door or a drawer (a front must clear
+#: the floor to move): the 13 cm strip of carpet and feet under sunrgbd_total3d_demo_5's night
+#: stand, from z = 0.00 m, was built as a door.
+PLINTH_MAX_M = 0.15
+FLOOR_CLEARANCE_M = 0.02
 #: An appliance's largest front, whatever the parse read from its window or panel: (kind,
 #: hinge). An oven's or a dishwasher's is a flap hinged at its bottom; a microwave's a door
 #: hinged on its left (its keypad and latch are on the right).
@@ -331,6 +337,8 @@ def fronts_on_face(rgb: np.ndarray, camera: Camera, face: Face, label: str = "",
         a = p.corners[:, 0] * m
         b = (h - p.corners[:, 1]) * m
         world = face.points(a, b)
+        if float(np.min(world[:, 2])) < FLOOR_CLEARANCE_M and float(np.ptp(world[:, 2])) < PLINTH_MAX_M:
+            continue
         px = k.project(transform_points(camera_from_world, world))
         handle = None
         if p.handle is not None:

@@ -547,3 +547,20 @@ def test_cabinet_photos_on_estimated_depth_get_their_drawers_and_no_plinth(name,
     assert len(fronts) == built
     assert match_count(boxes, truth) == matched
     assert all(float(np.ptp(f.corners_world_m[:, 2])) >= 0.1 for f in fronts)
+
+
+@pytest.mark.parametrize("bottom_px, kept", [(359.0, False), (320.0, True)])
+def test_a_low_strip_at_the_floor_is_no_front(monkeypatch, bottom_px, kept):
+    """A panel 10 cm high whose bottom edge is at the floor is the plinth or carpet under the piece
+    (sunrgbd_total3d_demo_5's night stand); the same panel 11 cm up is a drawer."""
+    import perception.front_parse as front_parse
+    from perception.front_parse import Panel
+    from perception.fronts import Face, fronts_on_face
+
+    cam = _camera_along_x()
+    face = Face(np.array([4.0, 0.3, 0.0]), np.array([0.0, -1.0, 0.0]), np.array([-1.0, 0.0, 0.0]), 0.6, 1.0)  # 216 x 360 px, 1/360 m each, from the floor, in view
+    top = bottom_px - 36.0
+    panel = Panel(np.array([[10.0, bottom_px], [200.0, bottom_px], [200.0, top], [10.0, top]]), "drawer", "", (105.0, 0.5 * (top + bottom_px)), 1.0)
+    monkeypatch.setattr(front_parse, "parse_face", lambda *a, **kw: [panel])
+    fronts = fronts_on_face(np.full((160, 200, 3), 200, np.uint8), cam, face, "cabinet")
+    assert len(fronts) == int(kept)
