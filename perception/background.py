@@ -58,6 +58,11 @@ BEHIND_MARGIN_M = 0.05
 MAX_FILL_FACTOR = 1.5
 #: Plane points this far outside the room's footprint still fill a node (m).
 FOOTPRINT_MARGIN_M = 0.1
+#: A node without depth continues an opening in the plane its ray meets (a doorway, a window)
+#: when its nearest observed node, at most this share of the grid's long side away, was
+#: measured more than OPENING_RATIO times the plane's depth along its own ray.
+OPENING_REACH = 0.1
+OPENING_RATIO = 1.1
 #: The floor, z = 0 (world frame): nothing of the background lies under it.
 FLOOR = Plane(np.array([0.0, 0.0, 1.0]), 0.0, "floor")
 #: Colour inpainting runs on an image of at most this many pixels on its long side, and is
@@ -137,6 +142,7 @@ def fill_depth_behind(
                 row[np.flatnonzero(fin)[~shapely.contains_xy(region, hit[:, 0], hit[:, 1])]] = np.inf
     best = t.min(axis=0)
     hit = np.isfinite(best) & (best <= cap)
+    best = _through_openings(best, hit, np.argmin(t, axis=0), idx, depth_m, known, rays_cam, camera, planes, cap)
     flat = out.reshape(-1)
     flat[idx[hit]] = best[hit]
     rest = np.zeros(h * w, dtype=bool)
@@ -158,6 +164,54 @@ def fill_depth_behind(
     # floor still wins there: the object hides that node.)
     under = np.isfinite(t_floor) & (flat[idx] > t_floor)
     flat[idx[under]] = t_floor[under]
+    return out
+
+
+def _through_openings(best: np.ndarray, hit: np.ndarray, first: np.ndarray, idx: np.ndarray, depth_m: np.ndarray, known: np.ndarray,
+                      rays_cam: np.ndarray, camera: Camera, planes: list[Plane], cap: float) -> np.ndarray:
+    """``best`` (the plane depth of each filled node ``idx``) where a node without depth continues
+    an opening: its nearest observed node (within OPENING_REACH of the grid's long side) was
+    measured more than OPENING_RATIO behind the plane the node's ray meets (``first``), so the
+    plane has a doorway or a window there and the node lies on the surface seen through it,
+    taken parallel to that plane through the observed point.
+
+    The case: a depth sensor's frame has no depth along its border and past its range. On
+    slambook_ch5_diningroom_frame5 the top rows over a doorway, where the next room's wall was
+    measured 7 m away, took the room's back wall 1.2 m nearer, and a view from another pose saw
+    that wall across the doorway."""
+    from scipy import ndimage
+
+    h, w = depth_m.shape
+    hole = (depth_m.reshape(-1)[idx] <= 0) & hit
+    if not np.any(hole) or not np.any(known):
+        return best
+    dist, (ni, nj) = ndimage.distance_transform_edt(~known, return_indices=True)
+    near = (ni * w + nj).reshape(-1)[idx]
+    close = hole & (dist.reshape(-1)[idx] <= OPENING_REACH * max(h, w))
+    if not np.any(close):
+        return best
+    r = camera.world_from_camera[:3, :3]
+    c = camera.world_from_camera[:3, 3]
+    rays = rays_cam.reshape(-1, 3)
+    out = best.copy()
+    for p, plane in enumerate(planes):
+        sel = np.flatnonzero(close & (first == p))
+        if len(sel) == 0 or plane.kind == "floor":  # (nothing is seen through the floor)
+            continue
+        k = near[sel]
+        t_k = plane_depths(rays[k], camera, [plane])[0]
+        d_k = depth_m.reshape(-1)[k]
+        through = np.isfinite(t_k) & (d_k > OPENING_RATIO * t_k)
+        if not np.any(through):
+            continue
+        sel, k, d_k = sel[through], k[through], d_k[through]
+        x_k = c + (rays[k] * d_k[:, None]) @ r.T  # the observed points seen through the opening
+        d_i = rays[idx[sel]] @ r.T
+        denom = d_i @ plane.normal
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_i = ((x_k - c) @ plane.normal) / denom
+        ok = np.isfinite(t_i) & (t_i > out[sel]) & (t_i <= cap)
+        out[sel[ok]] = t_i[ok]
     return out
 
 

@@ -268,3 +268,30 @@ def test_pack_atlas_keeps_the_photo_at_the_top_left_and_every_image_whole():
     assert pos[0] == (2, 2)
     for im, (r, c) in zip(images, pos):
         assert np.array_equal(atlas[r : r + im.shape[0], c : c + im.shape[1]], im)
+
+
+def test_a_hole_in_the_depth_over_a_doorway_continues_what_was_seen_through_it():
+    """A sensor frame without depth in its top rows (its border) over a doorway in the wall,
+    through which the next room's wall was measured 1.5 m further: the hole over the doorway
+    lies on that far wall, not on the room's wall across the doorway; the hole over the rest of
+    the wall lies on the wall (slambook_ch5_diningroom_frame5's top rows over its doorway)."""
+    import dataclasses
+
+    obs, _ = tf.observation()
+    cam = tf.camera()
+    d = tf.rays_cam() @ cam.world_from_camera[:3, :3].T
+    depth = tf.room_depth()
+    doorway = (slice(10, 60), slice(10, 45))
+    beyond_m = tf.WALL_X_M + 1.5
+    depth[doorway] = beyond_m / d[doorway][..., 0]
+    depth[:10] = 0.0  # the sensor's border: no depth
+    obs = dataclasses.replace(obs, depth_m=depth.astype(np.float32))
+    bg = observed_background(obs, cam, (tf.wall(),), (), max_nodes=tf.W * tf.H)
+    origin, dirs = _pixel_rays(cam)
+    t = _cast(bg.surface, origin, dirs).reshape(tf.H, tf.W)
+    x_hit = origin[0] + dirs.reshape(tf.H, tf.W, 3)[..., 0] * t
+    top = slice(1, 9)
+    over_doorway = x_hit[top, 14:41]
+    over_wall = x_hit[top, 60:150]
+    assert np.all(np.abs(over_doorway - beyond_m) < 0.05), np.round(over_doorway.min(), 2)
+    assert np.all(np.abs(over_wall - tf.WALL_X_M) < 0.05), np.round(over_wall.max(), 2)
