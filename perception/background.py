@@ -14,7 +14,10 @@ Method:
    object and background) and nodes with no depth are filled with what lies behind: the first of
    the floor and wall planes that the node's ray meets beyond the object's observed depth;
    otherwise the depth inpainted from the surrounding background (Navier-Stokes inpainting,
-   OpenCV), never in front of the object. No node, filled or observed, lies under the floor:
+   OpenCV), never in front of the object. A node without depth next to what was measured
+   behind the plane its ray meets (a doorway, a window: the sensor's border or range cut it off)
+   lies on the surface seen through that opening instead (:func:`_through_openings`). No node,
+   filled or observed, lies under the floor:
    one whose depth puts it there (a depth error: the camera cannot see through the floor)
    moves along its ray onto the floor plane.
 3. **Triangles** between neighbouring nodes, counter-clockwise seen from the camera. A triangle
