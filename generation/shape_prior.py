@@ -518,12 +518,16 @@ class ObservedBox:
     ``floor_snap_m`` the largest gap under its lowest seen point that its box closes down to the
     floor (inf: cut by the photo's bottom edge, down to the floor whatever the gap),
     ``cut_to_floor`` whether it was so cut, ``blockers`` the other
-    objects whose seen points stopped its completion (:func:`completion_blockers`)."""
+    objects whose seen points stopped its completion (:func:`completion_blockers`),
+    ``out_of_view_m`` how far it was widened past the photo's ``cut_side`` edge
+    (:mod:`generation.out_of_view`; 0 and "" when not)."""
 
     fit: object
     floor_snap_m: float
     cut_to_floor: bool
     blockers: tuple
+    out_of_view_m: float = 0.0
+    cut_side: str = ""
 
 
 def observed_box(obj: PerceivedObject, perception: Perception) -> ObservedBox:
@@ -532,6 +536,7 @@ def observed_box(obj: PerceivedObject, perception: Perception) -> ObservedBox:
     bottom edge cut floor furniture over a seen floor, its plan read by the category's
     proportions for :data:`PLAN_BY_PROPORTIONS` without fronts, completed no farther than the
     walls and what its :func:`completion_blockers` showed of themselves."""
+    from generation.out_of_view import width_out_of_view
     from generation.pose import floor_snap_height_m
     from scene_builder.vocabulary import category
 
@@ -556,7 +561,9 @@ def observed_box(obj: PerceivedObject, perception: Perception) -> ObservedBox:
     blocking = tuple(completion_blockers(obj, other_objects))
     fit = fitted_box(obj.points_world_m, perception.camera.position_m, label, perception.room.walls, floor_snap_m=snap_m,
                      typical_size_m=typical, others_world_m=[o.points_world_m for o in blocking])
-    return ObservedBox(fit, float(snap_m), bool(np.isinf(snap_m)), blocking)
+    # furniture a side edge of the photo cut continues past it (its seen end stays)
+    fit, grown, side = width_out_of_view(fit, label, obj.mask, perception.camera, perception.room.walls, others)
+    return ObservedBox(fit, float(snap_m), bool(np.isinf(snap_m)), blocking, grown, side)
 
 
 class ShapePriorGenerator:
@@ -595,6 +602,8 @@ class ShapePriorGenerator:
         description = f"{label} fitted to measured extents {size[0]:.2f} x {size[1]:.2f} x {size[2]:.2f} m (depth x width x height)"
         if cut_to_floor:
             description += ", down to the floor below the photo's bottom edge, which cut it"
+        if seen_box.out_of_view_m > 0:
+            description += f", continued {seen_box.out_of_view_m:.2f} m out of view past the photo's {seen_box.cut_side} edge, which cut it"
         cfg = config
 
         rects = []

@@ -21,26 +21,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from scene_builder.frames import edge_reach_share
+from scene_builder.frames import LENGTH_CAP_M, LENGTH_FACTOR, SIDEWAYS_MIN_HEIGHT_M, cut_side
+from scene_builder.frames import SIDE_CUT_SHARE as CUT_SHARE, SIDE_EDGE_SHARE as EDGE_SHARE
 
 __all__ = ["CUT_SHARE", "EDGE_SHARE", "LENGTH_CAP_M", "LENGTH_FACTOR", "SIDEWAYS_MIN_HEIGHT_M", "cut_by_side_edge", "length_max_m"]
-
-EDGE_SHARE = 0.03
-CUT_SHARE = 0.3
-SIDEWAYS_MIN_HEIGHT_M = 0.3
-#: An object a side edge of the photo cut is weighed at lengths up to LENGTH_FACTOR times the seen
-#: one, at most LENGTH_CAP_M (a bed's or a sofa's length): what is out of view is taken to be no
-#: more than what is in it.
-LENGTH_FACTOR = 2.0
-LENGTH_CAP_M = 2.5
 
 
 def cut_by_side_edge(mask: np.ndarray) -> bool:
     """Whether exactly one side edge of the photo cut the (H, W) bool ``mask`` (module doc)."""
-    near = max(2, int(round(EDGE_SHARE * np.shape(mask)[1])))
-    at_left = edge_reach_share(mask, "left", near) >= CUT_SHARE
-    at_right = edge_reach_share(mask, "right", near) >= CUT_SHARE
-    return bool(at_left != at_right)  # (both: it fills the photo's width, a close-up framed on it)
+    return cut_side(mask) is not None
 
 
 def length_max_m(mask: np.ndarray, size_m: tuple[float, float, float]) -> float | None:

@@ -126,3 +126,29 @@ def cut_by_photo_bottom(mask: np.ndarray, valid_depth: np.ndarray | None = None)
         last = int(rows_valid[-1]) if len(rows_valid) else None
     rows = max(2, int(round(BOTTOM_CUT_ROWS_SHARE * mask.shape[0])))
     return edge_reach_share(mask, "bottom", rows, last) >= BOTTOM_CUT_SHARE
+
+
+#: A mask reaching within this share of the photo's width of its left or right edge on at least
+#: :data:`SIDE_CUT_SHARE` of its rows was cut by that edge (a dresser at the photo's edge); one
+#: reaching both edges fills the photo's width (a close-up framed on it), which is no cut.
+SIDE_EDGE_SHARE = 0.03
+SIDE_CUT_SHARE = 0.3
+#: Only objects seen at least this tall are weighed as longer than seen when a side edge cut them
+#: (perception.seen_extent); an object a side edge cut is taken to be at most LENGTH_FACTOR times
+#: as long as seen, LENGTH_CAP_M at most (a bed's or a sofa's length): what is out of view is
+#: taken to be no more than what is in it.
+SIDEWAYS_MIN_HEIGHT_M = 0.3
+LENGTH_FACTOR = 2.0
+LENGTH_CAP_M = 2.5
+
+
+def cut_side(mask: np.ndarray) -> str | None:
+    """``"left"`` or ``"right"``: the one side edge of the photo that cut the (H, W) bool
+    ``mask`` (see :data:`SIDE_CUT_SHARE`); None when neither or both did."""
+    mask = np.asarray(mask, dtype=np.bool_)
+    near = max(2, int(round(SIDE_EDGE_SHARE * mask.shape[1])))
+    at_left = edge_reach_share(mask, "left", near) >= SIDE_CUT_SHARE
+    at_right = edge_reach_share(mask, "right", near) >= SIDE_CUT_SHARE
+    if at_left == at_right:
+        return None
+    return "left" if at_left else "right"
