@@ -7,10 +7,11 @@ floor furniture that exactly one side edge cut (:func:`scene_builder.frames.cut_
 least :data:`~scene_builder.frames.SIDEWAYS_MIN_HEIGHT_M` tall) is widened along its width axis
 toward that edge:
 
-- **how far**: to the category's typical width, scaled by the seen height against the typical
-  height (the proportions :func:`generation.shape_prior.complete_box` completes the depth by),
-  and at least until its end lies outside the view (the photo did not show the end: it lies past
-  the frustum's side plane); never more than :data:`~scene_builder.frames.LENGTH_FACTOR` times
+- **how far**: at least until its end lies outside the view (the photo did not show the end: it
+  lies past the frustum's side plane, at the box's back too, where the view is wider), and to the
+  category's typical width, scaled by the seen height against the typical height (the
+  proportions :func:`generation.shape_prior.complete_box` completes the depth by), when less
+  than :data:`GROW_BELOW_SHARE` of that was seen; never more than :data:`~scene_builder.frames.LENGTH_FACTOR` times
   the seen width (:data:`~scene_builder.frames.LENGTH_CAP_M` at most), the range naming weighed
   (``perception.seen_extent``);
 - **which way**: the box's width axis whose direction points out of the view past the cut edge
@@ -36,7 +37,8 @@ __all__ = ["CAMERA_CLEARANCE_M", "GROW_BELOW_SHARE", "MIN_OUTWARD", "OTHERS_CLEA
 #: The width axis points out of the view when its cosine with the side plane's outward normal is
 #: at least this (60 degrees).
 MIN_OUTWARD = 0.5
-#: The box is widened only when its seen width is less than this share of the expected one.
+#: The box is widened to the category's width only when its seen width is less than this share of
+#: it (else only until its end is out of view).
 GROW_BELOW_SHARE = 0.8
 #: It stops this far short of another object's seen points ...
 OTHERS_CLEARANCE_M = 0.02
@@ -99,8 +101,6 @@ def width_out_of_view(fit, label: str, mask: np.ndarray, camera, walls=(), other
         return fit, 0.0, ""
     _, tw, th = cat.typical_size_m
     expected = tw * h / th
-    if w >= GROW_BELOW_SHARE * expected:
-        return fit, 0.0, ""
     rot = fit.world_from_box[:3, :3]
     n3 = outward_normal(camera, side)
     n_plan = np.array([n3[0], n3[1], 0.0])
@@ -114,7 +114,7 @@ def width_out_of_view(fit, label: str, mask: np.ndarray, camera, walls=(), other
     c = camera.position_m
     rate = float(n3 @ e)
     out_of_view = max(0.0, float(np.max(-((end - c) @ n3) / rate)))
-    grow = max(expected - w, out_of_view)
+    grow = max(expected - w, out_of_view) if w < GROW_BELOW_SHARE * expected else out_of_view
     grow = min(grow, min(LENGTH_FACTOR * w, max(LENGTH_CAP_M, w)) - w)
     box_from_world = np.linalg.inv(fit.world_from_box)
     q_others = [transform_points(box_from_world, np.asarray(o, dtype=np.float64)) for o in others_world_m if len(o)]

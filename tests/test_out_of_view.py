@@ -100,7 +100,7 @@ def test_a_wall_or_a_neighbour_beside_it_stops_it():
     assert -2.1 < _ends_y(stopped)[0] < -2.05
 
 
-def test_what_no_edge_cut_or_small_things_stay_as_seen():
+def test_what_no_edge_cut_or_small_things_stay_as_seen_and_a_wide_one_only_leaves_the_view():
     fit = _dresser()
     mask = _mask(fit)
     whole = np.zeros_like(mask)
@@ -108,5 +108,8 @@ def test_what_no_edge_cut_or_small_things_stay_as_seen():
     assert width_out_of_view(fit, "cabinet", whole, CAMERA)[1] == 0.0
     assert width_out_of_view(fit, "mug", mask, CAMERA)[1] == 0.0  # not floor furniture
     assert width_out_of_view(fit, "object", mask, CAMERA)[1] == 0.0  # no category, no width to expect
+    # seen as wide as a cabinet: only until its back corner is out of view (the view widens with depth)
     wide = _dresser(seen_width_m=0.75)
-    assert width_out_of_view(wide, "cabinet", _mask(wide), CAMERA)[1] == 0.0  # already a cabinet's width
+    widened, grown, _ = width_out_of_view(wide, "cabinet", _mask(wide), CAMERA)
+    assert grown == pytest.approx(0.45 * -EDGE_Y, abs=1e-6)
+    assert _ends_y(widened)[0] == pytest.approx(3.45 * EDGE_Y, abs=1e-6)
