@@ -18,10 +18,10 @@ CAMERA = Camera(K, pose(np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0,
 EDGE_Y = -319.0 / 500.0  # the right frustum plane's world y per metre of x
 
 
-def _dresser(seen_width_m: float = 0.42, depth_m: float = 0.45, height_m: float = 0.9) -> BoxFit:
+def _dresser(seen_width_m: float = 0.42, depth_m: float = 0.45, height_m: float = 0.9, short_m: float = 0.0) -> BoxFit:
     """The seen part of a dresser 3 m in front of the camera, its front facing it, its right
-    end the right frustum plane at its front (y = 3 EDGE_Y)."""
-    y_cut = 3.0 * EDGE_Y
+    end the right frustum plane at its front (y = 3 EDGE_Y), or ``short_m`` inside the view."""
+    y_cut = 3.0 * EDGE_Y + short_m
     centre = np.array([3.0 + depth_m / 2, y_cut + seen_width_m / 2, 0.0])
     rot = np.array([[-1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]])  # box +x toward the camera, +y = world -y
     return BoxFit(pose(rot, centre), np.array([depth_m, seen_width_m, height_m]), True, depth_m)
@@ -65,27 +65,23 @@ def test_a_dresser_the_right_edge_cut_continues_past_it():
     # to a cabinet's width at its height (0.8 m at 0.9 m), no more than twice what was seen
     assert grown_fit.size_m[1] == pytest.approx(0.8, abs=1e-6)
     assert grown == pytest.approx(0.8 - 0.42, abs=1e-6)
-    # the seen end (world y max) stays; the new end lies outside the view at the box's back too
-    seen_lo, seen_hi = _ends_y(fit)
+    # the seen end (world y max) stays; the new end lies outside the view
+    _, seen_hi = _ends_y(fit)
     lo, hi = _ends_y(grown_fit)
     assert hi == pytest.approx(seen_hi, abs=1e-9)
-    back_x = 3.0 + 0.45
-    assert lo < back_x * EDGE_Y
+    assert lo < 3.0 * EDGE_Y
     # depth and height unchanged
     assert grown_fit.size_m[0] == fit.size_m[0] and grown_fit.size_m[2] == fit.size_m[2]
 
 
-def test_its_end_lies_out_of_view_even_past_the_category_width():
-    # seen 0.62 m of a cabinet 0.9 m deep: the category's width (0.8 m) would leave its back
-    # corner in view; twice the seen width (the cap) is enough to take it out
-    fit = _dresser(seen_width_m=0.62, depth_m=0.9)
-    grown_fit, grown, _ = width_out_of_view(fit, "cabinet", _mask(fit), CAMERA)
-    lo, _ = _ends_y(grown_fit)
-    assert lo == pytest.approx((3.0 + 0.9) * EDGE_Y, abs=1e-6)
-    assert 0.8 - 0.62 < grown < 0.62
-    # a deeper one would need more than twice what was seen: it stops at the cap
-    deep = _dresser(seen_width_m=0.62, depth_m=1.5)
-    assert width_out_of_view(deep, "cabinet", _mask(deep), CAMERA)[0].size_m[1] == pytest.approx(1.24, abs=1e-6)
+def test_its_seen_end_leaves_the_view_and_it_grows_no_more_than_twice_what_was_seen():
+    # seen as wide as a cabinet, its box ending 5 cm inside the view (the mask still reaches the
+    # edge): it grows only until its front's end is out of view
+    fit = _dresser(seen_width_m=0.75, short_m=0.05)
+    assert width_out_of_view(fit, "cabinet", _mask(fit), CAMERA)[1] == pytest.approx(0.05, abs=1e-6)
+    # 0.3 m seen of a cabinet 0.8 m wide: twice the seen width at most
+    narrow = _dresser(seen_width_m=0.3)
+    assert width_out_of_view(narrow, "cabinet", _mask(narrow), CAMERA)[0].size_m[1] == pytest.approx(0.6, abs=1e-6)
 
 
 def test_a_wall_or_a_neighbour_beside_it_stops_it():
@@ -100,7 +96,7 @@ def test_a_wall_or_a_neighbour_beside_it_stops_it():
     assert -2.1 < _ends_y(stopped)[0] < -2.05
 
 
-def test_what_no_edge_cut_or_small_things_stay_as_seen_and_a_wide_one_only_leaves_the_view():
+def test_what_no_edge_cut_small_things_and_whole_widths_stay_as_seen():
     fit = _dresser()
     mask = _mask(fit)
     whole = np.zeros_like(mask)
@@ -108,8 +104,5 @@ def test_what_no_edge_cut_or_small_things_stay_as_seen_and_a_wide_one_only_leave
     assert width_out_of_view(fit, "cabinet", whole, CAMERA)[1] == 0.0
     assert width_out_of_view(fit, "mug", mask, CAMERA)[1] == 0.0  # not floor furniture
     assert width_out_of_view(fit, "object", mask, CAMERA)[1] == 0.0  # no category, no width to expect
-    # seen as wide as a cabinet: only until its back corner is out of view (the view widens with depth)
-    wide = _dresser(seen_width_m=0.75)
-    widened, grown, _ = width_out_of_view(wide, "cabinet", _mask(wide), CAMERA)
-    assert grown == pytest.approx(0.45 * -EDGE_Y, abs=1e-6)
-    assert _ends_y(widened)[0] == pytest.approx(3.45 * EDGE_Y, abs=1e-6)
+    wide = _dresser(seen_width_m=0.75)  # already a cabinet's width, its end at the edge
+    assert width_out_of_view(wide, "cabinet", _mask(wide), CAMERA)[1] == 0.0
