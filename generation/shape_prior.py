@@ -462,7 +462,8 @@ def front_on_face(fit, fronts):
     return dataclasses.replace(fit, world_from_box=world_from_box, size_m=size)
 
 
-def face_fitted_box(obj: PerceivedObject, space, camera_position_m: np.ndarray, walls, floor_snap_m: float, others_world_m=()):
+def face_fitted_box(obj: PerceivedObject, space, camera_position_m: np.ndarray, walls, floor_snap_m: float, others_world_m=(), camera=None,
+                    beside_world_m=()):
     """(BoxFit, size) of an object with fronts whose first front layout failed the free-space
     test: the box with the axes of the face its fronts were seen on (``fit_box``'s
     ``face_normal``), its front on that face (:func:`front_on_face`), grown to a cabinet's least
@@ -470,12 +471,17 @@ def face_fitted_box(obj: PerceivedObject, space, camera_position_m: np.ndarray, 
     free space (:func:`box_within_free_space`). On sunrgbd_imvotenet_000003 the night stand's and
     the dresser's layouts failed (24-25 % of their surface in free space): boxes 8 degrees off
     their faces, 10 cm in front of them (the 99th percentile of depth 4 m away), over a sliver of
-    the neighbour their masks took in."""
+    the neighbour their masks took in. ``camera`` (a :class:`~scene_builder.model.Camera`), when
+    given: widened past a side edge of the photo that cut it (:mod:`generation.out_of_view`, short
+    of the seen points of ``beside_world_m``), as :func:`observed_box` widens the first box."""
+    from generation.out_of_view import width_out_of_view
     from scene_builder.vocabulary import category
 
     fit = fitted_box(obj.points_world_m, camera_position_m, obj.label, walls, floor_snap_m=floor_snap_m, face_normal=fronts_normal(obj.fronts),
                      others_world_m=others_world_m)
     fit = front_on_face(fit, obj.fronts)
+    if camera is not None:
+        fit = width_out_of_view(fit, obj.label, obj.mask, camera, walls, beside_world_m)[0]
     size = np.maximum(fit.size_m, 0.3 * np.asarray(category("cabinet").typical_size_m))
     size[2] = top_within_silhouette(space, fit.world_from_box, size)
     world_from_box, size = box_clear_of_walls(fit.world_from_box, size, walls)
@@ -683,7 +689,7 @@ class ShapePriorGenerator:
                 # box that other objects stand inside (a bookcase's books: promptda_arkit's
                 # cubbies read as fronts), which is no closed carcass of doors and drawers.
                 refitted = True
-                fit, size = face_fitted_box(obj, space, cam_world, perception.room.walls, snap_m, blockers)
+                fit, size = face_fitted_box(obj, space, cam_world, perception.room.walls, snap_m, blockers, perception.camera, others)
                 box_from_world = np.linalg.inv(fit.world_from_box)
                 pts = transform_points(box_from_world, obj.points_world_m)
                 rects = _seen_rects(obj, fit.world_from_box, size, perception.room.walls)
