@@ -7,9 +7,10 @@ floor furniture that exactly one side edge cut (:func:`scene_builder.frames.cut_
 least :data:`~scene_builder.frames.SIDEWAYS_MIN_HEIGHT_M` tall) is widened along its width axis
 toward that edge:
 
-- **how far**: at least until the seen face's end lies outside the view (the photo did not show
-  it: its top and bottom corners lie past the frustum's side plane, which a rolled or pitched
-  camera tilts, so that the bottom of a face cut at its top may still be in view), and to the
+- **how far**: at least until the seen face's end is not wholly in view (the photo did not show
+  it: one of its two corners, top or bottom, lies past the frustum's side plane, which a rolled
+  or pitched camera leans; a sensor's depth often stops short of the photo's edge, so the seen
+  points end inside the view where the object goes on), and to the
   category's typical width, scaled by the seen height against the typical height (the
   proportions :func:`generation.shape_prior.complete_box` completes the depth by), when less
   than :data:`GROW_BELOW_SHARE` of that was seen; never more than :data:`~scene_builder.frames.LENGTH_FACTOR` times
@@ -111,13 +112,15 @@ def width_out_of_view(fit, label: str, mask: np.ndarray, camera, walls=(), other
     if float(e @ n_plan) < MIN_OUTWARD:
         return fit, 0.0, ""
     end = transform_points(fit.world_from_box, np.array([[x, s * w / 2, z] for x in (-d / 2, d / 2) for z in (0.0, h)]))
-    # the seen face's end lies out of view: its corners past the side plane (not the back's: the
-    # box's depth behind the seen face is a completion, and a shelf completed 12 cm deeper than it
-    # is grew 11 cm past its true end, procedural room 3)
+    # The seen face's end is not wholly in view: one of its two corners (top, bottom) lies past
+    # the side plane. Not both: a camera looking down leans the plane, and a shelf whose top
+    # corner the edge cut showed its bottom corner, its true end, 22 px inside the photo
+    # (procedural room 3: grown 11 cm past it when both had to leave the view). Not the back's
+    # corners: the depth behind the seen face is a completion.
     front_end = end[2:]
     c = camera.position_m
     rate = float(n3 @ e)
-    out_of_view = max(0.0, float(np.max(-((front_end - c) @ n3) / rate)))
+    out_of_view = max(0.0, float(np.min(-((front_end - c) @ n3) / rate)))
     grow = max(expected - w, out_of_view) if w < GROW_BELOW_SHARE * expected else out_of_view
     grow = min(grow, min(LENGTH_FACTOR * w, max(LENGTH_CAP_M, w)) - w)
     box_from_world = np.linalg.inv(fit.world_from_box)

@@ -27,13 +27,13 @@ def _dresser(seen_width_m: float = 0.42, depth_m: float = 0.45, height_m: float 
     return BoxFit(pose(rot, centre), np.array([depth_m, seen_width_m, height_m]), True, depth_m)
 
 
-def _mask(fit: BoxFit) -> np.ndarray:
+def _mask(fit: BoxFit, camera: Camera = CAMERA) -> np.ndarray:
     """The box's front face's pixels in the photo."""
     d, w, h = fit.size_m
     ys, zs = np.meshgrid(np.linspace(-w / 2, w / 2, 60), np.linspace(0.0, h, 60))
     front = np.column_stack([np.full(ys.size, d / 2), ys.ravel(), zs.ravel()])
     world = transform_points(fit.world_from_box, front)
-    px = K.project(transform_points(np.linalg.inv(CAMERA.world_from_camera), world))
+    px = K.project(transform_points(np.linalg.inv(camera.world_from_camera), world))
     mask = np.zeros((K.height_px, K.width_px), dtype=bool)
     u = np.clip(np.round(px[:, 0]).astype(int), 0, K.width_px - 1)
     v = np.clip(np.round(px[:, 1]).astype(int), 0, K.height_px - 1)
@@ -82,6 +82,25 @@ def test_its_seen_end_leaves_the_view_and_it_grows_no_more_than_twice_what_was_s
     # 0.3 m seen of a cabinet 0.8 m wide: twice the seen width at most
     narrow = _dresser(seen_width_m=0.3)
     assert width_out_of_view(narrow, "cabinet", _mask(narrow), CAMERA)[0].size_m[1] == pytest.approx(0.6, abs=1e-6)
+
+
+def test_an_end_the_photo_showed_at_its_bottom_does_not_grow():
+    # A camera looking 25 degrees down leans the frustum's side plane: a shelf whose top corner
+    # the right edge cut shows its bottom corner, its true end, inside the photo.
+    tilt = np.radians(25.0)
+    down = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(tilt), -np.sin(tilt)], [0.0, np.sin(tilt), np.cos(tilt)]])  # about camera x
+    camera = Camera(K, pose(CAMERA.world_from_camera[:3, :3] @ down.T, [0.0, 0.0, 1.6]))
+    n3 = outward_normal(camera, "right")
+    c = camera.position_m
+    h = 1.4
+    # the end's top corner 2 cm past the side plane
+    y_end = (0.02 - n3 @ (np.array([3.0, 0.0, h]) - c)) / n3[1]
+    fit = BoxFit(pose(np.diag([-1.0, -1.0, 1.0]), [3.2, y_end + 0.4, 0.0]), np.array([0.4, 0.8, h]), True, 0.4)
+    bottom = n3 @ (np.array([3.0, y_end, 0.0]) - c)
+    assert bottom < -0.05  # the bottom corner in view
+    mask = _mask(fit, camera)
+    assert mask[:, -3:].any()
+    assert width_out_of_view(fit, "shelf", mask, camera)[1] == 0.0
 
 
 def test_a_wall_or_a_neighbour_beside_it_stops_it():
