@@ -605,7 +605,8 @@ class ShapePriorGenerator:
         cm = category_material(label)
         soft = deformable_settings(label)
         kind = None
-        description = f"{label} fitted to measured extents {size[0]:.2f} x {size[1]:.2f} x {size[2]:.2f} m (depth x width x height)"
+        seen_w = size[1] - seen_box.out_of_view_m  # (the width the photo showed)
+        description = f"{label} fitted to measured extents {size[0]:.2f} x {seen_w:.2f} x {size[2]:.2f} m (depth x width x height)"
         if cut_to_floor:
             description += ", down to the floor below the photo's bottom edge, which cut it"
         if seen_box.out_of_view_m > 0:

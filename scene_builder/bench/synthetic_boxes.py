@@ -82,12 +82,17 @@ def synthetic_perception(boxes: list[SyntheticBox], camera_m=(3.0, 1.0, 1.5), ta
     k = CameraIntrinsics.from_fov(64, 48, 60.0)
     rgb = np.zeros((48, 64, 3), dtype=np.uint8)
     obs = Observation("synthetic.png", rgb, np.zeros((48, 64), dtype=np.float32), k, "synthetic")
+    camera = Camera(k, look_at(camera_m, target_m))
+    camera_from_world = np.linalg.inv(camera.world_from_camera)
     objects = []
     for i, b in enumerate(boxes):
         pts = visible_box_points(b, camera_m, density_per_m2, rng, noise_m)
+        # the mask: the pixels its points project to (what a segmenter would have outlined)
+        cam = transform_points(camera_from_world, pts)
+        px = np.round(k.project(cam[cam[:, 2] > 1e-6])).astype(np.int64)
+        px = px[(px[:, 0] >= 0) & (px[:, 0] < 64) & (px[:, 1] >= 0) & (px[:, 1] < 48)]
         mask = np.zeros((48, 64), dtype=bool)
-        mask[i % 48, :4] = True
+        mask[px[:, 1], px[:, 0]] = True
         cols = np.tile(np.array(b.rgb, dtype=np.uint8), (len(pts), 1))
         objects.append(PerceivedObject(i + 1, f"{b.label}_{i}", b.label, 0.9, mask, pts, cols))
-    camera = Camera(k, look_at(camera_m, target_m))
     return Perception(obs, camera, Room(), tuple(objects))
