@@ -66,17 +66,6 @@ def outward_normal(camera, side: str) -> np.ndarray:
     return n / np.linalg.norm(n)
 
 
-def _limit_walls(side_corners: np.ndarray, e: np.ndarray, walls) -> float:
-    """How far (m) the box's end face (corners (N, 3), world) can move along ``e`` before it
-    reaches a wall (inf when none stands that way)."""
-    limit = np.inf
-    for wall in walls:
-        rate = float(np.asarray(wall.normal, dtype=np.float64) @ e)  # clearance change per metre
-        if rate < -1e-6:
-            limit = min(limit, float(np.min(wall.clearance_m(side_corners))) / -rate)
-    return limit
-
-
 def _limit_others(q_others, d: float, w: float, h: float, s: float) -> float:
     """How far the end at ``y = s w / 2`` (box frame) can move before it reaches what another
     object showed of itself beside it (``q_others``: each object's points in the box frame)."""
@@ -93,7 +82,7 @@ def width_out_of_view(fit, label: str, mask: np.ndarray, camera, walls=(), other
     """(the box ``fit`` (a :class:`generation.pose.BoxFit`) widened out of view, metres it grew,
     the edge that cut it or "") for an object labelled ``label`` with photo ``mask`` (see the
     module docstring); ``fit`` itself and 0 when nothing is to grow."""
-    from generation.pose import BoxFit
+    from generation.pose import BoxFit, travel_to_walls
     from scene_builder.vocabulary import category
 
     cat = category(label)
@@ -126,7 +115,7 @@ def width_out_of_view(fit, label: str, mask: np.ndarray, camera, walls=(), other
     box_from_world = np.linalg.inv(fit.world_from_box)
     q_others = [transform_points(box_from_world, np.asarray(o, dtype=np.float64)) for o in others_world_m if len(o)]
     cam = transform_points(box_from_world, c[None])[0]
-    limit = min(_limit_walls(end, e, walls), _limit_others(q_others, d, w, h, s))
+    limit = min(travel_to_walls(end, e, walls), _limit_others(q_others, d, w, h, s))
     if cam[2] < h + CAMERA_CLEARANCE_M and abs(cam[0]) < d / 2 + CAMERA_CLEARANCE_M and s * cam[1] > w / 2:
         limit = min(limit, s * cam[1] - w / 2 - CAMERA_CLEARANCE_M)
     grow = min(grow, limit)

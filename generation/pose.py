@@ -201,6 +201,17 @@ def _wall_angle(points_m: np.ndarray, angle: float, extent: np.ndarray, walls) -
     return angle if best is None else best[1]
 
 
+def travel_to_walls(points_world_m: np.ndarray, direction: np.ndarray, walls) -> float:
+    """How far (m) the (N, 3) world points can move along the unit ``direction`` before the first
+    of them reaches a wall of ``walls`` (inf when no wall stands that way, or past its ends)."""
+    limit = np.inf
+    for wall in walls:
+        rate = float(np.asarray(wall.normal, dtype=np.float64) @ direction)  # clearance change per metre
+        if rate < -1e-6:
+            limit = min(limit, float(np.min(wall.clearance_m(points_world_m))) / -rate)  # (inf past its ends)
+    return limit
+
+
 def extend_depth(fit: BoxFit, depth_m: float) -> BoxFit:
     """The same box made ``depth_m`` deep by growing it away from the camera (the observed
     front face stays where it was)."""

@@ -70,17 +70,13 @@ def depth_to_walls(fit, walls) -> float:
     seen against a wall, completed to a table's or a chair's depth, would otherwise reach up to a
     metre into the wall, and the layout would push it (and what it bumps into) that far into the
     room, off its pixels."""
+    from generation.pose import travel_to_walls
+
     rot = fit.world_from_box[:3, :3]
     back = -rot[:, 0]  # the box's +x faces the camera
     d, w, h = (float(v) for v in fit.size_m)
     front = np.array([[d / 2, sy * w / 2, z] for sy in (-1.0, 1.0) for z in (0.0, h)])
-    front_world = transform_points(fit.world_from_box, front)
-    limit = np.inf
-    for wall in walls:
-        rate = float(np.asarray(wall.normal, dtype=np.float64) @ back)  # signed distance per metre of depth
-        if rate < -1e-6:
-            limit = min(limit, float(np.min(wall.clearance_m(front_world))) / -rate)  # (inf past its ends)
-    return limit
+    return travel_to_walls(transform_points(fit.world_from_box, front), back, walls)
 
 
 #: Another object's seen points stop a box's completion (:func:`depth_to_others`) when at least

@@ -2,9 +2,11 @@
 weighs the lengths they may have (:func:`perception.naming_prior.size_hypotheses`); the photo's
 bottom edge is :func:`scene_builder.frames.cut_by_photo_bottom`'s.
 
-A side is cut when, on at least :data:`CUT_SHARE` of the mask's rows, the mask's outermost pixel
-on that side lies within :data:`EDGE_SHARE` of the photo's width of the edge (SUN RGB-D 000005: a
-dresser at the right edge, 0.38 m of it seen, was named a chair). An object reaching both side
+A side is cut when, on at least :data:`~scene_builder.frames.SIDE_CUT_SHARE` of the mask's
+rows, the mask's outermost pixel on that side lies within
+:data:`~scene_builder.frames.SIDE_EDGE_SHARE` of the photo's width of the edge
+(:func:`scene_builder.frames.cut_side`; SUN RGB-D 000005: a dresser at the right edge, 0.38 m of
+it seen, was named a chair). An object reaching both side
 edges fills the photo's width: a close-up framed on it, not cut (urdformer_label31's cabinet,
 weighed as longer, became a table). Only objects seen at least :data:`SIDEWAYS_MIN_HEIGHT_M` tall
 are weighed so (:func:`length_max_m`): a mug at the edge of a close-up of a shelf, weighed
@@ -22,9 +24,8 @@ from __future__ import annotations
 import numpy as np
 
 from scene_builder.frames import LENGTH_CAP_M, LENGTH_FACTOR, SIDEWAYS_MIN_HEIGHT_M, cut_side
-from scene_builder.frames import SIDE_CUT_SHARE as CUT_SHARE, SIDE_EDGE_SHARE as EDGE_SHARE
 
-__all__ = ["CUT_SHARE", "EDGE_SHARE", "LENGTH_CAP_M", "LENGTH_FACTOR", "SIDEWAYS_MIN_HEIGHT_M", "cut_by_side_edge", "length_max_m"]
+__all__ = ["LENGTH_CAP_M", "LENGTH_FACTOR", "SIDEWAYS_MIN_HEIGHT_M", "cut_by_side_edge", "length_max_m"]
 
 
 def cut_by_side_edge(mask: np.ndarray) -> bool:
