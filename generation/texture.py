@@ -4,8 +4,9 @@ it did not see carries the object's own material, never the photo stretched alon
 Each visual-mesh face, placed at the pose where the object was seen
 (``GeneratedAsset.world_from_asset``), is one of:
 
-* **seen**: it faces the camera (within :data:`MAX_VIEW_DEG`) and its corners project onto the
-  object's mask at the depth observed there. Its texture coordinates are its corners' pixels in
+* **seen**: it faces the camera (within :data:`MAX_VIEW_DEG`, or a grazing top one photo pixel
+  spans at most :data:`MAX_TEXEL_M` of) and its corners project onto the object's mask at the
+  depth observed there. Its texture coordinates are its corners' pixels in
   a crop of the photo around the mask (the photo projected from the input camera).
 * **mirrored**: hidden, but its mirror image across the asset's left-right plane (asset frame
   ``y = 0``: the asset's front is +X, so this swaps its left and right sides; furniture is
@@ -21,7 +22,8 @@ Each visual-mesh face, placed at the pose where the object was seen
   the silhouette's boundary pixels along them: the "streaked flank"). They carry a swatch of the
   object's own texture: the largest square seen inside the mask, scaled to its size in metres
   and mirror-tiled, mapped by the face's dominant axis (box mapping), so the grain keeps its
-  scale on every side.
+  scale on every side. The square is taken inside the object's most common colour (its dominant
+  material: a bed's mattress, not the mattress's edge over its dark frame).
 
 The texture is one image per object: the crop (pixels outside the mask filled from the nearest
 mask pixel, for filtering at the silhouette) beside the swatch and the blurred crop. The
@@ -38,14 +40,22 @@ import numpy as np
 from scene_builder.frames import transform_points
 from scene_builder.model import Camera, GeneratedAsset, Observation, PerceivedObject, Texture
 
-__all__ = ["CROP_MARGIN_PX", "MAX_VIEW_DEG", "SWATCH_PX", "donor_colours", "face_sources", "material_swatch", "near_seen_donors", "object_texture", "photo_textured"]
+__all__ = ["CROP_MARGIN_PX", "MAX_VIEW_DEG", "SWATCH_PX", "donor_colours", "face_sources", "material_swatch", "near_seen_donors", "object_texture", "photo_textured", "split_partly_seen"]
 
 #: The crop reaches this many pixels past the mask's bounding box (texture filtering reads a
 #: little around each texel).
 CROP_MARGIN_PX = 4
 #: A face seen more edge-on than this (angle between its normal and the ray to the camera) is
-#: not textured from the photo: its pixels would be smeared across it.
+#: not textured from the photo: its pixels would be smeared across it ...
 MAX_VIEW_DEG = 75.0
+#: ... unless it is seen within GRAZING_MAX_DEG and one photo pixel spans at most MAX_TEXEL_M
+#: (metres) of it, along the rays: a bed's mattress seen from 1.3 m high and 2.5-4 m away is seen
+#: 75-81 degrees from its normal, at 3-4.5 cm per pixel (sunrgbd_imvotenet_000003). It is what
+#: the photo shows of that top, coarse along the rays; left to the material swatch, the top of
+#: a white mattress was striped with its dark frame. A flank seen edge-on (88 degrees, 20 cm
+#: per pixel at 3 m) still is not textured from the photo.
+GRAZING_MAX_DEG = 84.0
+MAX_TEXEL_M = 0.05
 #: A face corner counts as seen where the depth observed at its pixel is within this of its own
 #: (metres, plus DEPTH_TOL_REL of the depth): the shapes' seen surface lies on the observed depth.
 DEPTH_TOL_M = 0.05
@@ -53,6 +63,20 @@ DEPTH_TOL_REL = 0.03
 #: Side of the material swatch (texels) and the least size of the square it is taken from.
 SWATCH_PX = 128
 MIN_PATCH_PX = 4
+#: The swatch comes from the object's dominant material: the largest of this many colour
+#: clusters of its seen pixels, when it holds at least MIN_MATERIAL_SHARE of them.
+MATERIAL_CLUSTERS = 2
+MIN_MATERIAL_SHARE = 0.25
+#: ... unless its colours span less than this (CIELAB units: a just noticeable difference is
+#: about 2): one material.
+ONE_COLOUR_LAB = 3.0
+#: A face facing the camera of which some sample points are seen and some are not (the
+#: silhouette, or the edge of what another object hid, crosses it) and with an edge longer than
+#: SPLIT_EDGE_M (m) is split in four, up to SPLIT_ROUNDS times, before its texture source is
+#: decided: a decimated shell's flat top is a few triangles a metre long, and one of them half
+#: seen took one flat colour over half a mattress (sunrgbd_imvotenet_000003's bed).
+SPLIT_EDGE_M = 0.1
+SPLIT_ROUNDS = 4
 #: Texels between the crop and the swatch in the texture image.
 GAP_PX = 2
 SEEN, MIRRORED, MATERIAL = 0, 1, 2
@@ -111,18 +135,20 @@ def donor_colours(crop_rgb: np.ndarray, metres_per_px: float) -> tuple[np.ndarra
 def material_swatch(crop_rgb: np.ndarray, crop_mask: np.ndarray, metres_per_px: float, extent_m: float, size_px: int = SWATCH_PX) -> np.ndarray:
     """(size_px, size_px, 3) uint8: the object's own texture covering ``extent_m`` metres.
 
-    The largest square inside the mask (eroded by two pixels: the silhouette's edge mixes in the
-    background and outlines), resampled from ``metres_per_px`` (the photo's pixel size on the
-    object) to the swatch's scale, mirror-tiled; the median colour of the mask where no square
-    of MIN_PATCH_PX fits."""
+    The largest square inside the object's dominant material (:func:`dominant_region`: the mask,
+    eroded by two pixels, where the silhouette's edge mixes in the background and outlines, less
+    what is not of its most common colour), resampled from ``metres_per_px`` (the photo's pixel
+    size on the object) to the swatch's scale, mirror-tiled; the median colour of that material
+    where no square of MIN_PATCH_PX fits."""
     import cv2
     from scipy import ndimage
 
     core = ndimage.binary_erosion(crop_mask, iterations=2)
     if not core.any():
         core = crop_mask
-    median = np.median(crop_rgb[core], axis=0).astype(np.uint8)
-    dist = ndimage.distance_transform_cdt(np.pad(core, 1), metric="chessboard")[1:-1, 1:-1]
+    region = dominant_region(crop_rgb, core, metres_per_px)
+    median = np.median(crop_rgb[region], axis=0).astype(np.uint8)
+    dist = ndimage.distance_transform_cdt(np.pad(region, 1), metric="chessboard")[1:-1, 1:-1]
     r = int(dist.max()) - 1
     if 2 * r + 1 < MIN_PATCH_PX:
         return np.broadcast_to(median, (size_px, size_px, 3)).copy()
@@ -134,6 +160,41 @@ def material_swatch(crop_rgb: np.ndarray, crop_mask: np.ndarray, metres_per_px: 
     tile = np.concatenate([tile, tile[::-1]], axis=0)
     reps = int(np.ceil(size_px / tile.shape[0]))
     return np.tile(tile, (reps, reps, 1))[:size_px, :size_px].copy()
+
+
+def dominant_region(crop_rgb: np.ndarray, core: np.ndarray, metres_per_px: float) -> np.ndarray:
+    """(h, w) bool: the pixels of ``core`` of the object's most common material: its colours
+    (CIELAB, blurred over DONOR_SPOT_M so that a grain or a pattern is one colour) split in
+    MATERIAL_CLUSTERS by k-means, the largest cluster, opened by a pixel; ``core`` itself where
+    that leaves less than MIN_MATERIAL_SHARE of it or no square of MIN_PATCH_PX.
+
+    A bed is a white mattress on a dark frame: the largest square of its whole mask straddled the
+    two (sunrgbd_imvotenet_000003: the mattress's edge over the footboard), and tiled, it striped
+    the bed's hidden back and flanks white and black."""
+    import cv2
+    from scipy import ndimage
+    from scipy.cluster.vq import ClusterError, kmeans2
+    from skimage.color import rgb2lab
+
+    if core.sum() < 4 * MATERIAL_CLUSTERS:
+        return core
+    sigma = max(1.0, DONOR_SPOT_M / max(metres_per_px, 1e-9))
+    blurred = cv2.GaussianBlur(np.ascontiguousarray(crop_rgb), (0, 0), min(sigma, 0.1 * max(crop_rgb.shape[:2])), borderType=cv2.BORDER_REFLECT)
+    lab = rgb2lab(blurred[core]).astype(np.float64)
+    if float(np.ptp(lab, axis=0).max()) < ONE_COLOUR_LAB:
+        return core  # one colour: one material
+    try:
+        # (a fixed seed and k-means++ start: the same photo gives the same swatch)
+        _, assign = kmeans2(lab, MATERIAL_CLUSTERS, minit="++", seed=np.random.default_rng(0), missing="raise")
+    except ClusterError:  # a cluster came out empty: no second colour to tell apart
+        return core
+    region = np.zeros_like(core)
+    region[core] = assign == int(np.argmax(np.bincount(assign, minlength=MATERIAL_CLUSTERS)))
+    region = ndimage.binary_opening(region)
+    dist = ndimage.distance_transform_cdt(np.pad(region, 1), metric="chessboard")[1:-1, 1:-1]
+    if region.sum() < MIN_MATERIAL_SHARE * core.sum() or 2 * int(dist.max()) - 1 < MIN_PATCH_PX:
+        return core
+    return region
 
 
 def _corner_seen(p_cam: np.ndarray, k, mask: np.ndarray, depth_m: np.ndarray) -> np.ndarray:
@@ -155,29 +216,91 @@ def _corner_seen(p_cam: np.ndarray, k, mask: np.ndarray, depth_m: np.ndarray) ->
     return out
 
 
-def _facing(tri_cam: np.ndarray) -> np.ndarray:
+def _facing(tri_cam: np.ndarray, focal_px: float) -> np.ndarray:
     """(F,) bool: triangles ((F, 3, 3), camera frame, counter-clockwise seen from outside) facing
-    the camera within MAX_VIEW_DEG."""
+    the camera within MAX_VIEW_DEG, or within GRAZING_MAX_DEG where one photo pixel (at
+    ``focal_px``) spans at most MAX_TEXEL_M of them."""
     n = np.cross(tri_cam[:, 1] - tri_cam[:, 0], tri_cam[:, 2] - tri_cam[:, 0])
     to_cam = -tri_cam.mean(axis=1)
-    cos = np.einsum("ij,ij->i", n, to_cam) / np.maximum(np.linalg.norm(n, axis=1) * np.linalg.norm(to_cam, axis=1), 1e-12)
-    return cos > np.cos(np.radians(MAX_VIEW_DEG))
+    dist = np.linalg.norm(to_cam, axis=1)
+    cos = np.einsum("ij,ij->i", n, to_cam) / np.maximum(np.linalg.norm(n, axis=1) * dist, 1e-12)
+    texel_m = dist / max(focal_px, 1e-9) / np.maximum(cos, 1e-9)
+    return (cos > np.cos(np.radians(MAX_VIEW_DEG))) | ((cos > np.cos(np.radians(GRAZING_MAX_DEG))) & (texel_m <= MAX_TEXEL_M))
 
 
 def face_sources(vertices_asset: np.ndarray, faces: np.ndarray, camera_from_asset: np.ndarray, k, mask: np.ndarray, depth_m: np.ndarray) -> np.ndarray:
     """(F,) int per face: SEEN, MIRRORED or MATERIAL (see the module docstring). k: the
     intrinsics of ``mask`` and ``depth_m`` (analysis resolution). A face is seen where at least
     SEEN_SHARE of SAMPLE_WEIGHTS' points on it are (large faces reach past the silhouette)."""
+    return _sources(vertices_asset, faces, camera_from_asset, k, mask, depth_m)[0]
+
+
+def _sources(vertices_asset: np.ndarray, faces: np.ndarray, camera_from_asset: np.ndarray, k, mask: np.ndarray, depth_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(:func:`face_sources`, (F,) bool: faces facing the camera (or mirrored, its mirror image)
+    of whose sample points some are seen and some are not)."""
     mirror = np.array([1.0, -1.0, 1.0])
     out = np.full(len(faces), MATERIAL, dtype=np.int64)
+    partial = np.zeros(len(faces), dtype=bool)
     for kind, verts, order in ((MIRRORED, vertices_asset * mirror, [0, 2, 1]), (SEEN, vertices_asset, [0, 1, 2])):
         p = transform_points(camera_from_asset, verts)
         tri = p[faces[:, order]]
         samples = np.einsum("sk,fkc->fsc", SAMPLE_WEIGHTS, tri)  # (F, S, 3)
         seen = _corner_seen(samples.reshape(-1, 3), k, mask, depth_m).reshape(len(faces), -1).mean(axis=1)
-        ok = (seen >= SEEN_SHARE) & _facing(tri)
-        out[ok] = kind
-    return out
+        facing = _facing(tri, 0.5 * (k.fx_px + k.fy_px))
+        out[(seen >= SEEN_SHARE) & facing] = kind
+        partial |= facing & (seen > 0) & (seen < 1)
+    return out, partial
+
+
+def split_partly_seen(vertices_asset: np.ndarray, faces: np.ndarray, camera_from_asset: np.ndarray, k, mask: np.ndarray, depth_m: np.ndarray,
+                      colours: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """The mesh with its partly seen faces longer than SPLIT_EDGE_M split (see
+    :data:`SPLIT_EDGE_M`), as (vertices, faces, per-vertex ``colours`` or None): the same
+    surface, finer where the silhouette crosses it."""
+    for _ in range(SPLIT_ROUNDS):
+        _, partial = _sources(vertices_asset, faces, camera_from_asset, k, mask, depth_m)
+        tri = vertices_asset[faces]
+        longest = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max(axis=1)
+        red = partial & (longest > SPLIT_EDGE_M)
+        if not red.any():
+            break
+        vertices_asset, faces, colours = _split_conforming(vertices_asset, faces, red, colours)
+    return vertices_asset, faces, colours
+
+
+def _split_conforming(v: np.ndarray, f: np.ndarray, red: np.ndarray, colours: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """``red`` faces split in four at their edges' midpoints, the faces sharing one split edge in
+    two and those sharing two or more in four (red-green refinement: no vertex ends on another
+    face's edge, so no crack opens between faces). Written here: trimesh's ``subdivide`` with a
+    ``face_index`` leaves the neighbours unsplit (its docstring: no longer watertight)."""
+    n = len(v)
+    ends = np.stack([f, np.roll(f, -1, axis=1)], axis=2)  # (F, 3, 2): edge j runs f[j] -> f[j + 1]
+    key = np.sort(ends, axis=2) @ np.array([n, 1], dtype=np.int64)  # (F, 3) one id per undirected edge
+    red = red.copy()
+    while True:
+        split = np.isin(key, key[red])
+        more = ~red & (split.sum(axis=1) >= 2)
+        if not more.any():
+            break
+        red |= more
+    split = np.isin(key, key[red])
+    ids, inverse = np.unique(key[split], return_inverse=True)
+    mid_of = np.full(key.shape, -1, dtype=np.int64)
+    mid_of[split] = n + inverse
+    first = np.zeros(len(ids), dtype=np.int64)
+    first[inverse] = np.flatnonzero(split.ravel())  # one (face, edge) holding each split edge
+    a, b = ends.reshape(-1, 2)[first].T
+    new_v = np.concatenate([v, 0.5 * (v[a] + v[b])])
+    new_c = None if colours is None else np.concatenate([colours, ((colours[a].astype(np.float64) + colours[b]) / 2).round().astype(colours.dtype)])
+    m = mid_of
+    out = [f[~split.any(axis=1)]]
+    r = red
+    out += [np.stack([f[r, 0], m[r, 0], m[r, 2]], 1), np.stack([m[r, 0], f[r, 1], m[r, 1]], 1),
+            np.stack([m[r, 2], m[r, 1], f[r, 2]], 1), np.stack([m[r, 0], m[r, 1], m[r, 2]], 1)]
+    for j in range(3):  # green: one split edge, f[j] -> f[j + 1], opposite f[j + 2]
+        g = ~red & split[:, j]
+        out += [np.stack([f[g, j], m[g, j], f[g, (j + 2) % 3]], 1), np.stack([m[g, j], f[g, (j + 1) % 3], f[g, (j + 2) % 3]], 1)]
+    return new_v, np.concatenate(out).astype(np.int64), new_c
 
 
 def _box_uv(tri_asset: np.ndarray, lo: np.ndarray, extent_m: float) -> np.ndarray:
@@ -257,7 +380,8 @@ def photo_textured(generated: GeneratedAsset, obj: PerceivedObject, observation:
     texture = Texture(generated.asset.name, image)
     parts = []
     for part in generated.asset.parts:
-        v, f = part.visual.vertices_m, part.visual.faces
+        v, f, colours = split_partly_seen(part.visual.vertices_m, part.visual.faces, camera_from_asset, camera.intrinsics, obj.mask, obs_depth,
+                                          part.visual.vertex_colors_rgba)
         source = face_sources(v, f, camera_from_asset, camera.intrinsics, obj.mask, obs_depth)
         corners = v[f]  # (F, 3, 3)
         mirrored = np.where((source == MIRRORED)[:, None, None], corners * np.array([1.0, -1.0, 1.0]), corners)
@@ -283,7 +407,7 @@ def photo_textured(generated: GeneratedAsset, obj: PerceivedObject, observation:
         new_v = v[f.reshape(-1)[first]]
         new_uv = np.clip(uv[first], 0.0, 1.0)
         visual = dataclasses.replace(part.visual, vertices_m=new_v, faces=inverse.reshape(-1, 3).astype(np.int64), uv=new_uv, texture=texture,
-                                     vertex_colors_rgba=None if part.visual.vertex_colors_rgba is None else part.visual.vertex_colors_rgba[f.reshape(-1)[first]])
+                                     vertex_colors_rgba=None if colours is None else colours[f.reshape(-1)[first]])
         parts.append(dataclasses.replace(part, visual=visual))
     asset = dataclasses.replace(generated.asset, parts=tuple(parts))
     return dataclasses.replace(generated, asset=asset)

@@ -139,3 +139,92 @@ def test_hidden_faces_take_the_seen_colour_around_their_donor_not_one_speck():
     colours = _texels_on_faces(out, np.flatnonzero(hidden), n=5)
     seen_mean = rgb[board.mask].mean(axis=0)  # (105, 15, 15): red and black, half and half
     assert np.all(np.abs(colours - seen_mean).max(axis=1) < 25)
+
+
+def _top_seen(height_below_camera_m: float, near_m: float, far_m: float, size_m: float = 0.8):
+    """A horizontal top (camera frame = asset frame, OpenCV: +y down) ``height_below_camera_m``
+    under a 500 px camera, from ``near_m`` to ``far_m`` ahead, ``size_m`` wide, as two faces
+    facing up; its mask and exact depth. Returns (face sources, faces' corners)."""
+    from scene_builder.model import CameraIntrinsics
+
+    w, h = 640, 480
+    k = CameraIntrinsics(500.0, 500.0, (w - 1) / 2.0, (h - 1) / 2.0, w, h, "flag")
+    y = height_below_camera_m
+    v = np.array([[-size_m / 2, y, near_m], [size_m / 2, y, near_m], [size_m / 2, y, far_m], [-size_m / 2, y, far_m]])
+    faces = np.array([[0, 1, 2], [0, 2, 3]])  # counter-clockwise seen from above (-y)
+    uu, vv = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    ry = (vv - k.cy_px) / k.fy_px
+    rx = (uu - k.cx_px) / k.fx_px
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.where(ry > 0, y / ry, np.inf)
+    mask = (z >= near_m) & (z <= far_m) & (np.abs(rx * z) <= size_m / 2)
+    depth = np.where(mask, z, 0.0)
+    return face_sources(v, faces, np.eye(4), k, mask, depth), v[faces]
+
+
+def test_a_top_seen_at_a_grazing_angle_keeps_the_photo_an_edge_on_one_does_not():
+    """A mattress 0.7 m under the camera, 2.5-4 m ahead, is seen 74-80 degrees from its normal,
+    at most 4 cm per pixel: the photo shows it, it is textured from the photo (it was left to the
+    material swatch at more than 75 degrees). The same top 0.1 m under the camera (86-88
+    degrees, 15-20 cm per pixel) is a sliver of pixels: not textured from them."""
+    seen, _ = _top_seen(0.7, 2.5, 4.0)
+    assert np.all(seen == SEEN)
+    edge_on, _ = _top_seen(0.1, 2.5, 4.0)
+    assert np.all(edge_on == MATERIAL)
+
+
+def test_the_swatch_comes_from_the_objects_dominant_material_not_across_two():
+    """A white mattress (the top 45 rows) over a dark frame (35 rows): the largest square of the
+    whole silhouette straddles both, and tiled it stripes every hidden side; the swatch is taken
+    from the white, which holds most of the object."""
+    from generation.texture import material_swatch
+
+    rgb = np.zeros((90, 90, 3), dtype=np.uint8)
+    rgb[5:50, 5:85] = (235, 235, 240)
+    rgb[50:85, 5:85] = (40, 30, 30)
+    rng = np.random.default_rng(0)
+    rgb = np.clip(rgb.astype(int) + rng.integers(-6, 7, rgb.shape), 0, 255).astype(np.uint8)  # a little grain
+    mask = np.zeros((90, 90), dtype=bool)
+    mask[5:85, 5:85] = True
+    swatch = material_swatch(rgb, mask, 0.01, 0.8)
+    assert swatch.shape == (128, 128, 3)
+    assert swatch.min() > 180  # all white: no row of the dark frame in it
+
+
+def test_partly_seen_faces_are_split_where_the_silhouette_crosses_them():
+    """Two big faces, their near quarter on the mask and the rest hidden (by another object in
+    front: off the mask): it is split until its pieces are seen or not, the surface unchanged
+    and no crack between the pieces (each edge shared by two faces in a closed box)."""
+    import trimesh
+
+    from generation.texture import SPLIT_EDGE_M, _split_conforming, split_partly_seen
+    from scene_builder.model import CameraIntrinsics
+
+    w, h = 640, 480
+    k = CameraIntrinsics(500.0, 500.0, (w - 1) / 2.0, (h - 1) / 2.0, w, h, "flag")
+    y, near, far = 0.7, 2.5, 4.0
+    v = np.array([[-0.4, y, near], [0.4, y, near], [0.4, y, far], [-0.4, y, far]])
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    uu, vv = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    ry, rx = (vv - k.cy_px) / k.fy_px, (uu - k.cx_px) / k.fx_px
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.where(ry > 0, y / ry, np.inf)
+    mask = (z >= near) & (z <= 2.9) & (np.abs(rx * z) <= 0.4)  # the far 1.1 m hidden
+    depth = np.where(mask, z, 0.0)
+    assert np.all(face_sources(v, faces, np.eye(4), k, mask, depth) != SEEN)  # neither face is seen as a whole
+    v2, f2, _ = split_partly_seen(v, faces, np.eye(4), k, mask, depth)
+    tri = v2[f2]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    assert abs(area.sum() - 0.8 * 1.5) < 1e-9
+    src = face_sources(v2, f2, np.eye(4), k, mask, depth)
+    centre_z = tri.mean(axis=1)[:, 2]
+    seen_area = area[src == SEEN].sum()
+    assert seen_area > 0.5 * 0.8 * 0.4  # most of the seen 0.4 m is textured from the photo
+    assert np.all(centre_z[src == SEEN] < 2.9 + SPLIT_EDGE_M)  # and nothing of the hidden part
+    # Red-green splitting keeps a closed mesh closed.
+    box = trimesh.creation.box((1.0, 2.0, 3.0))
+    red = np.zeros(len(box.faces), dtype=bool)
+    red[[0, 5]] = True
+    bv, bf, _ = _split_conforming(box.vertices, box.faces, red, None)
+    closed = trimesh.Trimesh(bv, bf)
+    assert len(bf) > len(box.faces) and closed.is_watertight and abs(closed.volume - 6.0) < 1e-9
