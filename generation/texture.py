@@ -70,6 +70,14 @@ MIN_MATERIAL_SHARE = 0.25
 #: ... unless its colours span less than this (CIELAB units: a just noticeable difference is
 #: about 2): one material.
 ONE_COLOUR_LAB = 3.0
+#: A pixel of the dominant material's cluster whose colour is farther than this many times the
+#: cluster's median distance (CIELAB, at least OUTLIER_MIN_LAB) from its median colour is a knob,
+#: a handle or a highlight, not the material.
+OUTLIER_SPREAD = 3.0
+OUTLIER_MIN_LAB = 10.0
+#: A swatch square smaller than this share of the object's extent would repeat many times over
+#: it (a wallpaper of one knob): the material is its median colour instead.
+MIN_TILE_SHARE = 0.1
 #: A face facing the camera of which some sample points are seen and some are not (the
 #: silhouette, or the edge of what another object hid, crosses it) and with an edge longer than
 #: SPLIT_EDGE_M (m) is split in four, up to SPLIT_ROUNDS times, before its texture source is
@@ -139,7 +147,7 @@ def material_swatch(crop_rgb: np.ndarray, crop_mask: np.ndarray, metres_per_px: 
     eroded by two pixels, where the silhouette's edge mixes in the background and outlines, less
     what is not of its most common colour), resampled from ``metres_per_px`` (the photo's pixel
     size on the object) to the swatch's scale, mirror-tiled; the median colour of that material
-    where no square of MIN_PATCH_PX fits."""
+    where no square of MIN_PATCH_PX, or of MIN_TILE_SHARE of ``extent_m``, fits."""
     import cv2
     from scipy import ndimage
 
@@ -150,7 +158,7 @@ def material_swatch(crop_rgb: np.ndarray, crop_mask: np.ndarray, metres_per_px: 
     median = np.median(crop_rgb[region], axis=0).astype(np.uint8)
     dist = ndimage.distance_transform_cdt(np.pad(region, 1), metric="chessboard")[1:-1, 1:-1]
     r = int(dist.max()) - 1
-    if 2 * r + 1 < MIN_PATCH_PX:
+    if 2 * r + 1 < MIN_PATCH_PX or (2 * r + 1) * metres_per_px < MIN_TILE_SHARE * extent_m:
         return np.broadcast_to(median, (size_px, size_px, 3)).copy()
     cy, cx = np.unravel_index(int(np.argmax(dist)), dist.shape)
     patch = crop_rgb[cy - r : cy + r + 1, cx - r : cx + r + 1]
@@ -166,7 +174,9 @@ def dominant_region(crop_rgb: np.ndarray, core: np.ndarray, metres_per_px: float
     """(h, w) bool: the pixels of ``core`` of the object's most common material: its colours
     (CIELAB, blurred over DONOR_SPOT_M so that a grain or a pattern is one colour) split in
     MATERIAL_CLUSTERS by k-means, the largest cluster, opened by a pixel; ``core`` itself where
-    that leaves less than MIN_MATERIAL_SHARE of it or no square of MIN_PATCH_PX.
+    that leaves less than MIN_MATERIAL_SHARE of it or no square of MIN_PATCH_PX. Pixels of that
+    cluster whose own colour lies more than OUTLIER_SPREAD times the cluster's median distance from
+    its median colour are left out.
 
     A bed is a white mattress on a dark frame: the largest square of its whole mask straddled the
     two (sunrgbd_imvotenet_000003: the mattress's edge over the footboard), and tiled, it striped
@@ -188,8 +198,14 @@ def dominant_region(crop_rgb: np.ndarray, core: np.ndarray, metres_per_px: float
         _, assign = kmeans2(lab, MATERIAL_CLUSTERS, minit="++", seed=np.random.default_rng(0), missing="raise")
     except ClusterError:  # a cluster came out empty: no second colour to tell apart
         return core
+    main = assign == int(np.argmax(np.bincount(assign, minlength=MATERIAL_CLUSTERS)))
+    # Its own pixels far from its usual colour (the blur hid them) are no part of it: knobs,
+    # handles, highlights (a sideboard's swatch tiled its brass knobs into rows of dots).
+    raw = rgb2lab(crop_rgb[core]).astype(np.float64)
+    off = np.linalg.norm(raw - np.median(raw[main], axis=0), axis=1)
+    usual = max(OUTLIER_MIN_LAB, OUTLIER_SPREAD * float(np.median(off[main])))
     region = np.zeros_like(core)
-    region[core] = assign == int(np.argmax(np.bincount(assign, minlength=MATERIAL_CLUSTERS)))
+    region[core] = main & (off <= usual)
     region = ndimage.binary_opening(region)
     dist = ndimage.distance_transform_cdt(np.pad(region, 1), metric="chessboard")[1:-1, 1:-1]
     if region.sum() < MIN_MATERIAL_SHARE * core.sum() or 2 * int(dist.max()) - 1 < MIN_PATCH_PX:
