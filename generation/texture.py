@@ -5,8 +5,8 @@ Each visual-mesh face, placed at the pose where the object was seen
 (``GeneratedAsset.world_from_asset``), is one of:
 
 * **seen**: it faces the camera (within :data:`MAX_VIEW_DEG`, or a grazing top one photo pixel
-  spans at most :data:`MAX_TEXEL_M` of) and its corners project onto the object's mask at the
-  depth observed there. Its texture coordinates are its corners' pixels in
+  spans at most :data:`MAX_TEXEL_M` of), its corners project onto the object's mask at the
+  depth observed there, and the object's own surface does not hide them (a ray cast). Its texture coordinates are its corners' pixels in
   a crop of the photo around the mask (the photo projected from the input camera).
 * **mirrored**: hidden, but its mirror image across the asset's left-right plane (asset frame
   ``y = 0``: the asset's front is +X, so this swaps its left and right sides; furniture is
@@ -14,7 +14,8 @@ Each visual-mesh face, placed at the pose where the object was seen
   hidden flank of a bed shows the seen flank).
 * **near-seen**: hidden or seen edge-on (a grazing top, the jittered faces of a shell made from
   sensor depth), but a seen (or mirrored) face of the same part within :data:`DONOR_RADIUS_M`
-  turns the same way (normals within :data:`DONOR_MAX_DEG`): it takes the photo's colour at the
+  turns the same way (normals within :data:`DONOR_MAX_DEG`) on the same surface (its plane
+  within :data:`DONOR_PLANE_M`): it takes the photo's colour at the
   centre of the nearest such face, averaged over :data:`DONOR_SPOT_M` around it (a blurred
   copy of the crop), one texel for the whole face (no stretching), so the hidden half of a
   mattress's top stays the mattress's white instead of the swatch of the dark frame.
@@ -40,7 +41,7 @@ import numpy as np
 from scene_builder.frames import transform_points
 from scene_builder.model import Camera, GeneratedAsset, Observation, PerceivedObject, Texture
 
-__all__ = ["CROP_MARGIN_PX", "MAX_VIEW_DEG", "SWATCH_PX", "donor_colours", "face_sources", "material_swatch", "near_seen_donors", "object_texture", "photo_textured", "split_partly_seen"]
+__all__ = ["CROP_MARGIN_PX", "MAX_VIEW_DEG", "SWATCH_PX", "donor_colours", "face_sources", "material_swatch", "near_seen_donors", "object_texture", "photo_textured", "self_visibility", "split_partly_seen"]
 
 #: The crop reaches this many pixels past the mask's bounding box (texture filtering reads a
 #: little around each texel).
@@ -60,6 +61,10 @@ MAX_TEXEL_M = 0.05
 #: (metres, plus DEPTH_TOL_REL of the depth): the shapes' seen surface lies on the observed depth.
 DEPTH_TOL_M = 0.05
 DEPTH_TOL_REL = 0.03
+#: ... and where no other part of the object's own surface lies in front of it along the ray by
+#: more than SELF_TOL_M plus SELF_TOL_REL of the distance.
+SELF_TOL_M = 0.03
+SELF_TOL_REL = 0.01
 #: Side of the material swatch (texels) and the least size of the square it is taken from.
 SWATCH_PX = 128
 MIN_PATCH_PX = 4
@@ -93,10 +98,19 @@ SEEN, MIRRORED, MATERIAL = 0, 1, 2
 SAMPLE_WEIGHTS = np.array([[1 / 3, 1 / 3, 1 / 3], [0.7, 0.15, 0.15], [0.15, 0.7, 0.15], [0.15, 0.15, 0.7]])
 SEEN_SHARE = 0.75
 #: A face the photo does not texture takes the colour of the nearest seen face within this
-#: distance (asset frame, between face centres) whose normal is within DONOR_MAX_DEG of its own.
-DONOR_RADIUS_M = 0.5
+#: distance (asset frame, between face centres) whose normal is within DONOR_MAX_DEG of its own
+#: (of its DONOR_NEIGHBOURS nearest seen faces). 1 m: the middle of a bed's top hidden behind its
+#: footboard lies more than 0.5 m from the seen part of that top, and took the dark frame's swatch.
+DONOR_RADIUS_M = 1.0
 DONOR_MAX_DEG = 40.0
-DONOR_NEIGHBOURS = 16
+#: ... and whose plane passes within this (m) of its centre: the same surface, not a parallel one
+#: nearby (sunrgbd_000017's mattress top hidden behind the footboard took the footboard's top
+#: rail, 10-20 cm higher, in a patchwork of brown and white).
+DONOR_PLANE_M = 0.06
+#: ... or, where no seen face on its surface is within DONOR_RADIUS_M, the nearest one turned
+#: its way within this distance (m).
+DONOR_NEAR_M = 0.5
+DONOR_NEIGHBOURS = 64
 #: A near-seen face's colour is the photo averaged over about this much of the object (metres, the
 #: sigma of a Gaussian) around its donor's centre: one photo pixel there is a speck of the grain,
 #: a highlight or a seam, and faces taking single pixels made a patchwork of flat colours.
@@ -244,14 +258,45 @@ def _facing(tri_cam: np.ndarray, focal_px: float) -> np.ndarray:
     return (cos > np.cos(np.radians(MAX_VIEW_DEG))) | ((cos > np.cos(np.radians(GRAZING_MAX_DEG))) & (texel_m <= MAX_TEXEL_M))
 
 
-def face_sources(vertices_asset: np.ndarray, faces: np.ndarray, camera_from_asset: np.ndarray, k, mask: np.ndarray, depth_m: np.ndarray) -> np.ndarray:
+def face_sources(vertices_asset: np.ndarray, faces: np.ndarray, camera_from_asset: np.ndarray, k, mask: np.ndarray, depth_m: np.ndarray,
+                 visible=None) -> np.ndarray:
     """(F,) int per face: SEEN, MIRRORED or MATERIAL (see the module docstring). k: the
     intrinsics of ``mask`` and ``depth_m`` (analysis resolution). A face is seen where at least
-    SEEN_SHARE of SAMPLE_WEIGHTS' points on it are (large faces reach past the silhouette)."""
-    return _sources(vertices_asset, faces, camera_from_asset, k, mask, depth_m)[0]
+    SEEN_SHARE of SAMPLE_WEIGHTS' points on it are (large faces reach past the silhouette).
+    ``visible``: None or a callable mapping (N, 3) camera-frame points to (N,) bool, whether the
+    object's own surface leaves them in view (:func:`self_visibility`)."""
+    return _sources(vertices_asset, faces, camera_from_asset, k, mask, depth_m, visible)[0]
 
 
-def _sources(vertices_asset: np.ndarray, faces: np.ndarray, camera_from_asset: np.ndarray, k, mask: np.ndarray, depth_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def self_visibility(meshes_asset, camera_from_asset: np.ndarray):
+    """A callable: (N, 3) camera-frame points on the object's surface -> (N,) bool, true where the
+    ray from the camera reaches the point before any other part of that surface (``meshes_asset``:
+    (vertices, faces) pairs in the asset frame, all its parts), within SELF_TOL_M plus
+    SELF_TOL_REL of the distance. Open3D's ``RaycastingScene``.
+
+    The observed depth alone let a mattress's top hidden behind its bed's own footboard count as
+    seen when it lay within the depth tolerance behind the footboard (17 cm at 4 m): it was
+    textured with the footboard (sunrgbd_000017_mmdet3d)."""
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    for v, f in meshes_asset:
+        if len(f):
+            vc = transform_points(camera_from_asset, np.asarray(v, dtype=np.float64)).astype(np.float32)
+            scene.add_triangles(o3d.core.Tensor(vc), o3d.core.Tensor(np.asarray(f, dtype=np.uint32)))
+
+    def visible(points_cam: np.ndarray) -> np.ndarray:
+        p = np.asarray(points_cam, dtype=np.float64)
+        dist = np.linalg.norm(p, axis=1)
+        rays = np.concatenate([np.zeros_like(p), p / np.maximum(dist, 1e-12)[:, None]], axis=1).astype(np.float32)
+        hit = scene.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy().astype(np.float64)
+        return hit >= dist - (SELF_TOL_M + SELF_TOL_REL * dist)
+
+    return visible
+
+
+def _sources(vertices_asset: np.ndarray, faces: np.ndarray, camera_from_asset: np.ndarray, k, mask: np.ndarray, depth_m: np.ndarray,
+             visible=None) -> tuple[np.ndarray, np.ndarray]:
     """(:func:`face_sources`, (F,) bool: faces facing the camera (or mirrored, its mirror image)
     of whose sample points some are seen and some are not)."""
     mirror = np.array([1.0, -1.0, 1.0])
@@ -261,7 +306,11 @@ def _sources(vertices_asset: np.ndarray, faces: np.ndarray, camera_from_asset: n
         p = transform_points(camera_from_asset, verts)
         tri = p[faces[:, order]]
         samples = np.einsum("sk,fkc->fsc", SAMPLE_WEIGHTS, tri)  # (F, S, 3)
-        seen = _corner_seen(samples.reshape(-1, 3), k, mask, depth_m).reshape(len(faces), -1).mean(axis=1)
+        flat = samples.reshape(-1, 3)
+        seen_at = _corner_seen(flat, k, mask, depth_m)
+        if visible is not None:
+            seen_at &= visible(flat)
+        seen = seen_at.reshape(len(faces), -1).mean(axis=1)
         facing = _facing(tri, 0.5 * (k.fx_px + k.fy_px))
         out[(seen >= SEEN_SHARE) & facing] = kind
         partial |= facing & (seen > 0) & (seen < 1)
@@ -269,12 +318,12 @@ def _sources(vertices_asset: np.ndarray, faces: np.ndarray, camera_from_asset: n
 
 
 def split_partly_seen(vertices_asset: np.ndarray, faces: np.ndarray, camera_from_asset: np.ndarray, k, mask: np.ndarray, depth_m: np.ndarray,
-                      colours: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+                      colours: np.ndarray | None = None, visible=None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """The mesh with its partly seen faces longer than SPLIT_EDGE_M split (see
     :data:`SPLIT_EDGE_M`), as (vertices, faces, per-vertex ``colours`` or None): the same
     surface, finer where the silhouette crosses it."""
     for _ in range(SPLIT_ROUNDS):
-        _, partial = _sources(vertices_asset, faces, camera_from_asset, k, mask, depth_m)
+        _, partial = _sources(vertices_asset, faces, camera_from_asset, k, mask, depth_m, visible)
         tri = vertices_asset[faces]
         longest = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max(axis=1)
         red = partial & (longest > SPLIT_EDGE_M)
@@ -350,10 +399,17 @@ def near_seen_donors(corners: np.ndarray, source: np.ndarray) -> np.ndarray:
     dist, idx = dist.reshape(len(takers), k), idx.reshape(len(takers), k)
     found = np.isfinite(dist)
     cand = donors[np.where(found, idx, 0)]  # (T, k) face indices (0 where no neighbour)
-    agree = found & (np.einsum("tc,tkc->tk", n[takers], n[cand]) > np.cos(np.radians(DONOR_MAX_DEG)))
-    first = np.argmax(agree, axis=1)  # neighbours come nearest first
-    ok = agree[np.arange(len(takers)), first]
-    out[takers[ok]] = cand[np.arange(len(takers)), first][ok]
+    turned = found & (np.einsum("tc,tkc->tk", n[takers], n[cand]) > np.cos(np.radians(DONOR_MAX_DEG)))
+    # ... on the same surface: the taker lies near the donor's plane (a mattress's hidden top
+    # takes the seen mattress, not the top rail of the footboard a few centimetres nearer); where
+    # none is, a small face between two surfaces (a shell's rounded edge) takes the nearest one
+    # turned its way within DONOR_NEAR_M.
+    off_plane = np.abs(np.einsum("tkc,tkc->tk", n[cand], centre[takers][:, None, :] - centre[cand]))
+    rows = np.arange(len(takers))
+    for agree in (turned & (off_plane <= DONOR_PLANE_M), turned & (dist <= DONOR_NEAR_M)):
+        first = np.argmax(agree, axis=1)  # neighbours come nearest first
+        ok = agree[rows, first] & (out[takers] < 0)
+        out[takers[ok]] = cand[rows, first][ok]
     return out
 
 
@@ -395,10 +451,11 @@ def photo_textured(generated: GeneratedAsset, obj: PerceivedObject, observation:
     image[spots.shape[0] :, bx0:] = spots[-1:]
     texture = Texture(generated.asset.name, image)
     parts = []
+    visible = self_visibility([(p.visual.vertices_m, p.visual.faces) for p in generated.asset.parts], camera_from_asset)
     for part in generated.asset.parts:
         v, f, colours = split_partly_seen(part.visual.vertices_m, part.visual.faces, camera_from_asset, camera.intrinsics, obj.mask, obs_depth,
-                                          part.visual.vertex_colors_rgba)
-        source = face_sources(v, f, camera_from_asset, camera.intrinsics, obj.mask, obs_depth)
+                                          part.visual.vertex_colors_rgba, visible)
+        source = face_sources(v, f, camera_from_asset, camera.intrinsics, obj.mask, obs_depth, visible)
         corners = v[f]  # (F, 3, 3)
         mirrored = np.where((source == MIRRORED)[:, None, None], corners * np.array([1.0, -1.0, 1.0]), corners)
         p = transform_points(camera_from_asset, mirrored.reshape(-1, 3))

@@ -228,3 +228,61 @@ def test_partly_seen_faces_are_split_where_the_silhouette_crosses_them():
     bv, bf, _ = _split_conforming(box.vertices, box.faces, red, None)
     closed = trimesh.Trimesh(bv, bf)
     assert len(bf) > len(box.faces) and closed.is_watertight and abs(closed.volume - 6.0) < 1e-9
+
+
+def test_hidden_faces_take_a_donor_on_their_own_surface_not_a_parallel_one_nearer():
+    """A mattress top (z = 0) seen only at its far end (x 0-0.2 m), hidden behind a footboard
+    whose top rail (z = 0.15 m, seen) lies nearer to the hidden part: the hidden top takes the
+    seen mattress, not the rail; a sliver on neither surface takes the nearest seen face turned
+    its way."""
+    from generation.texture import near_seen_donors
+
+    def quad(x0, y0, size, z=0.0):
+        a, b, c, d = (np.array(p, dtype=float) for p in ((x0, y0, z), (x0 + size, y0, z), (x0 + size, y0 + size, z), (x0, y0 + size, z)))
+        return [(a, b, c), (a, c, d)]
+
+    mattress = [t for i in range(6) for t in quad(0.1 * i, 0.0, 0.1)]  # x 0-0.6 m at z = 0
+    rail = [t for i in range(2) for t in quad(0.6 + 0.05 * i, 0.0, 0.05, z=0.15)]  # x 0.6-0.7 m, 15 cm higher
+    between = quad(0.6, 0.0, 0.02, z=0.075)  # a sliver of the rounded edge between the two
+    corners = np.array(mattress + rail + between)
+    source = np.full(len(corners), MATERIAL)
+    source[:4] = SEEN  # the mattress's far 0.2 m
+    source[12:16] = SEEN  # the rail
+    donor = near_seen_donors(corners, source)
+    # faces 4-11: the hidden mattress x 0.2-0.6 m; the rail is nearer to those at x 0.4-0.6 m.
+    assert np.all(np.isin(donor[4:12], [0, 1, 2, 3]))
+    # On neither surface (7.5 cm off both): the nearest seen face turned its way, the rail.
+    assert np.all(np.isin(donor[16:], [12, 13, 14, 15]))
+
+
+def test_a_face_behind_the_objects_own_front_is_not_seen_though_the_depth_is_near():
+    """A bed's footboard (a panel 3.0 m away) in front of its mattress's face (3.1 m): the depth
+    observed over the footboard is within the depth tolerance of the mattress's face (14 cm at
+    3 m), but the footboard hides it; a ray cast against the object's own surface tells."""
+    from generation.texture import self_visibility
+    from scene_builder.model import CameraIntrinsics
+
+    w, h = 320, 240
+    k = CameraIntrinsics(300.0, 300.0, (w - 1) / 2.0, (h - 1) / 2.0, w, h, "flag")
+
+    def panel(x0, x1, y0, y1, z):  # facing the camera (-z), counter-clockwise seen from it
+        v = np.array([[x0, y0, z], [x1, y0, z], [x1, y1, z], [x0, y1, z]], dtype=float)
+        return v, np.array([[0, 2, 1], [0, 3, 2]])
+
+    front_v, front_f = panel(-0.3, 0.3, -0.3, 0.3, 3.0)
+    strips = [panel(a, b, -0.3, 0.3, 3.1) for a, b in ((-0.9, -0.3), (-0.3, 0.3), (0.3, 0.9))]
+    back_v = np.concatenate([v for v, _ in strips])
+    back_f = np.concatenate([f + 4 * i for i, (_, f) in enumerate(strips)])
+    uu, vv = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    x, y = (uu - k.cx_px) / k.fx_px, (vv - k.cy_px) / k.fy_px
+    in_front = (np.abs(x * 3.0) <= 0.3) & (np.abs(y * 3.0) <= 0.3)
+    in_back = (np.abs(x * 3.1) <= 0.9) & (np.abs(y * 3.1) <= 0.3)
+    mask = in_front | in_back
+    depth = np.where(in_front, 3.0, np.where(in_back, 3.1, 0.0))
+    without = face_sources(back_v, back_f, np.eye(4), k, mask, depth)
+    assert np.all(without == SEEN)  # the depth test alone takes the hidden middle strip as seen
+    visible = self_visibility([(front_v, front_f), (back_v, back_f)], np.eye(4))
+    with_rays = face_sources(back_v, back_f, np.eye(4), k, mask, depth, visible)
+    assert np.all(with_rays[2:4] != SEEN)  # the middle strip, behind the footboard
+    assert np.all(with_rays[[0, 1, 4, 5]] == SEEN)  # the strips beside it are in view
+    assert np.all(face_sources(front_v, front_f, np.eye(4), k, mask, depth, visible) == SEEN)
