@@ -41,7 +41,7 @@ import numpy as np
 from scene_builder.frames import transform_points
 from scene_builder.model import Camera, GeneratedAsset, Observation, PerceivedObject, Texture
 
-__all__ = ["CROP_MARGIN_PX", "MAX_VIEW_DEG", "SWATCH_PX", "donor_colours", "face_sources", "material_swatch", "near_seen_donors", "object_texture", "photo_textured", "self_visibility", "split_partly_seen"]
+__all__ = ["CROP_MARGIN_PX", "MAX_VIEW_DEG", "SWATCH_PX", "donor_colours", "face_sources", "material_swatch", "near_seen_donors", "object_texture", "photo_textured", "self_visibility"]
 
 #: The crop reaches this many pixels past the mask's bounding box (texture filtering reads a
 #: little around each texel).
@@ -83,13 +83,6 @@ OUTLIER_MIN_LAB = 10.0
 #: A swatch square smaller than this share of the object's extent would repeat many times over
 #: it (a wallpaper of one knob): the material is its median colour instead.
 MIN_TILE_SHARE = 0.1
-#: A face facing the camera of which some sample points are seen and some are not (the
-#: silhouette, or the edge of what another object hid, crosses it) and with an edge longer than
-#: SPLIT_EDGE_M (m) is split in four, up to SPLIT_ROUNDS times, before its texture source is
-#: decided: a decimated shell's flat top is a few triangles a metre long, and one of them half
-#: seen took one flat colour over half a mattress (sunrgbd_imvotenet_000003's bed).
-SPLIT_EDGE_M = 0.1
-SPLIT_ROUNDS = 4
 #: Texels between the crop and the swatch in the texture image.
 GAP_PX = 2
 SEEN, MIRRORED, MATERIAL = 0, 1, 2
@@ -110,7 +103,7 @@ DONOR_PLANE_M = 0.06
 #: ... or, where no seen face on its surface is within DONOR_RADIUS_M, the nearest one turned
 #: its way within this distance (m).
 DONOR_NEAR_M = 0.5
-DONOR_NEIGHBOURS = 64
+DONOR_NEIGHBOURS = 32
 #: A near-seen face's colour is the photo averaged over about this much of the object (metres, the
 #: sigma of a Gaussian) around its donor's centre: one photo pixel there is a speck of the grain,
 #: a highlight or a seam, and faces taking single pixels made a patchwork of flat colours.
@@ -227,18 +220,16 @@ def dominant_region(crop_rgb: np.ndarray, core: np.ndarray, metres_per_px: float
     return region
 
 
-def _corner_seen(p_cam: np.ndarray, k, mask: np.ndarray, depth_m: np.ndarray) -> np.ndarray:
-    """(N,) bool: camera-frame points that project onto the mask (analysis resolution, dilated
-    by a pixel) where the observed depth matches theirs (or none was observed)."""
-    from scipy import ndimage
-
-    h, w = mask.shape
+def _corner_seen(p_cam: np.ndarray, k, grown: np.ndarray, depth_m: np.ndarray) -> np.ndarray:
+    """(N,) bool: camera-frame points that project onto ``grown`` (the object's mask at analysis
+    resolution, dilated by a pixel) where the observed depth matches theirs (or none was
+    observed)."""
+    h, w = grown.shape
     z = p_cam[:, 2]
     zs = np.where(z > 1e-3, z, 1.0)
     col = np.round(k.fx_px * p_cam[:, 0] / zs + k.cx_px).astype(np.int64)
     row = np.round(k.fy_px * p_cam[:, 1] / zs + k.cy_px).astype(np.int64)
     inside = (z > 1e-3) & (col >= 0) & (col < w) & (row >= 0) & (row < h)
-    grown = ndimage.binary_dilation(mask)
     out = np.zeros(len(p_cam), dtype=bool)
     ci, ri = col[inside], row[inside]
     d = depth_m[ri, ci]
@@ -265,7 +256,21 @@ def face_sources(vertices_asset: np.ndarray, faces: np.ndarray, camera_from_asse
     SEEN_SHARE of SAMPLE_WEIGHTS' points on it are (large faces reach past the silhouette).
     ``visible``: None or a callable mapping (N, 3) camera-frame points to (N,) bool, whether the
     object's own surface leaves them in view (:func:`self_visibility`)."""
-    return _sources(vertices_asset, faces, camera_from_asset, k, mask, depth_m, visible)[0]
+    from scipy import ndimage
+
+    grown = ndimage.binary_dilation(mask)
+    mirror = np.array([1.0, -1.0, 1.0])
+    out = np.full(len(faces), MATERIAL, dtype=np.int64)
+    for kind, verts, order in ((MIRRORED, vertices_asset * mirror, [0, 2, 1]), (SEEN, vertices_asset, [0, 1, 2])):
+        p = transform_points(camera_from_asset, verts)
+        tri = p[faces[:, order]]
+        samples = np.einsum("sk,fkc->fsc", SAMPLE_WEIGHTS, tri).reshape(-1, 3)  # (F * S, 3)
+        seen_at = _corner_seen(samples, k, grown, depth_m)
+        if visible is not None:
+            seen_at &= visible(samples)
+        seen = seen_at.reshape(len(faces), -1).mean(axis=1)
+        out[(seen >= SEEN_SHARE) & _facing(tri, 0.5 * (k.fx_px + k.fy_px))] = kind
+    return out
 
 
 def self_visibility(meshes_asset, camera_from_asset: np.ndarray):
@@ -293,79 +298,6 @@ def self_visibility(meshes_asset, camera_from_asset: np.ndarray):
         return hit >= dist - (SELF_TOL_M + SELF_TOL_REL * dist)
 
     return visible
-
-
-def _sources(vertices_asset: np.ndarray, faces: np.ndarray, camera_from_asset: np.ndarray, k, mask: np.ndarray, depth_m: np.ndarray,
-             visible=None) -> tuple[np.ndarray, np.ndarray]:
-    """(:func:`face_sources`, (F,) bool: faces facing the camera (or mirrored, its mirror image)
-    of whose sample points some are seen and some are not)."""
-    mirror = np.array([1.0, -1.0, 1.0])
-    out = np.full(len(faces), MATERIAL, dtype=np.int64)
-    partial = np.zeros(len(faces), dtype=bool)
-    for kind, verts, order in ((MIRRORED, vertices_asset * mirror, [0, 2, 1]), (SEEN, vertices_asset, [0, 1, 2])):
-        p = transform_points(camera_from_asset, verts)
-        tri = p[faces[:, order]]
-        samples = np.einsum("sk,fkc->fsc", SAMPLE_WEIGHTS, tri)  # (F, S, 3)
-        flat = samples.reshape(-1, 3)
-        seen_at = _corner_seen(flat, k, mask, depth_m)
-        if visible is not None:
-            seen_at &= visible(flat)
-        seen = seen_at.reshape(len(faces), -1).mean(axis=1)
-        facing = _facing(tri, 0.5 * (k.fx_px + k.fy_px))
-        out[(seen >= SEEN_SHARE) & facing] = kind
-        partial |= facing & (seen > 0) & (seen < 1)
-    return out, partial
-
-
-def split_partly_seen(vertices_asset: np.ndarray, faces: np.ndarray, camera_from_asset: np.ndarray, k, mask: np.ndarray, depth_m: np.ndarray,
-                      colours: np.ndarray | None = None, visible=None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """The mesh with its partly seen faces longer than SPLIT_EDGE_M split (see
-    :data:`SPLIT_EDGE_M`), as (vertices, faces, per-vertex ``colours`` or None): the same
-    surface, finer where the silhouette crosses it."""
-    for _ in range(SPLIT_ROUNDS):
-        _, partial = _sources(vertices_asset, faces, camera_from_asset, k, mask, depth_m, visible)
-        tri = vertices_asset[faces]
-        longest = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max(axis=1)
-        red = partial & (longest > SPLIT_EDGE_M)
-        if not red.any():
-            break
-        vertices_asset, faces, colours = _split_conforming(vertices_asset, faces, red, colours)
-    return vertices_asset, faces, colours
-
-
-def _split_conforming(v: np.ndarray, f: np.ndarray, red: np.ndarray, colours: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """``red`` faces split in four at their edges' midpoints, the faces sharing one split edge in
-    two and those sharing two or more in four (red-green refinement: no vertex ends on another
-    face's edge, so no crack opens between faces). Written here: trimesh's ``subdivide`` with a
-    ``face_index`` leaves the neighbours unsplit (its docstring: no longer watertight)."""
-    n = len(v)
-    ends = np.stack([f, np.roll(f, -1, axis=1)], axis=2)  # (F, 3, 2): edge j runs f[j] -> f[j + 1]
-    key = np.sort(ends, axis=2) @ np.array([n, 1], dtype=np.int64)  # (F, 3) one id per undirected edge
-    red = red.copy()
-    while True:
-        split = np.isin(key, key[red])
-        more = ~red & (split.sum(axis=1) >= 2)
-        if not more.any():
-            break
-        red |= more
-    split = np.isin(key, key[red])
-    ids, inverse = np.unique(key[split], return_inverse=True)
-    mid_of = np.full(key.shape, -1, dtype=np.int64)
-    mid_of[split] = n + inverse
-    first = np.zeros(len(ids), dtype=np.int64)
-    first[inverse] = np.flatnonzero(split.ravel())  # one (face, edge) holding each split edge
-    a, b = ends.reshape(-1, 2)[first].T
-    new_v = np.concatenate([v, 0.5 * (v[a] + v[b])])
-    new_c = None if colours is None else np.concatenate([colours, ((colours[a].astype(np.float64) + colours[b]) / 2).round().astype(colours.dtype)])
-    m = mid_of
-    out = [f[~split.any(axis=1)]]
-    r = red
-    out += [np.stack([f[r, 0], m[r, 0], m[r, 2]], 1), np.stack([m[r, 0], f[r, 1], m[r, 1]], 1),
-            np.stack([m[r, 2], m[r, 1], f[r, 2]], 1), np.stack([m[r, 0], m[r, 1], m[r, 2]], 1)]
-    for j in range(3):  # green: one split edge, f[j] -> f[j + 1], opposite f[j + 2]
-        g = ~red & split[:, j]
-        out += [np.stack([f[g, j], m[g, j], f[g, (j + 2) % 3]], 1), np.stack([m[g, j], f[g, (j + 1) % 3], f[g, (j + 2) % 3]], 1)]
-    return new_v, np.concatenate(out).astype(np.int64), new_c
 
 
 def _box_uv(tri_asset: np.ndarray, lo: np.ndarray, extent_m: float) -> np.ndarray:
@@ -453,8 +385,7 @@ def photo_textured(generated: GeneratedAsset, obj: PerceivedObject, observation:
     parts = []
     visible = self_visibility([(p.visual.vertices_m, p.visual.faces) for p in generated.asset.parts], camera_from_asset)
     for part in generated.asset.parts:
-        v, f, colours = split_partly_seen(part.visual.vertices_m, part.visual.faces, camera_from_asset, camera.intrinsics, obj.mask, obs_depth,
-                                          part.visual.vertex_colors_rgba, visible)
+        v, f = part.visual.vertices_m, part.visual.faces
         source = face_sources(v, f, camera_from_asset, camera.intrinsics, obj.mask, obs_depth, visible)
         corners = v[f]  # (F, 3, 3)
         mirrored = np.where((source == MIRRORED)[:, None, None], corners * np.array([1.0, -1.0, 1.0]), corners)
@@ -480,7 +411,7 @@ def photo_textured(generated: GeneratedAsset, obj: PerceivedObject, observation:
         new_v = v[f.reshape(-1)[first]]
         new_uv = np.clip(uv[first], 0.0, 1.0)
         visual = dataclasses.replace(part.visual, vertices_m=new_v, faces=inverse.reshape(-1, 3).astype(np.int64), uv=new_uv, texture=texture,
-                                     vertex_colors_rgba=None if colours is None else colours[f.reshape(-1)[first]])
+                                     vertex_colors_rgba=None if part.visual.vertex_colors_rgba is None else part.visual.vertex_colors_rgba[f.reshape(-1)[first]])
         parts.append(dataclasses.replace(part, visual=visual))
     asset = dataclasses.replace(generated.asset, parts=tuple(parts))
     return dataclasses.replace(generated, asset=asset)

@@ -191,45 +191,6 @@ def test_the_swatch_comes_from_the_objects_dominant_material_not_across_two():
     assert swatch.min() > 180  # all white: no row of the dark frame in it
 
 
-def test_partly_seen_faces_are_split_where_the_silhouette_crosses_them():
-    """Two big faces, their near quarter on the mask and the rest hidden (by another object in
-    front: off the mask): it is split until its pieces are seen or not, the surface unchanged
-    and no crack between the pieces (each edge shared by two faces in a closed box)."""
-    import trimesh
-
-    from generation.texture import SPLIT_EDGE_M, _split_conforming, split_partly_seen
-    from scene_builder.model import CameraIntrinsics
-
-    w, h = 640, 480
-    k = CameraIntrinsics(500.0, 500.0, (w - 1) / 2.0, (h - 1) / 2.0, w, h, "flag")
-    y, near, far = 0.7, 2.5, 4.0
-    v = np.array([[-0.4, y, near], [0.4, y, near], [0.4, y, far], [-0.4, y, far]])
-    faces = np.array([[0, 1, 2], [0, 2, 3]])
-    uu, vv = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-    ry, rx = (vv - k.cy_px) / k.fy_px, (uu - k.cx_px) / k.fx_px
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z = np.where(ry > 0, y / ry, np.inf)
-    mask = (z >= near) & (z <= 2.9) & (np.abs(rx * z) <= 0.4)  # the far 1.1 m hidden
-    depth = np.where(mask, z, 0.0)
-    assert np.all(face_sources(v, faces, np.eye(4), k, mask, depth) != SEEN)  # neither face is seen as a whole
-    v2, f2, _ = split_partly_seen(v, faces, np.eye(4), k, mask, depth)
-    tri = v2[f2]
-    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    assert abs(area.sum() - 0.8 * 1.5) < 1e-9
-    src = face_sources(v2, f2, np.eye(4), k, mask, depth)
-    centre_z = tri.mean(axis=1)[:, 2]
-    seen_area = area[src == SEEN].sum()
-    assert seen_area > 0.5 * 0.8 * 0.4  # most of the seen 0.4 m is textured from the photo
-    assert np.all(centre_z[src == SEEN] < 2.9 + SPLIT_EDGE_M)  # and nothing of the hidden part
-    # Red-green splitting keeps a closed mesh closed.
-    box = trimesh.creation.box((1.0, 2.0, 3.0))
-    red = np.zeros(len(box.faces), dtype=bool)
-    red[[0, 5]] = True
-    bv, bf, _ = _split_conforming(box.vertices, box.faces, red, None)
-    closed = trimesh.Trimesh(bv, bf)
-    assert len(bf) > len(box.faces) and closed.is_watertight and abs(closed.volume - 6.0) < 1e-9
-
-
 def test_hidden_faces_take_a_donor_on_their_own_surface_not_a_parallel_one_nearer():
     """A mattress top (z = 0) seen only at its far end (x 0-0.2 m), hidden behind a footboard
     whose top rail (z = 0.15 m, seen) lies nearer to the hidden part: the hidden top takes the
