@@ -6,8 +6,9 @@ Each visual-mesh face, placed at the pose where the object was seen
 
 * **seen**: it faces the camera (within :data:`MAX_VIEW_DEG`, or a grazing top one photo pixel
   spans at most :data:`MAX_TEXEL_M` of), its corners project onto the object's mask at the
-  depth observed there, and the object's own surface does not hide them (a ray cast). Its texture coordinates are its corners' pixels in
-  a crop of the photo around the mask (the photo projected from the input camera).
+  depth observed there, and the object's own surface does not hide them (a ray cast). Its
+  texture coordinates are its corners' pixels in a crop of the photo around the mask (the photo
+  projected from the input camera).
 * **mirrored**: hidden, but its mirror image across the asset's left-right plane (asset frame
   ``y = 0``: the asset's front is +X, so this swaps its left and right sides; furniture is
   built symmetric about it) is seen: it takes the photo where its mirror image was seen (the
@@ -15,10 +16,11 @@ Each visual-mesh face, placed at the pose where the object was seen
 * **near-seen**: hidden or seen edge-on (a grazing top, the jittered faces of a shell made from
   sensor depth), but a seen (or mirrored) face of the same part within :data:`DONOR_RADIUS_M`
   turns the same way (normals within :data:`DONOR_MAX_DEG`) on the same surface (its plane
-  within :data:`DONOR_PLANE_M`): it takes the photo's colour at the
-  centre of the nearest such face, averaged over :data:`DONOR_SPOT_M` around it (a blurred
-  copy of the crop), one texel for the whole face (no stretching), so the hidden half of a
-  mattress's top stays the mattress's white instead of the swatch of the dark frame.
+  within :data:`DONOR_PLANE_M`; else the nearest turned its way within :data:`DONOR_NEAR_M`):
+  it takes the photo's colour at the centre of the nearest such face, averaged over
+  :data:`DONOR_SPOT_M` around it (a blurred copy of the crop), one texel for the whole face (no
+  stretching), so the hidden half of a mattress's top stays the mattress's white instead of the
+  swatch of the dark frame.
 * **material**: the rest (backs, undersides, faces seen edge-on, whose projection would smear
   the silhouette's boundary pixels along them: the "streaked flank"). They carry a swatch of the
   object's own texture: the largest square seen inside the mask, scaled to its size in metres
