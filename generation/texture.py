@@ -85,6 +85,11 @@ OUTLIER_MIN_LAB = 10.0
 #: A swatch square smaller than this share of the object's extent would repeat many times over
 #: it (a wallpaper of one knob): the material is its median colour instead.
 MIN_TILE_SHARE = 0.1
+#: ... and so does a square whose blurred lightness spreads more than this (CIELAB standard
+#: deviation): it shows the object's structure, not its material, and mirror-tiled it became a
+#: kaleidoscope of legs and floor (sunrgbd_total3d_demo_2's chair seen from behind: 15.3; the
+#: other 31 objects of four photos measured 0.0-4.5).
+MAX_SWATCH_SPREAD_LAB = 8.0
 #: Texels between the crop and the swatch in the texture image.
 GAP_PX = 2
 SEEN, MIRRORED, MATERIAL = 0, 1, 2
@@ -156,7 +161,8 @@ def material_swatch(crop_rgb: np.ndarray, crop_mask: np.ndarray, metres_per_px: 
     eroded by two pixels, where the silhouette's edge mixes in the background and outlines, less
     what is not of its most common colour), resampled from ``metres_per_px`` (the photo's pixel
     size on the object) to the swatch's scale, mirror-tiled; the median colour of that material
-    where no square of MIN_PATCH_PX, or of MIN_TILE_SHARE of ``extent_m``, fits."""
+    where no square of MIN_PATCH_PX, or of MIN_TILE_SHARE of ``extent_m``, fits, or where the
+    square shows structure rather than material (:data:`MAX_SWATCH_SPREAD_LAB`)."""
     import cv2
     from scipy import ndimage
 
@@ -171,12 +177,26 @@ def material_swatch(crop_rgb: np.ndarray, crop_mask: np.ndarray, metres_per_px: 
         return np.broadcast_to(median, (size_px, size_px, 3)).copy()
     cy, cx = np.unravel_index(int(np.argmax(dist)), dist.shape)
     patch = crop_rgb[cy - r : cy + r + 1, cx - r : cx + r + 1]
+    if _structured(patch, metres_per_px):
+        return np.broadcast_to(median, (size_px, size_px, 3)).copy()
     side = int(np.clip(round((2 * r + 1) * metres_per_px * size_px / max(extent_m, 1e-6)), MIN_PATCH_PX, size_px))
     patch = cv2.resize(np.ascontiguousarray(patch), (side, side), interpolation=cv2.INTER_AREA)
     tile = np.concatenate([patch, patch[:, ::-1]], axis=1)
     tile = np.concatenate([tile, tile[::-1]], axis=0)
     reps = int(np.ceil(size_px / tile.shape[0]))
     return np.tile(tile, (reps, reps, 1))[:size_px, :size_px].copy()
+
+
+def _structured(patch_rgb: np.ndarray, metres_per_px: float) -> bool:
+    """Whether a swatch square shows the object's structure rather than its material: its CIELAB
+    lightness, blurred over DONOR_SPOT_M (a grain or a weave averages out), spreads more than
+    MAX_SWATCH_SPREAD_LAB (standard deviation)."""
+    import cv2
+    from skimage.color import rgb2lab
+
+    sigma = max(1.0, DONOR_SPOT_M / max(metres_per_px, 1e-9))
+    blurred = cv2.GaussianBlur(np.ascontiguousarray(patch_rgb), (0, 0), sigma, borderType=cv2.BORDER_REFLECT)
+    return float(rgb2lab(blurred)[..., 0].std()) > MAX_SWATCH_SPREAD_LAB
 
 
 def dominant_region(crop_rgb: np.ndarray, core: np.ndarray, metres_per_px: float) -> np.ndarray:

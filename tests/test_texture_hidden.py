@@ -247,3 +247,21 @@ def test_a_face_behind_the_objects_own_front_is_not_seen_though_the_depth_is_nea
     assert np.all(with_rays[2:4] != SEEN)  # the middle strip, behind the footboard
     assert np.all(with_rays[[0, 1, 4, 5]] == SEEN)  # the strips beside it are in view
     assert np.all(face_sources(front_v, front_f, np.eye(4), k, mask, depth, visible) == SEEN)
+
+
+def test_a_swatch_square_showing_structure_gives_a_flat_colour_a_grain_is_tiled():
+    """A dark top (another material) over light bands 16 cm wide, two greys of one noisy
+    material (a chair's frame before the floor seen through it): the square cut from the bands
+    shows structure, and mirror-tiled it is a kaleidoscope: the material's median colour instead.
+    The same two greys alternating every centimetre are a grain: kept as texture."""
+    from generation.texture import material_swatch
+
+    rng = np.random.default_rng(0)
+    cols = np.arange(140)
+    mask = np.ones((140, 140), dtype=bool)
+    for period, flat in ((16, True), (1, False)):
+        img = np.zeros((140, 140, 3))
+        img[:40] = 20
+        img[40:] = np.where((cols // period) % 2 == 0, 205, 140)[None, :, None] + rng.normal(0, 12, (100, 140, 1))
+        sw = material_swatch(np.clip(img, 0, 255).astype(np.uint8), mask, 0.01, 1.4)
+        assert (np.ptp(sw.reshape(-1, 3), axis=0).max() == 0) == flat
