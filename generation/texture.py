@@ -74,6 +74,7 @@ MIN_PATCH_PX = 4
 #: clusters of its seen pixels, when it holds at least MIN_MATERIAL_SHARE of them.
 MATERIAL_CLUSTERS = 2
 MIN_MATERIAL_SHARE = 0.25
+MATERIAL_GRID_PX = 160
 #: ... unless its colours span less than this (CIELAB units: a just noticeable difference is
 #: about 2): one material.
 ONE_COLOUR_LAB = 3.0
@@ -110,7 +111,7 @@ DONOR_PLANE_M = 0.06
 #: ... or, where no seen face on its surface is within DONOR_RADIUS_M, the nearest one turned
 #: its way within this distance (m).
 DONOR_NEAR_M = 0.5
-DONOR_NEIGHBOURS = 32
+DONOR_NEIGHBOURS = 16
 #: A near-seen face's colour is the photo averaged over about this much of the object (metres, the
 #: sigma of a Gaussian) around its donor's centre: one photo pixel there is a speck of the grain,
 #: a highlight or a seam, and faces taking single pixels made a patchwork of flat colours.
@@ -219,7 +220,14 @@ def dominant_region(crop_rgb: np.ndarray, core: np.ndarray, metres_per_px: float
         return core
     sigma = max(1.0, DONOR_SPOT_M / max(metres_per_px, 1e-9))
     blurred = cv2.GaussianBlur(np.ascontiguousarray(crop_rgb), (0, 0), min(sigma, 0.1 * max(crop_rgb.shape[:2])), borderType=cv2.BORDER_REFLECT)
-    lab = rgb2lab(blurred[core]).astype(np.float64)
+    # The colours are told apart on every STEP-th pixel (at most MATERIAL_GRID_PX a side; the
+    # blurred colours vary slowly), the region then drawn back at the crop's resolution.
+    h, w = core.shape
+    step = max(1, int(np.ceil(max(h, w) / MATERIAL_GRID_PX)))
+    few = core[::step, ::step]
+    if few.sum() < 4 * MATERIAL_CLUSTERS:
+        return core
+    lab = rgb2lab(blurred[::step, ::step][few]).astype(np.float64)
     if float(np.ptp(lab, axis=0).max()) < ONE_COLOUR_LAB:
         return core  # one colour: one material
     try:
@@ -230,11 +238,12 @@ def dominant_region(crop_rgb: np.ndarray, core: np.ndarray, metres_per_px: float
     main = assign == int(np.argmax(np.bincount(assign, minlength=MATERIAL_CLUSTERS)))
     # Its own pixels far from its usual colour (the blur hid them) are no part of it: knobs,
     # handles, highlights (a sideboard's swatch tiled its brass knobs into rows of dots).
-    raw = rgb2lab(crop_rgb[core]).astype(np.float64)
+    raw = rgb2lab(crop_rgb[::step, ::step][few]).astype(np.float64)
     off = np.linalg.norm(raw - np.median(raw[main], axis=0), axis=1)
     usual = max(OUTLIER_MIN_LAB, OUTLIER_SPREAD * float(np.median(off[main])))
-    region = np.zeros_like(core)
-    region[core] = main & (off <= usual)
+    coarse = np.zeros_like(few)
+    coarse[few] = main & (off <= usual)
+    region = core & np.repeat(np.repeat(coarse, step, axis=0), step, axis=1)[:h, :w]
     region = ndimage.binary_opening(region)
     dist = ndimage.distance_transform_cdt(np.pad(region, 1), metric="chessboard")[1:-1, 1:-1]
     if region.sum() < MIN_MATERIAL_SHARE * core.sum() or 2 * int(dist.max()) - 1 < MIN_PATCH_PX:
