@@ -171,14 +171,14 @@ def material_swatch(crop_rgb: np.ndarray, crop_mask: np.ndarray, metres_per_px: 
     if not core.any():
         core = crop_mask
     region = dominant_region(crop_rgb, core, metres_per_px)
+    r, cy, cx = _largest_square(region)
+    if region is not core and 2 * r + 1 < MIN_PATCH_PX:  # no square of the material: the whole mask
+        region = core
+        r, cy, cx = _largest_square(region)
     median = np.median(crop_rgb[region], axis=0).astype(np.uint8)
-    dist = ndimage.distance_transform_cdt(np.pad(region, 1), metric="chessboard")[1:-1, 1:-1]
-    r = int(dist.max()) - 1
-    if 2 * r + 1 < MIN_PATCH_PX or (2 * r + 1) * metres_per_px < MIN_TILE_SHARE * extent_m:
-        return np.broadcast_to(median, (size_px, size_px, 3)).copy()
-    cy, cx = np.unravel_index(int(np.argmax(dist)), dist.shape)
+    fits = 2 * r + 1 >= MIN_PATCH_PX and (2 * r + 1) * metres_per_px >= MIN_TILE_SHARE * extent_m
     patch = crop_rgb[cy - r : cy + r + 1, cx - r : cx + r + 1]
-    if _structured(patch, metres_per_px):
+    if not fits or _structured(patch, metres_per_px):
         return np.broadcast_to(median, (size_px, size_px, 3)).copy()
     side = int(np.clip(round((2 * r + 1) * metres_per_px * size_px / max(extent_m, 1e-6)), MIN_PATCH_PX, size_px))
     patch = cv2.resize(np.ascontiguousarray(patch), (side, side), interpolation=cv2.INTER_AREA)
@@ -204,7 +204,8 @@ def dominant_region(crop_rgb: np.ndarray, core: np.ndarray, metres_per_px: float
     """(h, w) bool: the pixels of ``core`` of the object's most common material: its colours
     (CIELAB, blurred over DONOR_SPOT_M so that a grain or a pattern is one colour) split in
     MATERIAL_CLUSTERS by k-means, the largest cluster, opened by a pixel; ``core`` itself where
-    that leaves less than MIN_MATERIAL_SHARE of it or no square of MIN_PATCH_PX. Pixels of that
+    that leaves less than MIN_MATERIAL_SHARE of it (:func:`material_swatch` goes back to ``core``
+    where it leaves no square of MIN_PATCH_PX). Pixels of that
     cluster whose own colour lies more than OUTLIER_SPREAD times the cluster's median distance from
     its median colour are left out.
 
@@ -245,10 +246,17 @@ def dominant_region(crop_rgb: np.ndarray, core: np.ndarray, metres_per_px: float
     coarse[few] = main & (off <= usual)
     region = core & np.repeat(np.repeat(coarse, step, axis=0), step, axis=1)[:h, :w]
     region = ndimage.binary_opening(region)
-    dist = ndimage.distance_transform_cdt(np.pad(region, 1), metric="chessboard")[1:-1, 1:-1]
-    if region.sum() < MIN_MATERIAL_SHARE * core.sum() or 2 * int(dist.max()) - 1 < MIN_PATCH_PX:
-        return core
-    return region
+    return core if region.sum() < MIN_MATERIAL_SHARE * core.sum() else region
+
+
+def _largest_square(mask: np.ndarray) -> tuple[int, int, int]:
+    """(r, row, column): the largest square of side 2 r + 1 inside ``mask``, by its centre (the
+    chessboard distance to the nearest pixel outside it, the image's border counted outside)."""
+    from scipy import ndimage
+
+    dist = ndimage.distance_transform_cdt(np.pad(mask, 1), metric="chessboard")[1:-1, 1:-1]
+    cy, cx = np.unravel_index(int(np.argmax(dist)), dist.shape)
+    return int(dist.max()) - 1, int(cy), int(cx)
 
 
 def _corner_seen(p_cam: np.ndarray, k, grown: np.ndarray, depth_m: np.ndarray) -> np.ndarray:
