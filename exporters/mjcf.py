@@ -458,12 +458,14 @@ def _add_joint(body, asset: ObjectAsset, part: Part) -> None:
     hinge, slide = mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE
     if j.type is JointType.FIXED:
         return
+    # the counterbalance spring (toward springref 0, the rest pose) acts on the hinge alone
+    spring = dict(stiffness=j.stiffness) if j.stiffness > 0 else {}
     if j.type is JointType.REVOLUTE:
-        body.add_joint(name=names.joint_name(asset, part), type=hinge, range=[j.lower, j.upper], **common)
+        body.add_joint(name=names.joint_name(asset, part), type=hinge, range=[j.lower, j.upper], **common, **spring)
     elif j.type is JointType.PRISMATIC:
         body.add_joint(name=names.joint_name(asset, part), type=slide, range=[j.lower, j.upper], **common)
     elif j.type is JointType.REVOLUTE_PRISMATIC:
-        body.add_joint(name=names.joint_name(asset, part), type=hinge, range=[j.lower, j.upper], **common)
+        body.add_joint(name=names.joint_name(asset, part), type=hinge, range=[j.lower, j.upper], **common, **spring)
         body.add_joint(name=names.joint_name(asset, part, "_slide"), type=slide, range=[j.lower2, j.upper2], **common)
     elif j.type is JointType.BALL:
         body.add_joint(name=names.joint_name(asset, part), type=mujoco.mjtJoint.mjJNT_BALL, pos=j.anchor_m,

@@ -19,7 +19,8 @@ SDFormat consumers).
   material's surface: Coulomb friction (ODE ``mu``, Bullet ``friction``; the dynamic coefficient
   as in the MJCF), torsional friction over the MJCF's patch radius, rolling friction,
   restitution, Young's modulus and Poisson's ratio. Joints: ``revolute`` / ``prismatic`` with
-  limits, damping and dry friction; ``fixed``; ``ball``; a revolute-prismatic joint becomes a
+  limits, damping and dry friction (a revolute joint's counterbalance spring as
+  ``spring_stiffness`` toward ``spring_reference`` 0, the rest pose); ``fixed``; ``ball``; a revolute-prismatic joint becomes a
   prismatic and a revolute joint through a 1 g link (as in the URDF). A free object's root link
   has no joint (a free body). Fixed furniture is ``static`` when it is one part; with moving parts
   (a built-in cabinet whose doors open) its root link is welded to ``world`` by a fixed joint
@@ -365,6 +366,9 @@ def _add_joint(model: ET.Element, ids: _Ids, links: dict[str, str], asset: Objec
             dynamics = _sub(axis, "dynamics")
             _sub(dynamics, "damping", f"{jt.damping:.9g}")
             _sub(dynamics, "friction", f"{jt.friction:.9g}")
+            if kind == "revolute" and jt.stiffness > 0:  # the counterbalance spring toward the rest pose
+                _sub(dynamics, "spring_reference", "0")
+                _sub(dynamics, "spring_stiffness", f"{jt.stiffness:.9g}")
 
     parent, child = links[part.parent], links[part.name]
     kinds = {JointType.REVOLUTE: "revolute", JointType.PRISMATIC: "prismatic", JointType.FIXED: "fixed", JointType.BALL: "ball"}

@@ -14,6 +14,8 @@ default), and optionally the whole scene as ``scene.urdf``, one tree rooted at a
   are offset by minus the anchor. A revolute-prismatic joint has no URDF equivalent: it becomes
   a revolute joint plus a prismatic joint through a massless intermediate link, as URDF users do.
   URDF has no ball joint: ball (and free) joints inside an object are refused with ExportError.
+  URDF has no joint spring either: a door hinged at its bottom keeps its damping and friction
+  (``dynamics``) but not its counterbalance spring, which the MJCF, SDF and USD carry.
 * Inertials: mass, origin at the centre of mass, full inertia tensor in link axes.
 * Meshes: the same .obj files as the MJCF (``meshes/``, relative paths; textured ones name their
   photo texture in a .mtl beside them). A ``<mujoco>`` extension element tells MuJoCo's URDF

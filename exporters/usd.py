@@ -34,8 +34,9 @@ Choices (the validators and Newton accept these):
   textures into one ``scene.usdz``.
 * Joint frames: every part frame is the asset frame, so localPos0 = localPos1 = anchor; the
   joint axis token is X and localRot0 = localRot1 rotates X onto ``Joint.axis``. Revolute
-  limits are degrees (UsdPhysics), prismatic metres. Joint damping goes to a DriveAPI with zero
-  stiffness; dry friction is ``mjc:frictionloss`` (MuJoCo's USD schema name, read by Newton), the
+  limits are degrees (UsdPhysics), prismatic metres. Joint damping goes to a DriveAPI whose
+  stiffness is the joint's counterbalance spring toward target position 0, the rest pose (zero
+  but on doors hinged at their bottom; angular gains per degree); dry friction is ``mjc:frictionloss`` (MuJoCo's USD schema name, read by Newton), the
   effort limit the drive's maxForce (and ``sceneBuilder:effortLimit``).
 * usd-core 26.11 has no UsdPhysics deformable schema: deformables are exported as rigid bodies
   (rigid fallback) carrying ``sceneBuilder:deformable:*`` attributes (Young's modulus, Poisson
@@ -532,7 +533,9 @@ def _add_joint(stage, jpath, asset: ObjectAsset, part: Part, body0, body1) -> No
     if drive_kind is not None and (j.damping > 0 or j.effort_limit > 0):
         drive = UsdPhysics.DriveAPI.Apply(prim, drive_kind)
         drive.CreateTypeAttr("force")
-        drive.CreateStiffnessAttr(0.0)
+        # the counterbalance spring toward the rest pose (target 0); angular gains per degree
+        drive.CreateStiffnessAttr(float(np.radians(j.stiffness)) if drive_kind == "angular" else 0.0)
+        drive.CreateTargetPositionAttr(0.0)
         drive.CreateDampingAttr(float(np.radians(j.damping)) if drive_kind == "angular" else float(j.damping))
         drive.CreateTargetVelocityAttr(0.0)
         if j.effort_limit > 0:

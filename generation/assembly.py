@@ -317,7 +317,8 @@ def assemble_asset_with_offset(
             axis = np.asarray(js.axis, dtype=np.float64)
             axis = axis / np.linalg.norm(axis)
             moving = combine_inertials([inertials[n] for n in _subtree(spec.name, children)])
-            res = joint_resistance(js.type, axis, anchor, moving)
+            revolute = js.type in (JointType.REVOLUTE, JointType.REVOLUTE_PRISMATIC)
+            res = joint_resistance(js.type, axis, anchor, moving, range_rad=(js.lower, js.upper) if revolute else None)
             joint = Joint(
                 type=js.type,
                 axis=axis,
@@ -329,6 +330,7 @@ def assemble_asset_with_offset(
                 effort_limit=res.effort_limit if js.effort_limit is None else js.effort_limit,
                 lower2=js.lower2,
                 upper2=js.upper2,
+                stiffness=res.stiffness,
             )
         out_parts.append(
             Part(

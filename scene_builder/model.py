@@ -516,7 +516,9 @@ class Joint:
       for prismatic (0 = rest pose as modelled). For ``REVOLUTE_PRISMATIC`` the slide along the
       same axis uses ``lower2``, ``upper2`` (metres). Ignored for fixed, ball and free joints.
     damping: N*m*s/rad (revolute) or N*s/m (prismatic). friction: N*m or N (dry friction loss).
-    effort_limit: N*m or N.
+    effort_limit: N*m or N. stiffness: N*m/rad, a spring pulling the joint toward its rest pose
+    (0 = none): the counterbalance of a door hinged at its bottom
+    (``generation.physics.joint_resistance``).
     """
 
     type: JointType
@@ -529,6 +531,7 @@ class Joint:
     effort_limit: float = 0.0
     lower2: float = 0.0
     upper2: float = 0.0
+    stiffness: float = 0.0
 
     def __post_init__(self) -> None:
         _freeze(self, "axis", np.float64, (3,))
@@ -537,8 +540,8 @@ class Joint:
             raise ValueError("Joint.axis must be a unit vector")
         if self.lower > self.upper or self.lower2 > self.upper2:
             raise ValueError("Joint: lower limit above upper limit")
-        if self.damping < 0 or self.friction < 0 or self.effort_limit < 0:
-            raise ValueError("Joint: damping, friction and effort_limit must be >= 0")
+        if self.damping < 0 or self.friction < 0 or self.effort_limit < 0 or self.stiffness < 0:
+            raise ValueError("Joint: damping, friction, effort_limit and stiffness must be >= 0")
 
 
 @dataclass(frozen=True, eq=False)

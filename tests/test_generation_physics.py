@@ -237,3 +237,25 @@ def test_mass_properties_of_a_flat_part_are_a_bodys_and_a_folded_mesh_is_refused
     mesh.vertices = _folding_snap(mesh.vertices)
     with pytest.raises(ValueError, match="fold"):
         mass_properties(mesh, RHO)
+
+
+def test_counterbalance_of_a_door_hinged_at_its_bottom():
+    """A door hinged at its bottom edge, opening 1.5 rad: the spring minimising the largest net
+    torque is k = 0.746 m g r with 0.122 m g r left (the minimax line through the origin under
+    m g r sin q); without a range (or on a side hinge) there is no spring."""
+    door = mass_properties(box_solid([-0.02, 0.0, 0.0], [0.02, 0.6, 0.6]), RHO)
+    r = float(np.hypot(door.com_m[0], door.com_m[2]))
+    mgr = door.mass_kg * 9.81 * r
+    res = joint_resistance(JointType.REVOLUTE, [0, 1, 0], [0.0, 0.0, 0.0], door, range_rad=(0.0, 1.5))
+    q = np.linspace(0.0, 1.5, 301)
+    phi = np.arctan2(door.com_m[0], door.com_m[2])
+    tau = door.mass_kg * 9.81 * r * np.sin(q + phi)
+    worst = np.max(np.abs(tau - res.stiffness * q))
+    assert res.stiffness == pytest.approx(0.746 * mgr, rel=0.05)
+    assert worst == pytest.approx(0.122 * mgr, rel=0.15)
+    for k in (0.9 * res.stiffness, 1.1 * res.stiffness, 0.0):
+        assert np.max(np.abs(tau - k * q)) > worst
+    assert res.friction >= 1.5 * worst * 0.99
+    assert joint_resistance(JointType.REVOLUTE, [0, 1, 0], [0.0, 0.0, 0.0], door).stiffness == 0.0
+    side = joint_resistance(JointType.REVOLUTE, [0, 0, 1], [0.0, 0.0, 0.0], door, range_rad=(0.0, 1.5))
+    assert side.stiffness == 0.0
