@@ -20,8 +20,9 @@ SDFormat consumers).
   as in the MJCF), torsional friction over the MJCF's patch radius, rolling friction,
   restitution, Young's modulus and Poisson's ratio. Joints: ``revolute`` / ``prismatic`` with
   limits, damping and dry friction (a revolute joint's counterbalance spring as
-  ``spring_stiffness`` toward ``spring_reference`` 0, the rest pose); ``fixed``; ``ball``; a revolute-prismatic joint becomes a
-  prismatic and a revolute joint through a 1 g link (as in the URDF). A free object's root link
+  ``spring_stiffness`` toward ``spring_reference`` 0, the rest pose); ``fixed``; ``ball``; a
+  revolute-prismatic joint becomes a prismatic and a revolute joint through a 1 g link (as in
+  the URDF). A free object's root link
   has no joint (a free body). Fixed furniture is ``static`` when it is one part; with moving parts
   (a built-in cabinet whose doors open) its root link is welded to ``world`` by a fixed joint
   instead, since a static model's joints cannot move. SDFormat has no soft bodies: a deformable

@@ -36,8 +36,9 @@ Choices (the validators and Newton accept these):
   joint axis token is X and localRot0 = localRot1 rotates X onto ``Joint.axis``. Revolute
   limits are degrees (UsdPhysics), prismatic metres. Joint damping goes to a DriveAPI whose
   stiffness is the joint's counterbalance spring toward target position 0, the rest pose (zero
-  but on doors hinged at their bottom; angular gains per degree); dry friction is ``mjc:frictionloss`` (MuJoCo's USD schema name, read by Newton), the
-  effort limit the drive's maxForce (and ``sceneBuilder:effortLimit``).
+  but on doors hinged at their bottom; angular gains per degree); dry friction is
+  ``mjc:frictionloss`` (MuJoCo's USD schema name, read by Newton), the effort limit the drive's
+  maxForce (and ``sceneBuilder:effortLimit``).
 * usd-core 26.11 has no UsdPhysics deformable schema: deformables are exported as rigid bodies
   (rigid fallback) carrying ``sceneBuilder:deformable:*`` attributes (Young's modulus, Poisson
   ratio, damping, resolution) so that a soft-body importer can pick them up.

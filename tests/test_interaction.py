@@ -221,6 +221,32 @@ def test_a_heavy_damped_drawer_is_pulled_as_hard_and_as_long_as_its_range_needs(
     assert_good_opening(j)
 
 
+
+def test_an_oven_door_opens_fully_without_slamming_into_its_stop(tmp_path):
+    """The oven template's door, hinged at its bottom, welded oven on the floor, as exported:
+    pulled open it travels its whole range without bouncing back off its stop (it did, 1.6
+    degrees, before its hinge carried a counterbalance spring: coco128_000000000338), and the
+    exported hinge carries the spring."""
+    import mujoco
+
+    from generation.articulation import articulated_parts
+    from generation.assembly import assemble_asset
+    from layout.interaction import FULL_OPEN_FRACTION, open_joint, opens_fully
+    from scene_builder.frames import rot_z
+    from scene_builder.vocabulary import category
+
+    oven = assemble_asset("oven_1", "oven", articulated_parts("oven", category("oven").typical_size_m), is_fixed=True)
+    scene = Scene(fixture_camera(), fixture_room(), (PlacedObject(oven, pose(rot_z(np.pi), (1.2, 0.0, 0.0)), "floor"),))
+    path = _mjcf(scene, tmp_path)
+    m = mujoco.MjModel.from_xml_path(str(path))
+    assert float(m.jnt_stiffness[m.joint("oven_1/door/joint").id]) > 0.0
+    j = open_joint(path, "oven_1/door/joint")
+    assert j.open_fraction >= FULL_OPEN_FRACTION and opens_fully(j), j
+    assert_good_opening(j)
+    # control: the same door without its spring falls open onto its stop and bounces back
+    m.jnt_stiffness[m.joint("oven_1/door/joint").id] = 0.0
+    assert not opens_fully(open_joint(m, "oven_1/door/joint"))
+
 def test_probes_refuse_unknown_names(tmp_path):
     from layout.interaction import open_joint, push_object
     from scene_builder.errors import InputError
