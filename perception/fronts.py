@@ -16,7 +16,9 @@ handle; a face the photo shows coarser than ``MAX_PHOTO_M_PER_PX`` gets none (to
 see a pull or a gap: the object is built rigid); ovens and dishwashers get their largest front
 as a flap hinged at the bottom, microwaves as a door hinged on the left, and an appliance keeps
 no other front but an oven's drawer under that door (its controls, vents and cooktop are no
-fronts); a "drawer" taller than ``DRAWER_MAX_HEIGHT_M`` is a door. On sensor
+fronts), and on a floor-standing oven or dishwasher that door reaches down near the floor
+(``FLAP_MAX_RISE_M``: else it was the cooktop, and the template stands in); a "drawer" taller
+than ``DRAWER_MAX_HEIGHT_M`` is a door. On sensor
 depth, a panel whose middle lies ``OPENING_RECESS_M`` (``HANDLED_RECESS_M`` for a case good's panel with a
 handle) or more behind the face is an opening, not a front (the cubbies of an open bookcase).
 """
@@ -91,6 +93,13 @@ FLOOR_CLEARANCE_M = 0.02
 #: hinge). An oven's or a dishwasher's is a flap hinged at its bottom; a microwave's a door
 #: hinged on its left (its keypad and latch are on the right).
 APPLIANCE_DOORS = {"oven": ("flap", "bottom"), "dishwasher": ("flap", "bottom"), "microwave": ("door", "left")}
+#: A floor-standing appliance whose door is hinged at its bottom (a range's oven, a dishwasher)
+#: has that door, or a drawer under it, reaching within this height (m) of the floor (a range's
+#: kick plate and storage drawer are 5-15 cm). A "door" the parse found higher with nothing under
+#: it is the cooktop or the control panel seen from above (coco128_000000000089: the glass cooktop
+#: was built as the oven's door, 0.40-0.70 m up, and opened as one): the appliance keeps no parsed
+#: front and takes its category's articulation template.
+FLAP_MAX_RISE_M = 0.3
 #: An appliance keeps its largest front (its door) and, an oven, of the other fronts the parse
 #: found on its face only drawers under that door at least this share of its width.
 APPLIANCE_DRAWER_WIDTH = 0.8
@@ -365,6 +374,9 @@ def fronts_on_face(rgb: np.ndarray, camera: Camera, face: Face, label: str = "",
         kind, hinge = APPLIANCE_DOORS[label]
         door = replace(out[big], kind=kind, hinge=hinge)
         out = [door if i == big else f for i, f in enumerate(out) if i == big or (label == "oven" and _drawer_under(f, door))]
+        lowest = min(float(np.min(f.corners_world_m[:, 2])) for f in out)
+        if hinge == "bottom" and float(face.origin_m[2]) <= 0.0 and lowest > FLAP_MAX_RISE_M:
+            return ()
     return tuple(out)
 
 

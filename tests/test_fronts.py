@@ -453,6 +453,28 @@ def test_an_appliance_keeps_its_door_and_a_drawer_under_it_only(monkeypatch, lab
         assert all(f is door or f.kind == "drawer" for f in fronts)
 
 
+
+@pytest.mark.parametrize("label, door_bottom_px, kept", [("oven", 200.0, 0), ("dishwasher", 200.0, 0), ("oven", 340.0, 1), ("microwave", 200.0, 1)])
+def test_a_floor_standing_ovens_door_reaches_down_to_the_floor(monkeypatch, label, door_bottom_px, kept):
+    """On a range standing on the floor the largest panel the parse reads 0.4 m and more up its
+    face, with nothing under it, is its cooktop or control panel seen from above (coco 089's glass
+    cooktop was built as the oven's door): the oven or dishwasher keeps no parsed front (its
+    template stands in); a door reaching down to 5 cm above the floor is kept, and a microwave,
+    which stands on a counter, keeps its door wherever it is."""
+    import perception.front_parse as front_parse
+    from perception.front_parse import Panel
+    from perception.fronts import Face, fronts_on_face
+
+    cam = _camera_along_x()
+    face = Face(np.array([2.0, 0.3, 0.0]), np.array([0.0, -1.0, 0.0]), np.array([-1.0, 0.0, 0.0]), 0.6, 0.9)  # on the floor, 1/400 m per px
+    y0 = door_bottom_px - 150.0
+    door = Panel(np.array([[10.0, door_bottom_px], [230.0, door_bottom_px], [230.0, y0], [10.0, y0]]), "drawer", "", (120.0, y0 + 75.0), 1.0)
+    monkeypatch.setattr(front_parse, "parse_face", lambda *a, **kw: [door])
+    fronts = fronts_on_face(np.full((160, 200, 3), 200, np.uint8), cam, face, label)
+    assert len(fronts) == kept
+    if kept:
+        assert float(np.min(fronts[0].corners_world_m[:, 2])) == pytest.approx((360.0 - door_bottom_px) / 400.0, abs=0.01)
+
 def _photo_of_a_turned_face(turn_deg: float, grain: int = 0):
     """A 640 x 480 photo (500 px focal length, camera 1.2 m up looking along world +x) of a 1.0 m x
     0.8 m chest of four drawers standing on the floor 2.6 m away, its face turned ``turn_deg``
