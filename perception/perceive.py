@@ -106,6 +106,18 @@ def _main_clusters(pix: np.ndarray, points_cam: np.ndarray, k: CameraIntrinsics,
 CROP_CONTEXT = 0.15
 
 
+#: A thing stands on the floor, for naming, when its lowest points (2nd percentile of height) lie
+#: within ON_FLOOR_M of it and it rises FLOOR_THING_MIN_HEIGHT_M above them (a book or a bottle
+#: on the floor is named by its size as it is).
+ON_FLOOR_M = 0.1
+FLOOR_THING_MIN_HEIGHT_M = 0.3
+
+
+def _stands_on_floor(points_world_m: np.ndarray) -> bool:
+    lo, hi = np.quantile(points_world_m[:, 2], [0.02, 0.98])
+    return bool(lo <= ON_FLOOR_M and hi - lo >= FLOOR_THING_MIN_HEIGHT_M)
+
+
 def _crop(rgb: np.ndarray, mask: np.ndarray, context: float = CROP_CONTEXT) -> tuple[np.ndarray, np.ndarray]:
     """The (h, w, 3) image crop around ``mask`` ((H, W) bool), its box grown by ``context`` of
     its size on each side and clipped to the image, and the (h, w) mask crop."""
@@ -501,12 +513,18 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
     # a range of lengths (perception.seen_extent).
     tops = [float(np.quantile(p[:, 2], 0.99)) if frame.floor_found and cut_by_photo_bottom(mask, valid) else None for (mask, _), p in zip(kept, points_world)]
     spans = [length_max_m(mask, s) for (mask, _), s in zip(kept, sizes)]
+    # A thing of furniture height standing on the floor is named as one (no monitor or vase:
+    # perception.naming_prior.OFF_FLOOR_WEIGHT), where the floor was seen.
+    floors = [frame.floor_found and _stands_on_floor(p) for p in points_world]
 
     def bounds(ids: list[int], one: bool = False) -> dict:
         """The namer's keyword arguments for objects ``ids`` that have them: per object
         (``heights_max_m``, ``lengths_max_m``), or for one (``height_max_m``, ``length_max_m``)."""
-        return {f"{what}{'' if one else 's'}_max_m": vals[ids[0]] if one else [vals[i] for i in ids]
-                for what, vals in (("height", tops), ("length", spans)) if any(vals[i] is not None for i in ids)}
+        out = {f"{what}{'' if one else 's'}_max_m": vals[ids[0]] if one else [vals[i] for i in ids]
+               for what, vals in (("height", tops), ("length", spans)) if any(vals[i] is not None for i in ids)}
+        if any(floors[i] for i in ids):
+            out["on_floor"] = floors[ids[0]] if one else [floors[i] for i in ids]
+        return out
 
     crops = [_crop(loaded.rgb, mask) for mask, _ in kept]
     # Names the segmenter knows (a detector's class) come first; the naming backend names the rest.

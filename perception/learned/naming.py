@@ -228,19 +228,24 @@ def _label_space() -> tuple[tuple[str, ...], np.ndarray]:
 
 
 def combined_label_posterior(
-    label_probs: dict[str, float] | None, size_m: tuple[float, float, float], height_max_m: float | None = None, length_max_m: float | None = None
+    label_probs: dict[str, float] | None, size_m: tuple[float, float, float], height_max_m: float | None = None, length_max_m: float | None = None,
+    on_floor: bool = False,
 ) -> dict[str, float]:
     """One calibrated score per label: posterior over the label space of
     prior x size likelihood (:func:`perception.naming_prior.size_log_likelihoods`, with
     ``height_max_m`` for an object the photo's bottom edge cut, ``length_max_m`` for one a side
     edge cut) x classifier
     likelihood ratio ((p + CLASSIFIER_FLOOR) / CLASSIFIER_FLOOR of the label's summed ImageNet
-    probability p; ``label_probs`` None = no classifier). Values sum to 1."""
-    from perception.naming_prior import size_log_likelihoods
+    probability p; ``label_probs`` None = no classifier). ``on_floor``: the object is a thing of
+    furniture height standing on the floor, which weighs the labels of things that stand on
+    furniture by :data:`perception.naming_prior.OFF_FLOOR_WEIGHT`. Values sum to 1."""
+    from perception.naming_prior import OFF_FLOOR_WEIGHT, off_floor_labels, size_log_likelihoods
 
     labels, log_prior = _label_space()
     p = np.array([(label_probs or {}).get(lab, 0.0) for lab in labels])
     logit = log_prior + size_log_likelihoods(labels, size_m, height_max_m, length_max_m) + np.log1p(p / CLASSIFIER_FLOOR)
+    if on_floor:
+        logit = logit + np.where(off_floor_labels(labels, float(size_m[2])), np.log(OFF_FLOOR_WEIGHT), 0.0)
     post = np.exp(logit - logit.max())
     post /= post.sum()
     return {lab: float(v) for lab, v in zip(labels, post)}
@@ -385,19 +390,22 @@ class EfficientNetNamer:
         sizes_m: list[tuple[float, float, float]],
         heights_max_m: list[float | None] | None = None,
         lengths_max_m: list[float | None] | None = None,
+        on_floor: list[bool] | None = None,
     ) -> list[tuple[str, float]]:
         """(label, confidence in [0, 1]) per crop: the label of highest posterior and its
         posterior; ``("object", 1 - that posterior)`` when the size fits no label (log-size
-        distance over 1 from all) and the classifier gives the best label under 0.5."""
+        distance over 1 from all) and the classifier gives the best label under 0.5.
+        ``on_floor``: per crop, see :func:`combined_label_posterior`."""
         from perception.naming_prior import size_hypotheses, size_distance
 
         probs = self.class_probabilities([self._views(c, m) for c, m in zip(crops_rgb, crop_masks)])
         heights = heights_max_m or [None] * len(sizes_m)
         lengths = lengths_max_m or [None] * len(sizes_m)
+        floors = on_floor or [False] * len(sizes_m)
         out = []
-        for p, size, top, span in zip(probs, sizes_m, heights, lengths):
+        for p, size, top, span, floor in zip(probs, sizes_m, heights, lengths, floors):
             lp = label_probabilities(p)
-            post = combined_label_posterior(lp, size, top, span)
+            post = combined_label_posterior(lp, size, top, span, floor)
             best = max(sorted(post), key=lambda k: post[k])
             conf = float(np.clip(post[best], 0.0, 1.0))
             sizes = size_hypotheses(size, top, span)
@@ -408,7 +416,8 @@ class EfficientNetNamer:
         return out
 
     def name(
-        self, crop_rgb: np.ndarray, crop_mask: np.ndarray, size_m: tuple[float, float, float], height_max_m: float | None = None, length_max_m: float | None = None
+        self, crop_rgb: np.ndarray, crop_mask: np.ndarray, size_m: tuple[float, float, float], height_max_m: float | None = None, length_max_m: float | None = None,
+        on_floor: bool = False,
     ) -> tuple[str, float]:
         """:meth:`name_many` for one crop."""
-        return self.name_many([crop_rgb], [crop_mask], [size_m], [height_max_m], [length_max_m])[0]
+        return self.name_many([crop_rgb], [crop_mask], [size_m], [height_max_m], [length_max_m], [on_floor])[0]
