@@ -6,7 +6,9 @@ tell them apart from their neighbours are candidates (a dishwasher and a cabinet
 cannot be told apart by size, so the more general "cabinet" stands for both); a few shape rules
 add what size alone misses (a large flat top at table height, tall and narrow furniture).
 Observed extents are partial (the back of an object is not seen), so the footprint may be
-smaller than the object's. The confidence is honest and low: at most :data:`MAX_CONFIDENCE`.
+smaller than the object's. A thing of furniture height standing on the floor is unlikely to be
+one of the things that stand on furniture (:data:`OFF_FLOOR_WEIGHT`). The confidence is honest
+and low: at most :data:`MAX_CONFIDENCE`.
 """
 
 from __future__ import annotations
@@ -16,8 +18,8 @@ import numpy as np
 from scene_builder.vocabulary import BY_NAME
 
 __all__ = [
-    "CANDIDATES", "EXTENT_STEPS", "GeometricPriorNamer", "MAX_CONFIDENCE", "OFF_FLOOR_WEIGHT", "SIZE_SIGMA_LOG",
-    "FLOOR_LAMP_MIN_M", "off_floor_labels", "shape_rule", "size_distance", "size_hypotheses", "size_log_likelihoods",
+    "CANDIDATES", "EXTENT_STEPS", "FLOOR_LAMP_MIN_M", "GeometricPriorNamer", "MAX_CONFIDENCE", "OFF_FLOOR_WEIGHT",
+    "SIZE_SIGMA_LOG", "off_floor_labels", "shape_rule", "size_distance", "size_hypotheses", "size_log_likelihoods",
 ]
 
 #: The namer never claims more than this: size is weak evidence of what an object is.

@@ -571,7 +571,7 @@ def perceive(inputs: InputSpec, config: PerceptionConfig, seed: int = 0, on_step
         prior = GeometricPriorNamer()
         for i in todo:
             (c, m), s = crops[i], sizes[i]
-            if names[i][0] == "object" and (guess := prior.name(c, m, s))[0] != "object":
+            if names[i][0] == "object" and (guess := prior.name(c, m, s, on_floor=floors[i]))[0] != "object":
                 names[i] = guess
                 named_by_prior += 1
     kept, points_world, names, merged = _merge_fragments(kept, points_world, names)

@@ -150,13 +150,16 @@ class ObjectNamer(Protocol):
     """Names an object crop with a label of ``scene_builder.vocabulary``."""
 
     def name(
-        self, crop_rgb: np.ndarray, crop_mask: np.ndarray, size_m: tuple[float, float, float], height_max_m: float | None = None, length_max_m: float | None = None
+        self, crop_rgb: np.ndarray, crop_mask: np.ndarray, size_m: tuple[float, float, float], height_max_m: float | None = None, length_max_m: float | None = None,
+        on_floor: bool = False,
     ) -> tuple[str, float]:
         """crop_rgb: (h, w, 3) uint8; crop_mask: (h, w) bool; size_m: gravity-aligned extents
         (length, width, height) sorted so that length >= width; height_max_m: None, or, for an
         object the photo's bottom edge cut, its top's height above the floor (its height lies
         between the seen one and this); length_max_m: None, or, for an object a side edge of the
-        photo cut, the most its length can be. Both are optional: a namer that takes neither is
-        called without them (:func:`keywords_taken`). Returns (label, confidence in [0, 1]);
-        ``("object", c)`` when unknown."""
+        photo cut, the most its length can be; on_floor: the object is a thing of furniture
+        height standing on the floor (not a monitor or a vase:
+        :data:`perception.naming_prior.OFF_FLOOR_WEIGHT`). All three are optional: a namer that
+        takes none is called without them (:func:`keywords_taken`). Returns (label, confidence
+        in [0, 1]); ``("object", c)`` when unknown."""
         ...
