@@ -317,8 +317,7 @@ def assemble_asset_with_offset(
             axis = np.asarray(js.axis, dtype=np.float64)
             axis = axis / np.linalg.norm(axis)
             moving = combine_inertials([inertials[n] for n in _subtree(spec.name, children)])
-            revolute = js.type in (JointType.REVOLUTE, JointType.REVOLUTE_PRISMATIC)
-            res = joint_resistance(js.type, axis, anchor, moving, range_rad=(js.lower, js.upper) if revolute else None)
+            res = joint_resistance(js.type, axis, anchor, moving, range_rad=(js.lower, js.upper))
             joint = Joint(
                 type=js.type,
                 axis=axis,

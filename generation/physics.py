@@ -302,9 +302,10 @@ def joint_resistance(
     time_constant_s: float = 0.5,
     range_rad: tuple[float, float] | None = None,
 ) -> JointResistance:
-    """Damping, dry friction, effort limit and (given ``range_rad``, a revolute joint's lower and
-    upper limits) counterbalance stiffness of a joint carrying ``inertial`` (the moving part and
-    everything attached to it). See the module docstring for the derivation."""
+    """Damping, dry friction, effort limit and (given ``range_rad``, the joint's lower and upper
+    limits, which only a revolute joint's counterbalance reads) counterbalance stiffness of a
+    joint carrying ``inertial`` (the moving part and everything attached to it). See the module
+    docstring for the derivation."""
     a = np.asarray(axis, dtype=np.float64)
     a = a / np.linalg.norm(a)
     m = inertial.mass_kg

@@ -157,24 +157,6 @@ def test_assemble_from_voxels_like_the_physx_backend():
     assert (lo + hi)[:2] == pytest.approx([0.0, 0.0], abs=1e-6) and lo[2] == pytest.approx(0.0, abs=1e-6)
 
 
-def _hinge_only_xml(part, stiffness: float, q0: float) -> str:
-    """The part alone on its (world-fixed) hinge, as exported, started at angle ``q0``."""
-    j, i = part.joint, part.inertial
-    t = i.inertia_kg_m2
-    return f"""
-<mujoco>
-  <compiler angle="radian"/>
-  <option timestep="0.002"/>
-  <worldbody>
-    <body name="door">
-      <joint name="hinge" type="hinge" axis="{j.axis[0]} {j.axis[1]} {j.axis[2]}" pos="{j.anchor_m[0]} {j.anchor_m[1]} {j.anchor_m[2]}"
-             range="{j.lower} {j.upper}" limited="true" damping="{j.damping}" frictionloss="{j.friction}" stiffness="{stiffness}"/>
-      <inertial pos="{i.com_m[0]} {i.com_m[1]} {i.com_m[2]}" mass="{i.mass_kg}" fullinertia="{t[0,0]} {t[1,1]} {t[2,2]} {t[0,1]} {t[0,2]} {t[1,2]}"/>
-    </body>
-  </worldbody>
-  <keyframe><key qpos="{q0}"/></keyframe>
-</mujoco>"""
-
 
 @pytest.mark.parametrize("label", ["oven", "dishwasher"])
 def test_a_door_hinged_at_its_bottom_is_counterbalanced_and_stays_where_put(assets, label):
@@ -182,6 +164,8 @@ def test_a_door_hinged_at_its_bottom_is_counterbalanced_and_stays_where_put(asse
     k about 0.75 m g r for a 1.5 rad range, the friction holding what is left, so in MuJoCo the door
     stays at 30, 45 and 70 degrees. The control, the same door without the spring, falls open."""
     import mujoco
+
+    from tests.test_generation_physics import hinged_part_xml
 
     door = next(p for p in assets[label].parts if p.joint is not None and p.joint.type is JointType.REVOLUTE)
     j = door.joint
@@ -192,7 +176,8 @@ def test_a_door_hinged_at_its_bottom_is_counterbalanced_and_stays_where_put(asse
     for q0 in np.radians([30.0, 45.0, 70.0]):
         drift = []
         for k in (j.stiffness, 0.0):
-            model = mujoco.MjModel.from_xml_string(_hinge_only_xml(door, k, q0))
+            model = mujoco.MjModel.from_xml_string(hinged_part_xml(door.inertial, j.friction, j.damping, axis=j.axis, anchor_m=j.anchor_m,
+                                                                   range_rad=(j.lower, j.upper), stiffness=k, q0=q0))
             data = mujoco.MjData(model)
             mujoco.mj_resetDataKeyframe(model, data, 0)
             mujoco.mj_step(model, data, nstep=1000)  # 2 s

@@ -143,19 +143,27 @@ def test_door_friction_exceeds_gravity_torque_at_tilt():
     assert res.damping == pytest.approx(i_hinge / 0.5, rel=1e-9)
 
 
-def _hinged_door_xml(inertial: Inertial, friction: float, damping: float, tilt_rad: float) -> str:
+def hinged_part_xml(inertial: Inertial, friction: float, damping: float, *, tilt_rad: float = 0.0, axis=(0.0, 0.0, 1.0), anchor_m=(0.0, 0.0, 0.0),
+                    range_rad: tuple[float, float] | None = None, stiffness: float = 0.0, q0: float = 0.0) -> str:
+    """MJCF of one part (``inertial``) on a world-fixed hinge (``axis`` through ``anchor_m``, with
+    ``friction``, ``damping``, a spring of ``stiffness`` toward 0 and, given, limits
+    ``range_rad``) under gravity tilted by ``tilt_rad`` about y, its keyframe at angle ``q0``."""
     g = 9.81 * np.array([np.sin(tilt_rad), 0.0, -np.cos(tilt_rad)])  # floor tilted about y
     m, c = inertial.mass_kg, inertial.com_m
     i = inertial.inertia_kg_m2
+    limits = "" if range_rad is None else f' range="{range_rad[0]} {range_rad[1]}" limited="true"'
     return f"""
 <mujoco>
+  <compiler angle="radian"/>
   <option gravity="{g[0]} {g[1]} {g[2]}" timestep="0.002"/>
   <worldbody>
     <body name="door" pos="0 0 0">
-      <joint name="hinge" type="hinge" axis="0 0 1" pos="0 0 0" frictionloss="{friction}" damping="{damping}"/>
+      <joint name="hinge" type="hinge" axis="{axis[0]} {axis[1]} {axis[2]}" pos="{anchor_m[0]} {anchor_m[1]} {anchor_m[2]}"{limits}
+             frictionloss="{friction}" damping="{damping}" stiffness="{stiffness}"/>
       <inertial pos="{c[0]} {c[1]} {c[2]}" mass="{m}" fullinertia="{i[0,0]} {i[1,1]} {i[2,2]} {i[0,1]} {i[0,2]} {i[1,2]}"/>
     </body>
   </worldbody>
+  <keyframe><key qpos="{q0}"/></keyframe>
 </mujoco>"""
 
 
@@ -168,7 +176,7 @@ def test_door_stays_put_in_mujoco_on_tilted_floor():
     res = joint_resistance(JointType.REVOLUTE, [0, 0, 1], [0.0, 0.0, 0.0], door)
     angles = []
     for friction in (res.friction, 0.0):
-        model = mujoco.MjModel.from_xml_string(_hinged_door_xml(door, friction, res.damping, np.radians(2.0)))
+        model = mujoco.MjModel.from_xml_string(hinged_part_xml(door, friction, res.damping, tilt_rad=np.radians(2.0)))
         data = mujoco.MjData(model)
         mujoco.mj_step(model, data, nstep=1000)  # 2 s
         angles.append(abs(float(data.qpos[0])))
