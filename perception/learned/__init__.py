@@ -42,7 +42,8 @@ def register_backends(depth: Registry, segmentation: Registry, naming: Registry,
     depth: ``"depth-anything-v2"`` (priority 100, when its weights resolve locally) and
     ``"single-view-geometry"`` (priority 0, always available, no weights).
     segmentation: ``"sam2"`` (priority 100, when its weights resolve locally).
-    naming: ``"efficientnet-lite0"`` (priority 50, when its package and weights file exist).
+    naming: ``"efficientnet-lite0"`` (priority 50, when its ONNX file, shipped with the project,
+    passes its SHA-256 check).
     """
     from perception import models
 
@@ -110,7 +111,7 @@ def register_backends(depth: Registry, segmentation: Registry, naming: Registry,
         make_efficientnet,
         priority=50,
         available=_eff_ok,
-        description="EfficientNet-Lite0 ImageNet classifier mapped to the project vocabulary",
+        description="EfficientNet-Lite0 ImageNet classifier (onnxruntime) mapped to the project vocabulary",
     )
 
 
