@@ -590,31 +590,9 @@ def summarize(items: list[Item]) -> dict:
     return out
 
 
-def _meta(argv: list[str] | None) -> dict:
-    """When, where and with what the figures were measured."""
-    import datetime
-    import os
-    import subprocess
-    import sys
-
-    from scene_builder.bench.suites import machine_description
-
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True, text=True, timeout=10).stdout.strip()
-    except OSError:
-        commit = ""
-    m = machine_description()
-    args = " ".join(sys.argv[1:] if argv is None else argv)
-    return {
-        "date": datetime.datetime.now(datetime.timezone.utc).date().isoformat(),
-        "commit": commit or "?",
-        "command": f"python -m scene_builder.bench.groundtruth {args}".strip(),
-        "machine": f"{m['cpu'].split()[0]} CPU, {m['cores']} cores, {m['memory_gb']} GB, no GPU",
-        "load": f"{os.getloadavg()[0]:.1f}",
-    }
-
-
 def main(argv: list[str] | None = None) -> int:
+    from scene_builder.bench.suites import run_meta
+
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA, help="the shared data folder (default ../shared/data)")
     parser.add_argument("--sets", default="sun-rgbd,sun-plain,coco,real", help="comma-separated: sun-rgbd, sun-plain, coco, real (every RGB-D sample: fates only)")
@@ -655,7 +633,7 @@ def main(argv: list[str] | None = None) -> int:
     summary = summarize(items)
     for set_name, s in summary.items():
         console.print(f"[bold]{set_name}[/bold] " + ", ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}" for k, v in s.items()))
-    doc = {"meta": _meta(argv), "summary": summary, "items": [dataclasses.asdict(i) for i in items]}
+    doc = {"meta": run_meta("scene_builder.bench.groundtruth", argv), "summary": summary, "items": [dataclasses.asdict(i) for i in items]}
     if args.json:
         args.json.write_text(json.dumps(doc, indent=1, default=str))
     if args.markdown:

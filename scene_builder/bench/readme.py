@@ -7,6 +7,7 @@ and the JSON drift apart.
 
     .venv/bin/python -m scene_builder.bench.groundtruth --json bench_results/groundtruth.json
     .venv/bin/python -m scene_builder.bench.novel_view --rooms 4 --json bench_results/novel_view.json
+    .venv/bin/python -m scene_builder.bench.cold_start --json bench_results/cold_start.json
     .venv/bin/python -m scene_builder.bench.readme --write     # rewrite the blocks of README.md
     .venv/bin/python -m scene_builder.bench.readme --check     # exit 1 when a block is stale
 """
@@ -152,8 +153,15 @@ def _novel_view(data: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _cold_start(data: dict) -> str:
+    """What a user waits for: one build process per photo (bench.cold_start) beside the control."""
+    from scene_builder.bench.cold_start import markdown
+
+    return markdown(data)
+
+
 #: block name -> (JSON file under bench_results/, renderer)
-BLOCKS = {"objects": ("groundtruth.json", _objects), "novel-view": ("novel_view.json", _novel_view)}
+BLOCKS = {"objects": ("groundtruth.json", _objects), "novel-view": ("novel_view.json", _novel_view), "cold-start": ("cold_start.json", _cold_start)}
 
 
 def render(name: str, results: Path = RESULTS) -> str:

@@ -36,6 +36,7 @@ import os
 import platform
 import resource
 import shutil
+import sys
 import tempfile
 import time
 from dataclasses import dataclass
@@ -653,3 +654,24 @@ def print_result(result: BenchResult, console=None) -> None:
     if result.summary.stage_seconds_median:
         console.print("median seconds per stage: " + ", ".join(f"{k} {v:.2f}" for k, v in result.summary.stage_seconds_median.items()))
     console.print(f"peak memory {result.summary.peak_rss_mb or 0:.0f} MiB; results in {result.out_json}")
+
+
+def run_meta(module: str, argv: list[str] | None) -> dict:
+    """When, where and with what a bench's figures were measured: UTC date, short commit, the
+    command (``python -m MODULE ARGS``), the machine in words and the 1-minute load average."""
+    import subprocess
+
+    repo = Path(__file__).resolve().parents[2]
+    try:
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=repo, capture_output=True, text=True, timeout=10).stdout.strip()
+    except OSError:
+        commit = ""
+    m = machine_description()
+    args = " ".join(sys.argv[1:] if argv is None else argv)
+    return {
+        "date": datetime.datetime.now(datetime.timezone.utc).date().isoformat(),
+        "commit": commit or "?",
+        "command": f"python -m {module} {args}".strip(),
+        "machine": f"{m['cpu'].split()[0]} CPU, {m['cores']} cores, {m['memory_gb']} GB, no GPU",
+        "load": f"{os.getloadavg()[0]:.1f}",
+    }
