@@ -17,6 +17,7 @@ Backends (registry task ``"generation"``):
 from __future__ import annotations
 
 import importlib.util
+import os
 from typing import TYPE_CHECKING, Callable, Protocol
 
 from scene_builder.config import GenerationConfig
@@ -109,18 +110,45 @@ def generate_assets(
     (``generation.texture``) when ``config.photo_textures``. ``on_object(name)`` is called after
     each object. Deterministic for a given seed. An object the learned generator fails on gets a
     shape-prior asset whose ``fallback_reason`` says why."""
-    generator, _use = resolve_generator(config)
-    out = []
-    for obj in perception.objects:
+    generator, use = resolve_generator(config)
+
+    def one(obj: PerceivedObject) -> GeneratedAsset:
         generated = generator.generate(obj, perception, config, seed)
         if config.photo_textures:
             from generation.texture import photo_textured
 
             generated = photo_textured(generated, obj, perception.observation, perception.camera)
-        out.append(generated)
+        return generated
+
+    # The shape prior makes each object from the perception alone, in numpy, SciPy and trimesh
+    # calls that release the GIL for much of their time: objects are made on threads, collected
+    # in their order (the same assets as one at a time, byte for byte). A learned generator keeps
+    # its one model call at a time.
+    threads = min(_threads(), len(perception.objects)) if use.backend == "shape-prior" else 1
+    out = []
+    if threads > 1:
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(threads, thread_name_prefix="generate") as pool:
+            futures = [pool.submit(one, obj) for obj in perception.objects]
+            for obj, future in zip(perception.objects, futures):
+                out.append(future.result())
+                if on_object is not None:
+                    on_object(obj.name)
+        return tuple(out)
+    for obj in perception.objects:
+        out.append(one(obj))
         if on_object is not None:
             on_object(obj.name)
     return tuple(out)
+
+
+def _threads() -> int:
+    """Threads that make objects: the cores this process may use, at most ``OMP_NUM_THREADS``
+    where it is set (``scene-builder batch`` sets it to each worker's share of the cores)."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    cap = os.environ.get("OMP_NUM_THREADS", "").strip()
+    return max(1, min(cores, int(cap)) if cap.isdigit() and int(cap) > 0 else cores)
 
 
 def assemble_asset(*args, **kwargs):

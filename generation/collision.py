@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import hashlib
 import io
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -117,6 +118,13 @@ def _merge_smallest(pieces, max_pieces: int):
     return pieces
 
 
+#: One CoACD run at a time in a process (objects are made on threads, ``generation.generate_assets``):
+#: CoACD documents no thread safety and keeps process-wide state (its log level, OpenMP inside),
+#: and fast_simplification, built the same way, mixed two meshes on two threads
+#: (``generation.meshing.DECIMATION_LOCK``).
+_COACD_LOCK = threading.Lock()
+
+
 def convex_pieces(
     mesh,
     *,
@@ -138,7 +146,7 @@ def convex_pieces(
     48^3 box 0.8 s instead of 4.6 s, the same pieces and coverage. Results are cached under ``cache_dir``
     keyed by the mesh bytes and parameters. Deterministic for a given mesh and seed.
     """
-    from generation.meshing import decimate, to_trimesh
+    from generation.meshing import decimate, quadric_decimation, to_trimesh
 
     tm = to_trimesh(mesh)
     if is_convex_enough(tm):
@@ -149,22 +157,23 @@ def convex_pieces(
         return _load_cache(cache_path)
 
     coacd = import_coacd()
-    coacd.set_log_level("error")
     small = decimate(tm, COACD_MAX_FACES)
     if len(small.faces) > COACD_MAX_FACES:
         # decimation could not keep the mesh watertight: CoACD repairs its input (preprocess
         # "on"), so a non-manifold decimated copy is fine for it, and far faster than 100k faces
-        small = tm.simplify_quadric_decimation(face_count=COACD_MAX_FACES)
-    result = coacd.run_coacd(
-        coacd.Mesh(np.asarray(small.vertices, dtype=np.float64), np.asarray(small.faces, dtype=np.int32)),
-        threshold=float(threshold),
-        max_convex_hull=int(max_pieces),
-        preprocess_mode="off" if small.is_watertight else "on",
-        resolution=int(resolution),
-        mcts_iterations=int(mcts_iterations),
-        mcts_max_depth=int(mcts_max_depth),
-        seed=int(seed),
-    )
+        small = quadric_decimation(tm, COACD_MAX_FACES)
+    with _COACD_LOCK:
+        coacd.set_log_level("error")
+        result = coacd.run_coacd(
+            coacd.Mesh(np.asarray(small.vertices, dtype=np.float64), np.asarray(small.faces, dtype=np.int32)),
+            threshold=float(threshold),
+            max_convex_hull=int(max_pieces),
+            preprocess_mode="off" if small.is_watertight else "on",
+            resolution=int(resolution),
+            mcts_iterations=int(mcts_iterations),
+            mcts_max_depth=int(mcts_max_depth),
+            seed=int(seed),
+        )
     pieces = []
     for verts, _faces in result:
         verts = np.asarray(verts, dtype=np.float64)

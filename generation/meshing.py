@@ -8,6 +8,8 @@ Voxel grid convention (used everywhere in ``generation``): ``occupancy[i, j, k]`
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from scene_builder.model import TriangleMesh
@@ -47,6 +49,20 @@ def check_watertight(tm, what: str) -> None:
         raise ValueError(f"{what}: mesh volume {float(tm.volume):.3g} m^3 is not positive")
 
 
+#: fast_simplification keeps the mesh it works on in global C++ vectors (its Simplify.h), filled
+#: and read back by separate calls: two decimations on two threads (``generation.generate_assets``
+#: makes objects on threads) mixed their meshes. One decimation at a time in a process.
+DECIMATION_LOCK = threading.Lock()
+
+
+def quadric_decimation(tm, face_count: int, aggression: int | None = None):
+    """``tm.simplify_quadric_decimation`` (fast_simplification) under :data:`DECIMATION_LOCK`."""
+    with DECIMATION_LOCK:
+        if aggression is None:
+            return tm.simplify_quadric_decimation(face_count=face_count)
+        return tm.simplify_quadric_decimation(face_count=face_count, aggression=aggression)
+
+
 def decimate(tm, max_faces: int):
     """Quadric decimation to at most ``max_faces`` faces (``fast_simplification`` via trimesh)
     that stays watertight with positive volume.
@@ -62,7 +78,7 @@ def decimate(tm, max_faces: int):
     best = tm
     n = int(max_faces)
     for aggression, target in ((3, n), (5, n), (7, n), (2, n), (3, int(0.9 * n)), (5, int(0.8 * n)), (1, n)):
-        out = tm.simplify_quadric_decimation(face_count=target, aggression=aggression)
+        out = quadric_decimation(tm, target, aggression)
         if not (out.is_watertight and out.is_winding_consistent):
             continue
         if float(out.volume) < 0:

@@ -124,6 +124,39 @@ def test_deterministic(perception):
             assert all(np.array_equal(c.vertices_m, d.vertices_m) for c, d in zip(p.collision, q.collision))
 
 
+def test_objects_made_on_threads_are_those_made_one_at_a_time(perception, monkeypatch):
+    """generate_assets makes the shape prior's objects on threads (one per core): the same assets,
+    in the same order, byte for byte, as on one thread; the progress callback in object order."""
+    import generation
+
+    monkeypatch.setattr(generation, "_threads", lambda: 1)
+    one = generate_assets(perception, GenerationConfig(), seed=5)
+    monkeypatch.setattr(generation, "_threads", lambda: 3)
+    seen = []
+    many = generate_assets(perception, GenerationConfig(), seed=5, on_object=seen.append)
+    assert seen == [o.name for o in perception.objects] == [g.asset.name for g in many]
+    for x, y in zip(one, many, strict=True):
+        assert np.array_equal(x.world_from_asset, y.world_from_asset) and x.asset.mass_kg == y.asset.mass_kg
+        for p, q in zip(x.asset.parts, y.asset.parts, strict=True):
+            assert np.array_equal(p.visual.vertices_m, q.visual.vertices_m) and np.array_equal(p.visual.faces, q.visual.faces)
+            assert np.array_equal(p.inertial.inertia_kg_m2, q.inertial.inertia_kg_m2)
+            assert all(np.array_equal(c.vertices_m, d.vertices_m) for c, d in zip(p.collision, q.collision, strict=True))
+
+
+def test_thread_count_follows_the_cores_and_omp_num_threads(monkeypatch):
+    import os
+
+    import generation
+
+    cores = len(os.sched_getaffinity(0))
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    assert generation._threads() == cores
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")  # a batch worker's share of the cores
+    assert generation._threads() == 1
+    monkeypatch.setenv("OMP_NUM_THREADS", "bogus")
+    assert generation._threads() == cores
+
+
 @pytest.mark.slow
 def test_real_rgbd_sample():
     """Perception of one real RGB-D photo, then generation: a sound asset per object."""

@@ -296,3 +296,24 @@ def test_only_objects_standing_on_a_top_count_as_resting_on_it():
     lifted[2, 3] = 0.2
     _, b2 = _resting_on(sideboard, [piece], lifted, np.array([0.5, 1.0, 0.9]))
     assert np.allclose(b2, bottoms - 0.2)
+
+
+def test_decimations_on_threads_are_those_made_one_at_a_time():
+    """fast_simplification keeps its mesh in global C++ vectors: two decimations at once on two
+    threads (objects are made on threads) mixed their meshes until generation.meshing made them
+    take turns. Four different meshes decimated on four threads, eight rounds: each result is the
+    one made alone."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    import trimesh
+
+    from generation.meshing import decimate
+
+    meshes = [trimesh.creation.icosphere(subdivisions=5, radius=0.2 + 0.05 * i) for i in range(2)]
+    meshes += [trimesh.creation.capsule(height=0.3 + 0.1 * i, radius=0.1, count=[96, 96]) for i in range(2)]
+    alone = [decimate(m, 800) for m in meshes]
+    with ThreadPoolExecutor(4) as pool:
+        for _ in range(8):
+            for got, want in zip(pool.map(lambda m: decimate(m, 800), meshes), alone):
+                np.testing.assert_array_equal(got.vertices, want.vertices)
+                np.testing.assert_array_equal(got.faces, want.faces)

@@ -4,8 +4,8 @@ from launch to exit.
 The ground-truth bench builds all its photos in one Python process, so its seconds leave out what
 each user's command pays once: starting Python and importing the stages (numpy, trimesh, MuJoCo,
 USD, rerun, open3d, onnxruntime, ...). Here each photo is built as the CLI builds it, with every
-export and the rerun recording: wall seconds, CPU seconds (the process's own user + system time)
-and its peak resident memory, read from the kernel's accounting of that child (``os.wait4``).
+export and the rerun recording: wall seconds, CPU seconds (the process's own user + system time,
+``os.wait4``) and its peak resident memory (its ``VmHWM``, sampled while it runs).
 
 The control does nothing clever: a process that imports every stage and builds nothing
 (``scene_builder.pipeline.load_stages``), what any build costs before it starts.
@@ -40,19 +40,37 @@ TARGET_MEDIAN_S = 15.0
 CONTROL_CODE = "from scene_builder.pipeline import load_stages; load_stages()"
 
 
+def _hwm_mb(pid: int) -> float | None:
+    """Peak resident memory (MB) of process ``pid`` since it last exec'd (``VmHWM`` of
+    /proc/PID/status), or None once it has exited."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024.0
+    except (OSError, ValueError):
+        return None
+    return None
+
+
 def timed_run(cmd: list[str], env: dict | None = None, cwd: Path | None = None, timeout_s: float = 900.0) -> dict:
     """Run ``cmd`` and return its exit status (None when it ran past ``timeout_s`` and was
     killed), wall seconds, CPU seconds (user + system of that process and the children it waited
-    for), peak resident memory in MB and the last 2000 characters of its stderr."""
+    for, ``os.wait4``), peak resident memory in MB and the last 2000 characters of its stderr.
+
+    The peak is the process's own high-water mark (``VmHWM``), read every 20 ms while it runs:
+    the kernel's ``ru_maxrss`` of a child also counts the parent's memory it was forked from (a
+    ``python -c pass`` started from a 1 GB test worker read 1 GB)."""
     with tempfile.TemporaryFile() as err:
         t0 = time.perf_counter()
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err, env=env, cwd=cwd)
-        status = None
+        status, peak = None, 0.0
         while True:
+            hwm = _hwm_mb(proc.pid)
             pid, raw, usage = os.wait4(proc.pid, os.WNOHANG)
             if pid == proc.pid:
                 status = os.waitstatus_to_exitcode(raw)
                 break
+            peak = max(peak, hwm or 0.0)
             if time.perf_counter() - t0 > timeout_s:
                 proc.kill()
                 _, raw, usage = os.wait4(proc.pid, 0)
@@ -66,7 +84,7 @@ def timed_run(cmd: list[str], env: dict | None = None, cwd: Path | None = None, 
         "exit_status": status,
         "wall_s": round(wall, 2),
         "cpu_s": round(usage.ru_utime + usage.ru_stime, 2),
-        "peak_rss_mb": round(usage.ru_maxrss / 1024.0, 1),  # ru_maxrss is in KB on Linux
+        "peak_rss_mb": round(peak, 1),
         "stderr_tail": tail,
     }
 
