@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import threading
 from dataclasses import replace
 
 import numpy as np
@@ -721,6 +722,10 @@ class ShapePriorGenerator:
         # (completion_blockers, found above; _ownership is cached per object)
         columns = [_ownership(o)[2] for o in blocking]
 
+        # Both cores for the queries (most of the time here), unless objects are made on threads
+        # (generation.generate_assets): the other core is making another object.
+        query_workers = 2 if threading.current_thread() is threading.main_thread() else 1
+
         def blocked(p_box: np.ndarray) -> np.ndarray:
             """Voxel centres this object may not fill: seen free space, behind a wall, or nearer
             to another object's observed surface than to its own and not below that object's
@@ -731,10 +736,10 @@ class ShapePriorGenerator:
             for wall in walls:
                 out |= wall.clearance_m(p_world) < WALL_CLEARANCE_M + 0.5 * voxel_m
             if others_tree is not None:
-                d_own, _ = own_tree.query(p_world, workers=2)  # (both cores: the queries are most of the time)
+                d_own, _ = own_tree.query(p_world, workers=query_workers)
                 # Another object's surface matters only where it is nearer than this one's.
                 bound = float(d_own.max()) + voxel_m
-                d_other, idx = others_tree.query(p_world, distance_upper_bound=bound, workers=2)
+                d_other, idx = others_tree.query(p_world, distance_upper_bound=bound, workers=query_workers)
                 near = np.isfinite(d_other)
                 above = np.zeros(len(p_world), dtype=bool)
                 above[near] = p_world[near, 2] >= others_bottom[idx[near]] - 0.5 * voxel_m
