@@ -124,22 +124,17 @@ def generate_assets(
     # calls that release the GIL for much of their time: objects are made on threads, collected
     # in their order (the same assets as one at a time, byte for byte). A learned generator keeps
     # its one model call at a time.
+    import contextlib
+    from concurrent.futures import ThreadPoolExecutor
+
     threads = min(_threads(), len(perception.objects)) if use.backend == "shape-prior" else 1
     out = []
-    if threads > 1:
-        from concurrent.futures import ThreadPoolExecutor
-
-        with ThreadPoolExecutor(threads, thread_name_prefix="generate") as pool:
-            futures = [pool.submit(one, obj) for obj in perception.objects]
-            for obj, future in zip(perception.objects, futures):
-                out.append(future.result())
-                if on_object is not None:
-                    on_object(obj.name)
-        return tuple(out)
-    for obj in perception.objects:
-        out.append(one(obj))
-        if on_object is not None:
-            on_object(obj.name)
+    with ThreadPoolExecutor(threads, thread_name_prefix="generate") if threads > 1 else contextlib.nullcontext() as pool:
+        made = map(one, perception.objects) if pool is None else pool.map(one, perception.objects)
+        for obj, generated in zip(perception.objects, made):
+            out.append(generated)
+            if on_object is not None:
+                on_object(obj.name)
     return tuple(out)
 
 

@@ -33,7 +33,6 @@ import numpy as np
 __all__ = ["CONTROL_CODE", "run", "summarize", "timed_run"]
 
 REPO = Path(__file__).resolve().parents[2]
-DEFAULT_DATA = REPO.parent / "shared" / "data"
 #: The median build time issues 24 and 25 ask for (s, 2 cores).
 TARGET_MEDIAN_S = 15.0
 #: The control: a process that loads every stage and builds nothing.
@@ -165,6 +164,7 @@ def markdown(doc: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     from scene_builder.bench.suites import run_meta
+    from scene_builder.bench.sweep import DEFAULT_DATA
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA, help="the shared data folder (default ../shared/data)")
