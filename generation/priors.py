@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from generation.assembly import ConvexSolids, JointSpec, PartSpec, box_solid
+from generation.proportions import turned_box
 from scene_builder.model import JointType, TriangleMesh
 
 __all__ = ["PRIOR_LABELS", "prior_parts", "shelf_boards"]
@@ -146,26 +147,39 @@ def shelf_boards(contents, size_m, shelf_points_m=None) -> tuple[tuple[float, fl
     return tuple(boards)
 
 
-def _sofa(d, w, h, material, rgba, label):
+def _sofa(d, w, h, material, rgba, label, proportions=None):
+    """A bed (mattress base, headboard) or a sofa (seat base, backrest, arms). ``proportions``
+    (:class:`generation.proportions.Proportions`): the mattress's or seat's top and the side of
+    the headboard or back as measured (no headboard where none was seen: a block of the box's
+    height); None: category constants, the back on -x."""
+    side = "-x" if proportions is None or proportions.back_side is None else proportions.back_side
+    dd, ww = (d, w) if side in ("-x", "+x") else (w, d)  # depth and width with the back on -x
+
+    def box(lo, hi):
+        return box_solid(*turned_box(side, lo, hi))
+
     if label == "bed":
-        base_h = 0.75 * h if h > 0.4 else h
-        solids = [box_solid([-d / 2, -w / 2, 0.0], [d / 2, w / 2, base_h])]
+        if proportions is None:
+            base_h = 0.75 * h if h > 0.4 else h
+        else:
+            base_h = proportions.top_m if proportions.back_side is not None else h
+        solids = [box([-dd / 2, -ww / 2, 0.0], [dd / 2, ww / 2, base_h])]
         if base_h < h:
-            head = _clip(0.04 * d, 0.03, 0.08)
-            solids.append(box_solid([-d / 2, -w / 2, 0.0], [-d / 2 + head, w / 2, h]))
+            head = _clip(0.04 * dd, 0.03, 0.08)
+            solids.append(box([-dd / 2, -ww / 2, 0.0], [-dd / 2 + head, ww / 2, h]))
         return [PartSpec("body", None, ConvexSolids(tuple(solids)), material, affordance_rank=2, affordance="lie down",
                          description="bed: mattress base with a headboard", rgba=rgba)]
-    seat_h = 0.5 * h
-    back_d = 0.25 * d
-    arm_w = _clip(0.12 * w, 0.05, 0.25) if w > 4 * 0.12 * d else 0.0
+    seat_h = 0.5 * h if proportions is None else proportions.top_m
+    back_d = 0.25 * dd
+    arm_w = _clip(0.12 * ww, 0.05, 0.25) if ww > 4 * 0.12 * dd else 0.0
     solids = [
-        box_solid([-d / 2, -w / 2, 0.0], [d / 2, w / 2, seat_h]),
-        box_solid([-d / 2, -w / 2, seat_h - _E], [-d / 2 + back_d, w / 2, h]),
+        box([-dd / 2, -ww / 2, 0.0], [dd / 2, ww / 2, seat_h]),
+        box([-dd / 2, -ww / 2, seat_h - _E], [-dd / 2 + back_d, ww / 2, h]),
     ]
     if arm_w > 0:
         arm_top = seat_h + 0.4 * (h - seat_h)
-        solids.append(box_solid([-d / 2 + back_d - _E, -w / 2, seat_h - _E], [d / 2, -w / 2 + arm_w, arm_top]))
-        solids.append(box_solid([-d / 2 + back_d - _E, w / 2 - arm_w, seat_h - _E], [d / 2, w / 2, arm_top]))
+        solids.append(box([-dd / 2 + back_d - _E, -ww / 2, seat_h - _E], [dd / 2, -ww / 2 + arm_w, arm_top]))
+        solids.append(box([-dd / 2 + back_d - _E, ww / 2 - arm_w, seat_h - _E], [dd / 2, ww / 2, arm_top]))
     return [PartSpec("body", None, ConvexSolids(tuple(solids)), material, affordance_rank=2, affordance="sit",
                      description="sofa: seat base, backrest and arms", rgba=rgba)]
 
@@ -298,7 +312,7 @@ PRIOR_LABELS = (
 
 
 def prior_parts(label: str, size_m, material: str, shell_thickness_m: float | None, rgba=None,
-                max_pieces: int = 12, boards=None) -> list[PartSpec]:
+                max_pieces: int = 12, boards=None, proportions=None) -> list[PartSpec]:
     """Part specifications of the shape prior of ``label`` fitted to ``size_m`` = (D, W, H).
     ``boards``: a shelf's boards where things were seen resting in it (:func:`shelf_boards`).
 
@@ -312,7 +326,7 @@ def prior_parts(label: str, size_m, material: str, shell_thickness_m: float | No
     if label == "shelf":
         return _shelf(d, w, h, material, rgba, label, max_pieces, boards)
     if label in ("sofa", "bed"):
-        return _sofa(d, w, h, material, rgba, label)
+        return _sofa(d, w, h, material, rgba, label, proportions)
     if label in ("counter", "sink"):
         return _counter(d, w, h, material, rgba, label)
     if label in ("box", "book"):

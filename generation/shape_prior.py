@@ -584,6 +584,7 @@ class ShapePriorGenerator:
         from scipy.spatial import cKDTree
 
         from generation.priors import PRIOR_LABELS, prior_parts, shelf_boards
+        from generation.proportions import seen_proportions
         from scene_builder.vocabulary import category
 
         label = obj.label
@@ -640,8 +641,11 @@ class ShapePriorGenerator:
             if label == "shelf":
                 held = _held(others, box_from_world, size)
                 boards = shelf_boards(held, size, pts) if held else None
-            specs = prior_parts(label, size, cm.material, cm.shell_thickness_m, rgba, config.max_collision_pieces, boards)
+            measured = seen_proportions(label, pts, size)
+            specs = prior_parts(label, size, cm.material, cm.shell_thickness_m, rgba, config.max_collision_pieces, boards, measured)
             description += "; shape prior" if boards is None else f"; shape prior, {len(boards)} boards under what it holds"
+            if measured is not None:
+                description += f", mattress top at {measured.top_m:.2f} m" + (f" and headboard on its {measured.back_side} side" if measured.back_side else ", no headboard") + " as seen"
         elif soft is not None:
             kind = AssetKind.DEFORMABLE
             cfg = replace(config, max_visual_faces=min(config.max_visual_faces, 800))

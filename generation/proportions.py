@@ -1,0 +1,108 @@
+"""Proportions of beds measured from what the camera saw, for the shape priors.
+
+A category constant put a bed's mattress at three quarters of its height and its headboard at
+the far end of the box's depth axis: a bed 1.43 m high to its headboard got a mattress top at
+1.07 m (the five SUN RGB-D beds measure 0.65-0.79 m), and a bed seen from its side got its
+headboard along its long side. On the five SUN RGB-D bedrooms every bed's prior filled 40-45 %
+seen free space with sensor depth, 24-29 % (four of them) with estimated depth
+(``generation.visibility``), and fell back to the extruded observed shell.
+
+:func:`measure_proportions` reads them from the observed points instead, in the fitted box's
+frame (origin at its bottom centre, +X its front): a height map of the top surface seen (the
+highest point in each cell of a 2-D grid over the footprint); its median is the seat's or the
+mattress's top (the largest surface seen from above); the back (headboard, backrest) is the side
+whose strip of cells rises highest above that top. Written here, not taken from a library: it is
+a few percentiles of a grid, nothing a point-cloud library offers as such.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["SIDES", "Proportions", "measure_proportions", "seen_proportions", "turned_box"]
+
+#: The sides of the box a back may stand on, by the outward axis of that side.
+SIDES = ("-x", "+x", "-y", "+y")
+#: Grid cell (m) of the top height map: fine enough for a 6 cm headboard strip, coarse enough
+#: that most cells hold a few points of a sensor's depth at 2-5 m.
+CELL_M = 0.05
+#: A side's strip is this share of the box across it (at least one cell, at most 0.3 m).
+STRIP_SHARE = 0.15
+#: A back rises at least this far (m) above the seat or mattress top; lower, there is none seen.
+MIN_BACK_RISE_M = 0.1
+#: The seat or mattress top lies between these shares of the box's height.
+TOP_SHARE = (0.2, 0.85)
+
+
+@dataclass(frozen=True)
+class Proportions:
+    """What the observed points say of a seat's or bed's shape, in its box frame.
+
+    top_m: height of the seat's or mattress's top; back_side: the side (:data:`SIDES`) whose
+    strip rises highest, where the back or headboard stands, or None where no side rises
+    :data:`MIN_BACK_RISE_M` above the top; back_top_m: that strip's height (90th percentile of
+    its cells)."""
+
+    top_m: float
+    back_side: str | None
+    back_top_m: float | None
+
+
+def measure_proportions(points_box_m: np.ndarray, size_m, sides: tuple[str, ...] = SIDES) -> Proportions | None:
+    """The :class:`Proportions` of the (N, 3) observed points in the box frame of ``size_m``
+    (D, W, H); ``sides``: where a back may stand (a bed's headboard: its short sides). None
+    when fewer than 8 cells of the footprint hold points (too little seen to say)."""
+    d, w, h = (float(v) for v in size_m)
+    p = np.asarray(points_box_m, dtype=np.float64)
+    inside = (np.abs(p[:, 0]) <= d / 2) & (np.abs(p[:, 1]) <= w / 2) & (p[:, 2] >= 0.0) & (p[:, 2] <= h)
+    p = p[inside]
+    nx, ny = max(1, int(np.ceil(d / CELL_M))), max(1, int(np.ceil(w / CELL_M)))
+    ix = np.clip(((p[:, 0] + d / 2) / d * nx).astype(np.int64), 0, nx - 1)
+    iy = np.clip(((p[:, 1] + w / 2) / w * ny).astype(np.int64), 0, ny - 1)
+    top = np.full((nx, ny), -np.inf)
+    np.maximum.at(top, (ix, iy), p[:, 2])
+    seen = np.isfinite(top)
+    if np.count_nonzero(seen) < 8:
+        return None
+    seat = float(np.clip(np.median(top[seen]), TOP_SHARE[0] * h, TOP_SHARE[1] * h))
+    sx = max(1, min(int(round(STRIP_SHARE * nx)), int(np.ceil(0.3 / CELL_M))))
+    sy = max(1, min(int(round(STRIP_SHARE * ny)), int(np.ceil(0.3 / CELL_M))))
+    strips = {"-x": top[:sx, :], "+x": top[-sx:, :], "-y": top[:, :sy], "+y": top[:, -sy:]}
+    best, best_top = None, -np.inf
+    for side in sides:
+        cells = strips[side][np.isfinite(strips[side])]
+        if len(cells) < 2:
+            continue
+        rise = float(np.percentile(cells, 90))
+        if rise > best_top:
+            best, best_top = side, rise
+    if best is None or best_top < seat + MIN_BACK_RISE_M:
+        return Proportions(seat, None, None)
+    return Proportions(seat, best, best_top)
+
+
+def turned_box(side: str, lo_m, hi_m) -> tuple[np.ndarray, np.ndarray]:
+    """Corners (lo, hi) of the axis-aligned box given in a frame whose back is on ``-x``, turned
+    about the vertical so that the back is on ``side`` (:data:`SIDES`). A box built for a back
+    on ``-y`` or ``+y`` takes the box's W as its depth and D as its width."""
+    lo, hi = np.asarray(lo_m, dtype=np.float64), np.asarray(hi_m, dtype=np.float64)
+    turn = {"-x": ((1, 0), (0, 1)), "+x": ((-1, 0), (0, -1)), "-y": ((0, -1), (1, 0)), "+y": ((0, 1), (-1, 0))}[side]
+    r = np.array(turn, dtype=np.float64)
+    a, b = r @ lo[:2], r @ hi[:2]
+    return np.r_[np.minimum(a, b), lo[2]], np.r_[np.maximum(a, b), hi[2]]
+
+
+def seen_proportions(label: str, points_box_m: np.ndarray, size_m) -> Proportions | None:
+    """:func:`measure_proportions` of a bed, its headboard on one of its short sides (either
+    where its plan is near square); None for other labels. (Sofas keep their constants: read
+    this way, on the real RGB-D photos their backs went on a short side of sectionals and of a
+    sofa seen edge-on, and filled more seen free space than the constants.)"""
+    if label != "bed":
+        return None
+    d, w = float(size_m[0]), float(size_m[1])
+    sides = SIDES
+    if abs(d - w) > 0.15 * max(d, w):
+        sides = ("-y", "+y") if d < w else ("-x", "+x")  # the ends of its long axis
+    return measure_proportions(points_box_m, size_m, sides)
