@@ -96,9 +96,10 @@ def turned_box(side: str, lo_m, hi_m) -> tuple[np.ndarray, np.ndarray]:
 
 def seen_proportions(label: str, points_box_m: np.ndarray, size_m) -> Proportions | None:
     """:func:`measure_proportions` of a bed, its headboard on one of its short sides (either
-    where its plan is near square); None for other labels. (Sofas keep their constants: read
-    this way, on the real RGB-D photos their backs went on a short side of sectionals and of a
-    sofa seen edge-on, and filled more seen free space than the constants.)"""
+    where its plan is near square); None for other labels. (Sofas and chairs keep their
+    constants: read this way, a sofa's back on a long side and a chair's on any side, on the
+    real, plain-SUN, Total3D-demo and COCO photos 6 of 7 sofas and 20 of 22 chairs whose prior
+    changed filled more seen free space than with the constants, and none came under 10 %.)"""
     if label != "bed":
         return None
     d, w = float(size_m[0]), float(size_m[1])
