@@ -50,6 +50,7 @@ def complete_occupancy(
     blocked=None,
     resting_m: np.ndarray | None = None,
     resting_bottom_m: np.ndarray | None = None,
+    prior_boxes_m: tuple = (),
 ) -> VoxelGeometry:
     """Completed occupancy of an object from its observed surface points.
 
@@ -61,7 +62,8 @@ def complete_occupancy(
     frame) of other objects resting on this one, with resting_bottom_m (M,) the bottom height of
     the object each belongs to: what they hide below their bottom is this object's (the back of a
     sideboard's top under the tea set standing on it), extruded along the rays like its own
-    surface. Returns a :class:`VoxelGeometry`. Raises ValueError when no observed point lies in
+    surface. prior_boxes_m: ((lo (3,), hi (3,)), ...) asset-frame boxes of a shape prior fitted
+    to the object (a bed's mattress and headboard): filled too, then carved like the rest. Returns a :class:`VoxelGeometry`. Raises ValueError when no observed point lies in
     the box.
     """
     from scipy import ndimage
@@ -104,6 +106,9 @@ def complete_occupancy(
         dist_r, nn_r = tree_r.query(dir_v, k=1)
         hidden = (dist_r <= reach) & (rng_v >= rng_r[nn_r] - 0.5 * s) & (centres[:, 2] < np.asarray(resting_bottom_m)[nn_r])
         occ |= hidden.reshape(dims)
+
+    for lo, hi in prior_boxes_m:
+        occ |= np.all((centres >= np.asarray(lo)) & (centres <= np.asarray(hi)), axis=1).reshape(dims)
 
     if mirror_y:
         occ |= occ[:, ::-1, :]

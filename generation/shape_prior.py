@@ -612,6 +612,7 @@ class ShapePriorGenerator:
         cfg = config
 
         rects = []
+        measured = None  # a bed's proportions as seen (generation.proportions)
         space = FreeSpace(perception.observation, perception.camera, own_mask=obj.mask)
         if obj.fronts:  # doors and drawers where the photo showed them (generation.front_parts)
             from generation.front_parts import front_parts
@@ -676,6 +677,7 @@ class ShapePriorGenerator:
             return GeneratedAsset(asset, fit.world_from_box @ pose(np.eye(3), -shift), obj.points_world_m)
 
         structure_mass_kg = None  # the mass of the category's structure, when its prior is not used
+        hidden_prior = ()  # the boxes of a rejected prior fitted to what was seen
         first_fit, refitted = fit, False
         while specs is not None:
             generated = assemble(specs, kind, soft, description, cfg)
@@ -704,6 +706,11 @@ class ShapePriorGenerator:
             why = f"filled {share:.0%} seen free space" if share > MAX_FREE_SPACE_SHARE else f"reached {behind * 100:.0f} cm into a wall"
             description = f"{label}: the {what} {why}; " + description.split("; ")[0]
             structure_mass_kg = generated.asset.mass_kg
+            # A prior fitted to what was seen (a bed's) still says what its hidden side holds: the
+            # completion fills its boxes too, carved like the shell (a seen overhang of the
+            # mattress, a yaw a few degrees off, leave it in seen free space as a whole).
+            hidden_prior = tuple((q.vertices_m.min(axis=0), q.vertices_m.max(axis=0)) for part in specs for q in part.geometry.solids) \
+                if measured is not None and measured.back_side is not None else ()
             kind, soft = None, None
             fit = first_fit
             box_from_world = np.linalg.inv(fit.world_from_box)
@@ -766,11 +773,11 @@ class ShapePriorGenerator:
         resting, resting_bottom = _resting_on(obj, other_objects, fit.world_from_box, size)
         mirror_x, mirror_y = mirror_axes(label, pts)
         geometry = complete_occupancy(pts, cam, size, config.voxel_resolution, mirror_y=mirror_y, mirror_x=mirror_x, blocked=blocked,
-                                      resting_m=resting, resting_bottom_m=resting_bottom)
+                                      resting_m=resting, resting_bottom_m=resting_bottom, prior_boxes_m=hidden_prior)
         specs = [PartSpec("body", None, geometry, cm.material, affordance_rank=3, affordance="pick up or push",
                           description=f"{label}: observed shell extruded and mirrored", shell_thickness_m=cm.shell_thickness_m,
                           rgba=rgba)]
-        description += "; completed from the observed shell, carved to the seen free space"
+        description += "; completed from the observed shell" + (" and the fitted bed prior" if hidden_prior else "") + ", carved to the seen free space"
 
         def snap(v_box: np.ndarray) -> np.ndarray:
             return transform_points(box_from_world, space.snap(transform_points(fit.world_from_box, v_box), SNAP_VOXELS * voxel_m))

@@ -101,3 +101,29 @@ def test_the_beds_of_plain_bedroom_photos_keep_a_shape_prior_fitted_to_them():
         asset = ShapePriorGenerator().generate(bed, p, cfg.generation, 0).asset
         kept.append(("shape prior" in asset.description and "observed shell" not in asset.description, asset.description))
     assert all(k for k, _ in kept), kept
+
+
+def test_a_rejected_bed_priors_boxes_fill_the_hidden_side_of_its_completion_and_are_carved():
+    """Only a bed's front face and mattress top were seen (the camera at +x). The completion
+    extrudes them along the rays; the fitted prior's boxes (mattress block, headboard at -x) fill
+    the rest of its box, except where the carving (seen free space) says nothing is."""
+    from generation.completion import complete_occupancy
+
+    size = np.array([2.0, 1.6, 1.2])
+    rng = np.random.default_rng(0)
+    face = np.column_stack([np.full(800, 1.0), rng.uniform(-0.8, 0.8, 800), rng.uniform(0.05, 0.6, 800)])
+    top = np.column_stack([rng.uniform(0.2, 1.0, 800), rng.uniform(-0.8, 0.8, 800), np.full(800, 0.6)])
+    pts, cam = np.vstack([face, top]), np.array([3.0, 0.0, 1.4])
+    boxes = ((np.array([-1.0, -0.8, 0.0]), np.array([1.0, 0.8, 0.6])), (np.array([-1.0, -0.8, 0.0]), np.array([-0.94, 0.8, 1.2])))
+
+    def vol(g):
+        return float(g.occupancy.sum()) * g.voxel_size_m ** 3
+
+    plain = complete_occupancy(pts, cam, size, 40)
+    with_prior = complete_occupancy(pts, cam, size, 40, prior_boxes_m=boxes)
+    assert vol(with_prior) > vol(plain)
+    assert vol(with_prior) == pytest.approx(2.0 * 1.6 * 0.6 + 0.06 * 1.6 * 0.6, rel=0.1)
+    occ = with_prior.occupancy
+    assert occ[0, occ.shape[1] // 2, int(1.1 / with_prior.voxel_size_m)]  # the headboard, at -x, up to 1.2 m
+    carved = complete_occupancy(pts, cam, size, 40, prior_boxes_m=boxes, blocked=lambda p: p[:, 2] > 0.9)
+    assert not carved.occupancy[:, :, int(1.0 / carved.voxel_size_m):].any()
