@@ -4,8 +4,11 @@ A category constant put a bed's mattress at three quarters of its height and its
 the far end of the box's depth axis: a bed 1.43 m high to its headboard got a mattress top at
 1.07 m (the five SUN RGB-D beds measure 0.65-0.79 m), and a bed seen from its side got its
 headboard along its long side. On the five SUN RGB-D bedrooms every bed's prior filled 40-45 %
-seen free space with sensor depth, 24-29 % (four of them) with estimated depth
-(``generation.visibility``), and fell back to the extruded observed shell.
+seen free space with sensor depth; built from the photos alone (estimated depth), the beds of
+three of them and of sunrgbd_total3d_demo_5 filled 24-29 % (``generation.visibility``): each
+fell back to the extruded observed shell. With the proportions read as below those four keep
+their prior (3-5 %); the sensor-depth ones fill 14-27 % and complete their shell with it
+(``generation.completion.complete_occupancy``, ``prior_boxes_m``).
 
 :func:`measure_proportions` reads them from the observed points instead, in the fitted box's
 frame (origin at its bottom centre, +X its front): a height map of the top surface seen (the
