@@ -63,8 +63,8 @@ def complete_occupancy(
     the object each belongs to: what they hide below their bottom is this object's (the back of a
     sideboard's top under the tea set standing on it), extruded along the rays like its own
     surface. prior_boxes_m: ((lo (3,), hi (3,)), ...) asset-frame boxes of a shape prior fitted
-    to the object (a bed's mattress and headboard): filled too, then carved like the rest. Returns a :class:`VoxelGeometry`. Raises ValueError when no observed point lies in
-    the box.
+    to the object (a bed's mattress and headboard): filled too, then carved like the rest.
+    Returns a :class:`VoxelGeometry`. Raises ValueError when no observed point lies in the box.
     """
     from scipy import ndimage
     from scipy.spatial import cKDTree

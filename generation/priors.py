@@ -148,17 +148,17 @@ def shelf_boards(contents, size_m, shelf_points_m=None) -> tuple[tuple[float, fl
 
 
 def _sofa(d, w, h, material, rgba, label, proportions=None):
-    """A bed (mattress base, headboard) or a sofa (seat base, backrest, arms). ``proportions``
-    (:class:`generation.proportions.Proportions`): the mattress's or seat's top and the side of
-    the headboard or back as measured (no headboard where none was seen: a block of the box's
-    height); None: category constants, the back on -x."""
-    side = "-x" if proportions is None or proportions.back_side is None else proportions.back_side
-    dd, ww = (d, w) if side in ("-x", "+x") else (w, d)  # depth and width with the back on -x
-
-    def box(lo, hi):
-        return box_solid(*turned_box(side, lo, hi))
-
+    """A bed (mattress base, headboard) or a sofa (seat base, backrest, arms; its category's
+    constants). A bed's ``proportions`` (:class:`generation.proportions.Proportions`): its
+    mattress top and its headboard's side as measured (no headboard where none was seen: a
+    block of the box's height); None: the constants, the headboard on -x."""
     if label == "bed":
+        side = "-x" if proportions is None or proportions.back_side is None else proportions.back_side
+        dd, ww = (d, w) if side in ("-x", "+x") else (w, d)  # length and width with the head on -x
+
+        def box(lo, hi):
+            return box_solid(*turned_box(side, lo, hi))
+
         if proportions is None:
             base_h = 0.75 * h if h > 0.4 else h
         else:
@@ -169,17 +169,17 @@ def _sofa(d, w, h, material, rgba, label, proportions=None):
             solids.append(box([-dd / 2, -ww / 2, 0.0], [-dd / 2 + head, ww / 2, h]))
         return [PartSpec("body", None, ConvexSolids(tuple(solids)), material, affordance_rank=2, affordance="lie down",
                          description="bed: mattress base with a headboard", rgba=rgba)]
-    seat_h = 0.5 * h if proportions is None else proportions.top_m
-    back_d = 0.25 * dd
-    arm_w = _clip(0.12 * ww, 0.05, 0.25) if ww > 4 * 0.12 * dd else 0.0
+    seat_h = 0.5 * h
+    back_d = 0.25 * d
+    arm_w = _clip(0.12 * w, 0.05, 0.25) if w > 4 * 0.12 * d else 0.0
     solids = [
-        box([-dd / 2, -ww / 2, 0.0], [dd / 2, ww / 2, seat_h]),
-        box([-dd / 2, -ww / 2, seat_h - _E], [-dd / 2 + back_d, ww / 2, h]),
+        box_solid([-d / 2, -w / 2, 0.0], [d / 2, w / 2, seat_h]),
+        box_solid([-d / 2, -w / 2, seat_h - _E], [-d / 2 + back_d, w / 2, h]),
     ]
     if arm_w > 0:
         arm_top = seat_h + 0.4 * (h - seat_h)
-        solids.append(box([-dd / 2 + back_d - _E, -ww / 2, seat_h - _E], [dd / 2, -ww / 2 + arm_w, arm_top]))
-        solids.append(box([-dd / 2 + back_d - _E, ww / 2 - arm_w, seat_h - _E], [dd / 2, ww / 2, arm_top]))
+        solids.append(box_solid([-d / 2 + back_d - _E, -w / 2, seat_h - _E], [d / 2, -w / 2 + arm_w, arm_top]))
+        solids.append(box_solid([-d / 2 + back_d - _E, w / 2 - arm_w, seat_h - _E], [d / 2, w / 2, arm_top]))
     return [PartSpec("body", None, ConvexSolids(tuple(solids)), material, affordance_rank=2, affordance="sit",
                      description="sofa: seat base, backrest and arms", rgba=rgba)]
 
