@@ -35,6 +35,10 @@ CELL_M = 0.05
 STRIP_SHARE = 0.15
 #: A back rises at least this far (m) above the seat or mattress top; lower, there is none seen.
 MIN_BACK_RISE_M = 0.1
+#: A bed's plan this many times longer than wide shows which axis is its length (a queen bed's is
+#: 1.33, a twin's about 2, a king's 1.05; a plan measured from estimated depth is off by 10-20 %):
+#: its headboard is then at one end of it; a squarer plan leaves all four sides to the points.
+LONG_PLAN_RATIO = 1.3
 #: The seat or mattress top lies between these shares of the box's height.
 TOP_SHARE = (0.2, 0.85)
 
@@ -98,8 +102,9 @@ def turned_box(side: str, lo_m, hi_m) -> tuple[np.ndarray, np.ndarray]:
 
 
 def seen_proportions(label: str, points_box_m: np.ndarray, size_m) -> Proportions | None:
-    """:func:`measure_proportions` of a bed, its headboard on one of its short sides (either
-    where its plan is near square); None for other labels. (Sofas and chairs keep their
+    """:func:`measure_proportions` of a bed, its headboard on one of its short sides (any side
+    where its plan is not :data:`LONG_PLAN_RATIO` times longer than wide); None for other
+    labels. (Sofas and chairs keep their
     constants: read this way, a sofa's back on a long side and a chair's on any side, on the
     real, plain-SUN, Total3D-demo and COCO photos 6 of 7 sofas and 20 of 22 chairs whose prior
     changed filled more seen free space than with the constants, and none came under 10 %.)"""
@@ -107,6 +112,6 @@ def seen_proportions(label: str, points_box_m: np.ndarray, size_m) -> Proportion
         return None
     d, w = float(size_m[0]), float(size_m[1])
     sides = SIDES
-    if abs(d - w) > 0.15 * max(d, w):
+    if max(d, w) > LONG_PLAN_RATIO * min(d, w):
         sides = ("-y", "+y") if d < w else ("-x", "+x")  # the ends of its long axis
     return measure_proportions(points_box_m, size_m, sides)

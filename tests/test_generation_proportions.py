@@ -127,3 +127,14 @@ def test_a_rejected_bed_priors_boxes_fill_the_hidden_side_of_its_completion_and_
     assert occ[0, occ.shape[1] // 2, int(1.1 / with_prior.voxel_size_m)]  # the headboard, at -x, up to 1.2 m
     carved = complete_occupancy(pts, cam, size, 40, prior_boxes_m=boxes, blocked=lambda p: p[:, 2] > 0.9)
     assert not carved.occupancy[:, :, int(1.0 / carved.voxel_size_m):].any()
+
+
+def test_a_bed_whose_plan_is_not_clearly_long_may_have_its_headboard_on_any_side():
+    """sunrgbd_imvotenet_000005 from the photo alone: estimated depth made the bed's plan 2.11 x
+    2.54 m with its headboard along the 2.54 m side; a king bed's plan is near square anyway. Under
+    LONG_PLAN_RATIO the headboard goes where the points rise; over it, only on a short side."""
+    pts = _bed_points(2.1, 2.5, 0.6, 1.05, "-x")
+    assert seen_proportions("bed", pts, (2.1, 2.5, 1.05)).back_side == "-x"
+    # a bed clearly longer than wide, its headboard at +y, something as high seen along its -x side
+    long_pts = np.vstack([_bed_points(1.4, 2.2, 0.6, 1.0, "+y"), _bed_points(1.4, 2.2, 0.6, 1.05, "-x", seed=3)])
+    assert seen_proportions("bed", long_pts, (1.4, 2.2, 1.05)).back_side == "+y"
