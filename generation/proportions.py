@@ -104,10 +104,10 @@ def turned_box(side: str, lo_m, hi_m) -> tuple[np.ndarray, np.ndarray]:
 def seen_proportions(label: str, points_box_m: np.ndarray, size_m) -> Proportions | None:
     """:func:`measure_proportions` of a bed, its headboard on one of its short sides (any side
     where its plan is not :data:`LONG_PLAN_RATIO` times longer than wide); None for other
-    labels. (Sofas and chairs keep their
-    constants: read this way, a sofa's back on a long side and a chair's on any side, on the
-    real, plain-SUN, Total3D-demo and COCO photos 6 of 7 sofas and 20 of 22 chairs whose prior
-    changed filled more seen free space than with the constants, and none came under 10 %.)"""
+    labels. (Sofas and chairs keep their constants: read this way, a sofa's back on a long side
+    and a chair's on any side, on the real, plain-SUN, Total3D-demo and COCO photos 6 of 7 sofas
+    and 20 of 22 chairs whose prior changed filled more seen free space than with the
+    constants, and none came under 10 %.)"""
     if label != "bed":
         return None
     d, w = float(size_m[0]), float(size_m[1])
