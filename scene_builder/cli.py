@@ -117,7 +117,7 @@ def _add_scene_options(p: argparse.ArgumentParser) -> None:
         help="instance segmentation backend: detections (offline detectors in the models dir), sam2, depth-clusters "
         "(default auto: the first available)",
     )
-    p.add_argument("--settle-s", type=_positive, default=3.0, help="seconds of simulation in the stability check (default 3)")
+    p.add_argument("--settle-s", type=_positive, default=3.0, help="most seconds of simulation in the stability check (default 3; it stops sooner once everything is at rest)")
     p.add_argument("--adopt-settled", action="store_true", help="write the poses after the settle simulation instead of the solved ones")
     p.add_argument(
         "--robot",

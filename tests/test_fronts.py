@@ -586,3 +586,23 @@ def test_a_low_strip_at_the_floor_is_no_front(monkeypatch, bottom_px, kept):
     monkeypatch.setattr(front_parse, "parse_face", lambda *a, **kw: [panel])
     fronts = fronts_on_face(np.full((160, 200, 3), 200, np.uint8), cam, face, "cabinet")
     assert len(fronts) == int(kept)
+
+
+def test_theil_sen_and_spearman_agree_with_scipy():
+    """The numpy Theil-Sen line and Spearman correlation (written to keep scipy.stats' import out
+    of a build) give scipy.stats' values, ties included; degenerate inputs give NaN."""
+    from scipy import stats
+
+    from perception.fronts import spearman, theil_sen
+
+    rng = np.random.default_rng(3)
+    for n in (3, 8, 40):
+        for ties in (False, True):
+            x = rng.normal(size=n)
+            y = 1.5 * x + rng.normal(scale=0.3, size=n)
+            if ties:
+                x, y = np.round(x), np.round(2 * y) / 2
+            assert np.allclose(theil_sen(y, x), stats.theilslopes(y, x)[:2])
+            assert np.isclose(spearman(x, y), stats.spearmanr(x, y)[0])
+    assert np.all(np.isnan(theil_sen(np.arange(4.0), np.ones(4))))
+    assert np.isnan(spearman(np.ones(5), np.arange(5.0)))
