@@ -125,7 +125,7 @@ class LayoutConfig:
     """Layout solver and physics-check settings.
 
     settle_s: simulated seconds of the stability check (it ends sooner once every body has been
-    at rest for half a second, after at least one second: layout.verify.REST_QVEL). adopt_settled: replace solved poses with
+    at rest for half a second, after at least one second: layout.verify.REST_MOVE_M). adopt_settled: replace solved poses with
     the settled ones. max_wall_push_m: a movable object reaching further than this into a wall is
     wall (a door, a radiator, an off wall plane): it stays where seen as static background;
     shallower, it is pushed out. max_lower_m: an object seen at most this far above its support
