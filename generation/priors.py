@@ -37,12 +37,25 @@ def _legs(d: float, w: float, z_top: float, side: float, inset: float) -> list[T
     return out
 
 
-def _table(d, w, h, material, rgba, label):
+def table_legs(d, w, h, inset=None) -> list[TriangleMesh]:
+    """The four legs of a table prior of size (d, w, h), ``inset`` (m) from its top's edges
+    (None: the category constant)."""
     top_t = _clip(0.05 * h, 0.015, 0.05)
     leg = _clip(0.06 * min(d, w), 0.025, 0.08)
-    inset = _clip(0.03 * min(d, w), 0.0, 0.05)
+    if inset is None:
+        inset = _clip(0.03 * min(d, w), 0.0, 0.05)
+    return _legs(d, w, h - top_t + _E, leg, min(inset, max(0.0, min(d, w) / 2 - leg)))
+
+
+def _table(d, w, h, material, rgba, label, proportions=None):
+    """A top slab on four legs; with ``proportions`` (:mod:`generation.proportions`) its top at
+    the height seen and its legs at the inset fitted to what was seen."""
+    inset = None
+    if proportions is not None:
+        h, inset = proportions.top_m, proportions.leg_inset_m
+    top_t = _clip(0.05 * h, 0.015, 0.05)
     solids = [box_solid([-d / 2, -w / 2, h - top_t], [d / 2, w / 2, h])]
-    solids += _legs(d, w, h - top_t + _E, leg, inset)
+    solids += table_legs(d, w, h, inset)
     return [PartSpec("body", None, ConvexSolids(tuple(solids)), material, affordance_rank=3,
                      affordance="place objects on top", description=f"{label}: top slab on four legs", rgba=rgba)]
 
@@ -320,7 +333,7 @@ def prior_parts(label: str, size_m, material: str, shell_thickness_m: float | No
     """
     d, w, h = (float(v) for v in size_m)
     if label in ("table", "desk"):
-        return _table(d, w, h, material, rgba, label)
+        return _table(d, w, h, material, rgba, label, proportions)
     if label in ("chair", "stool"):
         return _chair(d, w, h, material, rgba, label)
     if label == "shelf":

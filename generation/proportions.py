@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["SIDES", "Proportions", "measure_proportions", "seen_proportions", "turned_box"]
+__all__ = ["SIDES", "Proportions", "fit_leg_inset", "measure_proportions", "seen_proportions", "turned_box"]
 
 #: The sides of the box a back may stand on, by the outward axis of that side.
 SIDES = ("-x", "+x", "-y", "+y")
@@ -41,6 +41,9 @@ MIN_BACK_RISE_M = 0.1
 LONG_PLAN_RATIO = 1.3
 #: The seat or mattress top lies between these shares of the box's height.
 TOP_SHARE = (0.2, 0.85)
+#: A table's or desk's top lies between these shares of its box's height (what stands on it
+#: raises the box).
+TABLE_TOP_SHARE = (0.5, 1.0)
 
 
 @dataclass(frozen=True)
@@ -50,14 +53,24 @@ class Proportions:
     top_m: height of the seat's or mattress's top; back_side: the side (:data:`SIDES`) whose
     strip rises highest, where the back or headboard stands, or None where no side rises
     :data:`MIN_BACK_RISE_M` above the top; back_top_m: that strip's height (90th percentile of
-    its cells)."""
+    its cells); leg_inset_m: how far a table's legs stand in from the edges of its top
+    (:func:`fit_leg_inset`), None where not fitted."""
 
     top_m: float
     back_side: str | None
     back_top_m: float | None
+    leg_inset_m: float | None = None
+
+    def describe(self, label: str) -> str:
+        """What was read, for the asset's description ("... as seen")."""
+        if label in ("table", "desk"):
+            legs = "" if self.leg_inset_m is None else f" and legs {self.leg_inset_m * 100:.0f} cm in from its edges"
+            return f"top at {self.top_m:.2f} m{legs}"
+        head = f" and headboard on its {self.back_side} side" if self.back_side else ", no headboard"
+        return f"mattress top at {self.top_m:.2f} m{head}"
 
 
-def measure_proportions(points_box_m: np.ndarray, size_m, sides: tuple[str, ...] = SIDES) -> Proportions | None:
+def measure_proportions(points_box_m: np.ndarray, size_m, sides: tuple[str, ...] = SIDES, top_share: tuple[float, float] = TOP_SHARE) -> Proportions | None:
     """The :class:`Proportions` of the (N, 3) observed points in the box frame of ``size_m``
     (D, W, H); ``sides``: where a back may stand (a bed's headboard: its short sides). None
     when fewer than 8 cells of the footprint hold points (too little seen to say)."""
@@ -73,7 +86,7 @@ def measure_proportions(points_box_m: np.ndarray, size_m, sides: tuple[str, ...]
     seen = np.isfinite(top)
     if np.count_nonzero(seen) < 8:
         return None
-    seat = float(np.clip(np.median(top[seen]), TOP_SHARE[0] * h, TOP_SHARE[1] * h))
+    seat = float(np.clip(np.median(top[seen]), top_share[0] * h, top_share[1] * h))
     sx = max(1, min(int(round(STRIP_SHARE * nx)), int(np.ceil(0.3 / CELL_M))))
     sy = max(1, min(int(round(STRIP_SHARE * ny)), int(np.ceil(0.3 / CELL_M))))
     strips = {"-x": top[:sx, :], "+x": top[-sx:, :], "-y": top[:, :sy], "+y": top[:, -sy:]}
@@ -108,6 +121,8 @@ def seen_proportions(label: str, points_box_m: np.ndarray, size_m) -> Proportion
     and a chair's on any side, on the real, plain-SUN, Total3D-demo and COCO photos 6 of 7 sofas
     and 20 of 22 chairs whose prior changed filled more seen free space than with the
     constants, and none came under 10 %.)"""
+    if label in ("table", "desk"):
+        return measure_proportions(points_box_m, size_m, (), TABLE_TOP_SHARE)
     if label != "bed":
         return None
     d, w = float(size_m[0]), float(size_m[1])
@@ -115,3 +130,32 @@ def seen_proportions(label: str, points_box_m: np.ndarray, size_m) -> Proportion
     if max(d, w) > LONG_PLAN_RATIO * min(d, w):
         sides = ("-y", "+y") if d < w else ("-x", "+x")  # the ends of its long axis
     return measure_proportions(points_box_m, size_m, sides)
+
+
+#: Candidate insets of a table's legs from the edges of its top, as shares of its shorter side
+#: (a top overhangs its legs by 0-20 % of its depth: a dining table's apron, a coffee table's rim).
+LEG_INSET_SHARES = (0.0, 0.04, 0.08, 0.12, 0.16, 0.2)
+#: Surface samples per candidate.
+LEG_SAMPLES = 600
+
+
+def fit_leg_inset(proportions: Proportions, space, world_from_box: np.ndarray, size_m, legs, seed: int = 0) -> Proportions:
+    """``proportions`` with the leg inset (:data:`LEG_INSET_SHARES`) whose legs fill the least
+    seen free space: the legs the camera saw stand where it saw them (a thin leg a few
+    centimetres off shows the floor behind it), the first (outermost) on ties. ``space`` is the
+    object's ``generation.visibility.FreeSpace``, ``world_from_box`` and ``size_m`` its box,
+    ``legs(d, w, top_m, inset_m)`` the leg meshes in the box frame (``generation.priors.table_legs``). Fitted by search, not by clustering leg points: a leg
+    is a few dozen points or none, and the free space seen around it says as much."""
+    from scene_builder.frames import transform_points
+
+    from generation.visibility import surface_samples
+
+    d, w = float(size_m[0]), float(size_m[1])
+    best, best_share = None, np.inf
+    for share in LEG_INSET_SHARES:
+        inset = share * min(d, w)
+        pts = transform_points(world_from_box, surface_samples(legs(d, w, proportions.top_m, inset), LEG_SAMPLES, seed))
+        v = space.violation(pts)
+        if v < best_share - 1e-9:
+            best, best_share = inset, v
+    return Proportions(proportions.top_m, proportions.back_side, proportions.back_top_m, best)

@@ -48,7 +48,7 @@ SNAP_VOXELS = 1.5
 #: How high a category's lowest seen point may be for its box to reach the floor when nothing
 #: seen stands under it (others: generation.pose.floor_snap_height_m's 0.3 m); where the camera
 #: saw under it, the free space seen carves the box back.
-BASE_GAP_M = {"bed": 0.6}
+BASE_GAP_M = {"bed": 0.6, "table": 1.0, "desk": 1.0}
 #: Large furniture whose front is not always the side the camera sees best (a sofa seen end-on
 #: or from behind): its box fit reads the plan by the category's proportions
 #: (:func:`generation.pose.fit_box`). Not screens, clocks or bags, whose seen face is their front
@@ -583,8 +583,8 @@ class ShapePriorGenerator:
         from generation.physics import too_small
         from scipy.spatial import cKDTree
 
-        from generation.priors import PRIOR_LABELS, prior_parts, shelf_boards
-        from generation.proportions import seen_proportions
+        from generation.priors import PRIOR_LABELS, prior_parts, shelf_boards, table_legs
+        from generation.proportions import fit_leg_inset, seen_proportions
         from scene_builder.vocabulary import category
 
         label = obj.label
@@ -643,10 +643,12 @@ class ShapePriorGenerator:
                 held = _held(others, box_from_world, size)
                 boards = shelf_boards(held, size, pts) if held else None
             measured = seen_proportions(label, pts, size)
+            if measured is not None and label in ("table", "desk"):
+                measured = fit_leg_inset(measured, space, fit.world_from_box, size, table_legs, seed)
             specs = prior_parts(label, size, cm.material, cm.shell_thickness_m, rgba, config.max_collision_pieces, boards, measured)
             description += "; shape prior" if boards is None else f"; shape prior, {len(boards)} boards under what it holds"
             if measured is not None:
-                description += f", mattress top at {measured.top_m:.2f} m" + (f" and headboard on its {measured.back_side} side" if measured.back_side else ", no headboard") + " as seen"
+                description += f", {measured.describe(label)} as seen"
         elif soft is not None:
             kind = AssetKind.DEFORMABLE
             cfg = replace(config, max_visual_faces=min(config.max_visual_faces, 800))
@@ -706,11 +708,11 @@ class ShapePriorGenerator:
             why = f"filled {share:.0%} seen free space" if share > MAX_FREE_SPACE_SHARE else f"reached {behind * 100:.0f} cm into a wall"
             description = f"{label}: the {what} {why}; " + description.split("; ")[0]
             structure_mass_kg = generated.asset.mass_kg
-            # A prior fitted to what was seen (a bed's) still says what its hidden side holds: the
-            # completion fills its boxes too, carved like the shell (a seen overhang of the
-            # mattress, a yaw a few degrees off, leave it in seen free space as a whole).
+            # A prior fitted to what was seen (a bed's, a table's) still says what its hidden side
+            # holds: the completion fills its boxes too, carved like the shell (a seen overhang
+            # of the mattress, a yaw a few degrees off, leave it in seen free space as a whole).
             hidden_prior = tuple((q.vertices_m.min(axis=0), q.vertices_m.max(axis=0)) for part in specs for q in part.geometry.solids) \
-                if measured is not None and measured.back_side is not None else ()
+                if measured is not None and (measured.back_side is not None or measured.leg_inset_m is not None) else ()
             kind, soft = None, None
             fit = first_fit
             box_from_world = np.linalg.inv(fit.world_from_box)
@@ -777,7 +779,7 @@ class ShapePriorGenerator:
         specs = [PartSpec("body", None, geometry, cm.material, affordance_rank=3, affordance="pick up or push",
                           description=f"{label}: observed shell extruded and mirrored", shell_thickness_m=cm.shell_thickness_m,
                           rgba=rgba)]
-        description += "; completed from the observed shell" + (" and the fitted bed prior" if hidden_prior else "") + ", carved to the seen free space"
+        description += "; completed from the observed shell" + (f" and the fitted {label} prior" if hidden_prior else "") + ", carved to the seen free space"
 
         def snap(v_box: np.ndarray) -> np.ndarray:
             return transform_points(box_from_world, space.snap(transform_points(fit.world_from_box, v_box), SNAP_VOXELS * voxel_m))

@@ -1,5 +1,5 @@
-"""Bed proportions measured from the observed points (generation.proportions) and the bed prior
-built from them (generation.priors)."""
+"""Bed and table proportions measured from the observed points (generation.proportions) and the
+priors built from them (generation.priors)."""
 
 from __future__ import annotations
 
@@ -70,7 +70,75 @@ def test_a_bed_with_no_side_rising_above_its_mattress_has_no_headboard():
 def test_other_labels_keep_their_constants():
     pts = _bed_points(2.0, 1.0, 0.45, 0.9, "-x")
     assert seen_proportions("sofa", pts, (2.0, 1.0, 0.9)) is None
-    assert seen_proportions("table", pts, (2.0, 1.0, 0.9)) is None
+    assert seen_proportions("chair", pts, (2.0, 1.0, 0.9)) is None
+
+
+def test_a_tables_top_is_its_surface_not_what_stands_on_it():
+    """A desk top at 0.72 m (1 cm noise) with a lamp on it up to 1.4 m: the box is 1.4 m high, the
+    top is read at 0.72 m and the prior's slab ends there (the old prior put it at 1.4 m)."""
+    rng = np.random.default_rng(1)
+    top = np.column_stack([rng.uniform(-0.35, 0.35, 3000), rng.uniform(-0.6, 0.6, 3000), 0.72 + rng.normal(0, 0.01, 3000)])
+    lamp = np.column_stack([rng.uniform(-0.1, 0.1, 500), rng.uniform(0.3, 0.5, 500), rng.uniform(0.72, 1.4, 500)])
+    size = (0.7, 1.2, 1.4)
+    got = seen_proportions("desk", np.vstack([top, lamp]), size)
+    assert got is not None and got.back_side is None
+    assert got.top_m == pytest.approx(0.72, abs=0.02)
+    solids = prior_parts("desk", size, "wood", None, proportions=got)[0].geometry.solids
+    assert max(float(m.vertices_m[:, 2].max()) for m in solids) == pytest.approx(got.top_m)
+    assert "top at 0.7" in got.describe("desk")
+
+
+def _raycast_depth(meshes, world_from_camera, k):
+    """(H, W) planar depth of the first hit of each pixel's ray on ``meshes`` (trimesh), 0 where none."""
+    import trimesh
+
+    mesh = trimesh.util.concatenate([trimesh.Trimesh(m.vertices_m, m.faces) for m in meshes])
+    v, u = np.mgrid[0:k.height_px, 0:k.width_px]
+    rays_cam = np.stack([(u + 0.5 - k.cx_px) / k.fx_px, (v + 0.5 - k.cy_px) / k.fy_px, np.ones(u.shape)], axis=-1).reshape(-1, 3)
+    dirs = rays_cam @ world_from_camera[:3, :3].T
+    origins = np.repeat(world_from_camera[None, :3, 3], len(dirs), axis=0)
+    locs, ray_idx, _ = mesh.ray.intersects_location(origins, dirs, multiple_hits=False)
+    depth = np.zeros(len(dirs))
+    depth[ray_idx] = (locs - world_from_camera[:3, 3]) @ world_from_camera[:3, 2]
+    return depth.reshape(k.height_px, k.width_px).astype(np.float32)
+
+
+def test_a_tables_legs_stand_where_the_camera_saw_them():
+    """A table 0.8 x 1.2 m, top at 0.7 m, legs 10 cm in from its edges, seen by a depth camera 1.2 m
+    up and 2 m away (320 x 240 px): the fitted inset is the candidate nearest 10 cm, and its legs
+    fill far less seen free space than the constant's (3 cm in: where the camera saw the floor)."""
+    from generation.assembly import box_solid
+    from generation.priors import table_legs
+    from generation.proportions import LEG_INSET_SHARES, fit_leg_inset
+    from generation.visibility import FreeSpace, surface_samples
+    from scene_builder.frames import transform_points
+    from scene_builder.model import Camera, CameraIntrinsics, Observation
+
+    d, w, top = 0.8, 1.2, 0.7
+    world_from_box = np.eye(4)
+    world_from_box[:3, 3] = (0.0, 2.0, 0.0)
+    truth = [box_solid([-d / 2, -w / 2, top - 0.03], [d / 2, w / 2, top])] + table_legs(d, w, top, 0.10)
+    room = [box_solid([-5, -5, -0.1], [5, 8, 0.0]), box_solid([-5, 4.0, 0.0], [5, 4.1, 3.0])]
+    world = [transform_points(world_from_box, np.asarray(m.vertices_m)) for m in truth]
+    meshes = [type(m)(v, m.faces) for m, v in zip(truth, world)] + room
+    c, s = np.cos(np.radians(25)), np.sin(np.radians(25))
+    world_from_camera = np.eye(4)
+    world_from_camera[:3, :3] = np.column_stack([[1, 0, 0], [0, -s, -c], [0, c, -s]])  # x right, y down, z ahead
+    world_from_camera[:3, 3] = (0.0, 0.0, 1.2)
+    k = CameraIntrinsics(400.0, 400.0, 160.0, 120.0, 320, 240, "file")
+    depth = _raycast_depth(meshes, world_from_camera, k)
+    assert np.mean(depth > 0) > 0.95
+    obs = Observation("synthetic", np.zeros((240, 320, 3), np.uint8), depth, k, "sensor")
+    space = FreeSpace(obs, Camera(k, world_from_camera))
+    got = fit_leg_inset(Proportions(top, None, None), space, world_from_box, (d, w, top), table_legs)
+    candidates = [share * min(d, w) for share in LEG_INSET_SHARES]
+    assert got.leg_inset_m == pytest.approx(min(candidates, key=lambda x: abs(x - 0.10)))
+
+    def legs_share(inset):
+        return space.violation(transform_points(world_from_box, surface_samples(table_legs(d, w, top, inset), 600, 0)))
+
+    # (legs 10 px wide: the pixels at their edges see the floor beside them, some 10 % of samples)
+    assert legs_share(got.leg_inset_m) < 0.2 < 0.4 < legs_share(None)
 
 
 @pytest.mark.parametrize("side", SIDES)
