@@ -262,6 +262,38 @@ def test_detected_object_stands_at_its_floor_contact():
     assert np.allclose(out4[grown == 1], expect, rtol=1e-3)
 
 
+def test_an_object_painted_on_a_side_wall_of_the_estimate_stands_at_its_floor_contact():
+    """The estimate put a detected desk on a plane 1.2 m left of a level camera, 0.8 m and more
+    above the floor, running straight ahead (sunrgbd_total3d_demo_4's back-left desk): every
+    pixel is off the room's planes, yet it stands at its floor contact like an unseen object. The
+    same pixels on a plane facing the camera, or reaching down to the floor, stay as estimated."""
+    from perception.contact import _painted_edge_on, stand_on_contacts
+    from scene_builder.model import CameraIntrinsics
+
+    h, w, f = 240, 320, 200.0
+    k = CameraIntrinsics(f, f, w / 2, h / 2, w, h, "flag")
+    world_from_camera = np.eye(4)
+    world_from_camera[:3, :3] = [[1, 0, 0], [0, 0, 1], [0, -1, 0]]  # level, looking along +y
+    world_from_camera[2, 3] = 1.5
+    labels = np.zeros((h, w), dtype=np.int32)
+    labels[150:200, 20:60] = 1  # left of the centre: u - cx < 0
+    v, u = np.mgrid[0:h, 0:w]
+    side = np.where(labels == 1, 1.2 / np.maximum((k.cx_px - (u + 0.5)) / f, 1e-6), 3.0)  # x = -1.2 m
+    depth = np.clip(side, 0.2, 10.0).astype(np.float32)
+    pts = np.column_stack([((u + 0.5 - k.cx_px) / f * depth)[labels == 1], depth[labels == 1], 1.5 - ((v + 0.5 - k.cy_px) / f * depth)[labels == 1]])
+    assert np.allclose(pts[:, 0], -1.2) and pts[:, 2].min() > 0.3
+    heading = np.array([0.0, 1.0])
+    assert _painted_edge_on(pts, heading)
+    assert not _painted_edge_on(pts[:, [1, 0, 2]], heading)  # the same points on a plane facing the camera
+    assert not _painted_edge_on(pts - [0.0, 0.0, pts[:, 2].min()], heading)  # down on the floor
+    seen = np.zeros((h, w), dtype=bool)  # every pixel of it off the room's planes
+    out, _, _, _, lifted = stand_on_contacts(depth, np.ones((h, w), bool), seen, labels, ("desk",), world_from_camera, k)
+    assert lifted == (1,)
+    assert np.allclose(out[labels == 1], 1.5 * f / (199.5 - 120), rtol=0.05)  # its bottom row's floor contact
+    _, _, _, _, lifted_cup = stand_on_contacts(depth, np.ones((h, w), bool), seen, labels, ("mug",), world_from_camera, k)
+    assert lifted_cup == ()  # a thing that does not stand on the floor keeps the estimate
+
+
 def test_only_the_instances_asked_stand_at_their_contact_and_their_face_is_square_to_the_room():
     """With sensor depth, perceive lifts only the detected objects the sensor measured too little
     of (``only``); a lifted face turned less than FACE_WALL_DEG from facing the camera is square
