@@ -144,8 +144,9 @@ def fit_leg_inset(proportions: Proportions, space, world_from_box: np.ndarray, s
     seen free space: the legs the camera saw stand where it saw them (a thin leg a few
     centimetres off shows the floor behind it), the first (outermost) on ties. ``space`` is the
     object's ``generation.visibility.FreeSpace``, ``world_from_box`` and ``size_m`` its box,
-    ``legs(d, w, top_m, inset_m)`` the leg meshes in the box frame (``generation.priors.table_legs``). Fitted by search, not by clustering leg points: a leg
-    is a few dozen points or none, and the free space seen around it says as much."""
+    ``legs(d, w, top_m, inset_m)`` the leg meshes in the box frame
+    (``generation.priors.table_legs``). Fitted by search, not by clustering leg points: a leg is
+    a few dozen points or none, and the free space seen around it says as much."""
     from scene_builder.frames import transform_points
 
     from generation.visibility import surface_samples
