@@ -351,12 +351,13 @@ def verify_scene(
     At t = 0 (``mj_forward``) and again after ``config.settle_s`` seconds of simulation at the
     model's own timestep (fewer once every body is at rest, :data:`REST_MOVE_M`): the deepest
     overlap over every pair of collision geoms of different bodies (:func:`_penetration`:
-    objects, fixed furniture, floor, walls, static background). Per movable object the drift of its root body origin (a flex: its vertex centroid), its
-    rotation, and whether it toppled (rotation or up-axis tilt > 30 deg); ``stable``: every
-    movable object within ``stable_drift_m`` and ``stable_rotation_deg`` (deformables: see
-    DEFORMABLE_SAG_FRACTION). Fixed furniture cannot move: it is counted apart and never as at
-    rest. Trajectories are sampled at about 30 Hz. With ``perception``, the scene is rendered from
-    ``input_camera`` at t = 0 and after settling and compared with the photo and its depth
+    objects, fixed furniture, floor, walls, static background). Per movable object the drift of
+    its root body origin (a flex: its vertex centroid), its rotation, and whether it toppled
+    (rotation or up-axis tilt > 30 deg); ``stable``: every movable object within
+    ``stable_drift_m`` and ``stable_rotation_deg`` (deformables: see DEFORMABLE_SAG_FRACTION).
+    Fixed furniture cannot move: it is counted apart and never as at rest. Trajectories are
+    sampled at about 30 Hz. With ``perception``, the scene is rendered from ``input_camera`` at
+    t = 0 and after settling and compared with the photo and its depth
     (:class:`~scene_builder.model.Fidelity`).
     """
     import mujoco
