@@ -109,7 +109,9 @@ def test_observed_points_lie_on_the_asset(generated):
         half = g.asset.size_m / 2
         outside = np.maximum(np.abs(p[:, :2]) - half[:2], 0.0).max(axis=1)
         outside = np.maximum(outside, np.maximum(p[:, 2] - g.asset.size_m[2], -p[:, 2]))
-        assert np.quantile(outside, 0.98) < 0.01
+        # (a table's top spans the 2nd-98th percentiles of its top's points each way, not the
+        # flying pixels along its depth edges: its outermost points lie up to 2 % of it outside)
+        assert np.quantile(outside, 0.98) < (0.02 * g.asset.size_m[:2].max() if g.asset.label in ("table", "desk") else 0.01)
 
 
 def test_deterministic(perception):

@@ -75,17 +75,25 @@ def test_other_labels_keep_their_constants():
 
 def test_a_tables_top_is_its_surface_not_what_stands_on_it():
     """A desk top at 0.72 m (1 cm noise) with a lamp on it up to 1.4 m: the box is 1.4 m high, the
-    top is read at 0.72 m and the prior's slab ends there (the old prior put it at 1.4 m)."""
+    top is read at 0.72 m and the prior's slab ends there (the old prior put it at 1.4 m); the
+    top spans what was seen of it, not the flying pixels at the depth edges the box took in."""
     rng = np.random.default_rng(1)
     top = np.column_stack([rng.uniform(-0.35, 0.35, 3000), rng.uniform(-0.6, 0.6, 3000), 0.72 + rng.normal(0, 0.01, 3000)])
     lamp = np.column_stack([rng.uniform(-0.1, 0.1, 500), rng.uniform(0.3, 0.5, 500), rng.uniform(0.72, 1.4, 500)])
-    size = (0.7, 1.2, 1.4)
-    got = seen_proportions("desk", np.vstack([top, lamp]), size)
+    # flying pixels along the depth edges, which the box was fitted to: 0.9 x 1.4 m
+    edge = np.column_stack([rng.choice([-0.45, 0.45], 40), rng.uniform(-0.7, 0.7, 40), 0.72 + rng.normal(0, 0.01, 40)])
+    size = (0.9, 1.4, 1.4)
+    got = seen_proportions("desk", np.vstack([top, lamp, edge]), size)
     assert got is not None and got.back_side is None
     assert got.top_m == pytest.approx(0.72, abs=0.02)
+    # the top as seen: the desk's 0.7 x 1.2 m (its 2nd-98th percentiles), not the box's 0.9 x 1.4 m
+    assert np.allclose(np.subtract(got.top_hi_m, got.top_lo_m), (0.96 * 0.7, 0.96 * 1.2), atol=0.02)
     solids = prior_parts("desk", size, "wood", None, proportions=got)[0].geometry.solids
-    assert max(float(m.vertices_m[:, 2].max()) for m in solids) == pytest.approx(got.top_m)
-    assert "top at 0.7" in got.describe("desk")
+    verts = np.vstack([m.vertices_m for m in solids])
+    assert verts[:, 2].max() == pytest.approx(got.top_m)
+    assert np.all(verts[:, :2] >= np.array(got.top_lo_m) - 1e-9) and np.all(verts[:, :2] <= np.array(got.top_hi_m) + 1e-9)
+    text = got.describe("desk")
+    assert text.startswith("top at 0.7") and " x 1.15 m" in text
 
 
 def _raycast_depth(meshes, world_from_camera, k):
