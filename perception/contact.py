@@ -42,12 +42,6 @@ EDGE_ON_MIN_HEIGHT_M = 0.3
 LEGGED = frozenset({"table", "desk", "chair", "stool", "bench"})
 
 
-def _world(depth: np.ndarray, where: np.ndarray, k: CameraIntrinsics, rot: np.ndarray, cam: np.ndarray) -> np.ndarray:
-    """(N, 3) world points of the pixels ``where`` at planar ``depth``."""
-    v, u = np.nonzero(where)
-    return (_rays(k, u + 0.5, v + 0.5) * depth[v, u][:, None]) @ rot.T + cam
-
-
 def _rays(k: CameraIntrinsics, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """(N, 3) camera-frame rays with z = 1 through pixel centres (u, v)."""
     return np.stack([(u - k.cx_px) / k.fx_px, (v - k.cy_px) / k.fy_px, np.ones_like(u, dtype=np.float64)], axis=1)
@@ -186,7 +180,8 @@ def stand_on_contacts(
         area = int(mask.sum())
         label = names[inst - 1]
         seen = mask & valid & ~background
-        if area == 0 or (seen.sum() >= SEES_SHARE * area and not (category(label).on_floor and _painted_edge_on(_world(depth, seen, k, rot, cam), heading))):
+        if area == 0 or (seen.sum() >= SEES_SHARE * area and not (
+                category(label).on_floor and _painted_edge_on(k.unproject(depth)[seen] @ rot.T + cam, heading))):
             continue
         cols = np.flatnonzero(mask.any(axis=0))
         bottom = (h - 1 - np.argmax(mask[::-1, cols], axis=0)).astype(np.float64)

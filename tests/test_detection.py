@@ -278,9 +278,9 @@ def test_an_object_painted_on_a_side_wall_of_the_estimate_stands_at_its_floor_co
     labels = np.zeros((h, w), dtype=np.int32)
     labels[150:200, 20:60] = 1  # left of the centre: u - cx < 0
     v, u = np.mgrid[0:h, 0:w]
-    side = np.where(labels == 1, 1.2 / np.maximum((k.cx_px - (u + 0.5)) / f, 1e-6), 3.0)  # x = -1.2 m
+    side = np.where(labels == 1, 1.2 / np.maximum((k.cx_px - u) / f, 1e-6), 3.0)  # x = -1.2 m (CameraIntrinsics.unproject's pixels)
     depth = np.clip(side, 0.2, 10.0).astype(np.float32)
-    pts = np.column_stack([((u + 0.5 - k.cx_px) / f * depth)[labels == 1], depth[labels == 1], 1.5 - ((v + 0.5 - k.cy_px) / f * depth)[labels == 1]])
+    pts = np.column_stack([((u - k.cx_px) / f * depth)[labels == 1], depth[labels == 1], 1.5 - ((v - k.cy_px) / f * depth)[labels == 1]])
     assert np.allclose(pts[:, 0], -1.2) and pts[:, 2].min() > 0.3
     heading = np.array([0.0, 1.0])
     assert _painted_edge_on(pts, heading)
