@@ -37,28 +37,29 @@ def _legs(d: float, w: float, z_top: float, side: float, inset: float) -> list[T
     return out
 
 
-def table_legs(d, w, h, inset=None, centre_xy=(0.0, 0.0)) -> list[TriangleMesh]:
-    """The four legs of a table prior whose top is d x w (centred on ``centre_xy``) at height h,
-    ``inset`` (m) from its top's edges (None: the category constant)."""
+def table_legs(lo_xy, hi_xy, h, inset=None) -> list[TriangleMesh]:
+    """The four legs of a table prior whose top spans the plan rectangle ``lo_xy``..``hi_xy`` at
+    height h, ``inset`` (m) from its top's edges (None: the category constant)."""
+    lo, hi = np.asarray(lo_xy, dtype=np.float64), np.asarray(hi_xy, dtype=np.float64)
+    d, w = float(hi[0] - lo[0]), float(hi[1] - lo[1])
     top_t = _clip(0.05 * h, 0.015, 0.05)
     leg = _clip(0.06 * min(d, w), 0.025, 0.08)
     if inset is None:
         inset = _clip(0.03 * min(d, w), 0.0, 0.05)
-    shift = np.array([centre_xy[0], centre_xy[1], 0.0])
+    shift = np.r_[0.5 * (lo + hi), 0.0]
     return [TriangleMesh(m.vertices_m + shift, m.faces) for m in _legs(d, w, h - top_t + _E, leg, min(inset, max(0.0, min(d, w) / 2 - leg)))]
 
 
 def _table(d, w, h, material, rgba, label, proportions=None):
     """A top slab on four legs; with ``proportions`` (:mod:`generation.proportions`) its top at
     the height and over the plan seen, its legs at the inset fitted to what was seen."""
-    inset, lo, hi = None, (-d / 2, -w / 2), (d / 2, w / 2)
+    inset, lo, hi = None, np.array([-d / 2, -w / 2]), np.array([d / 2, w / 2])
     if proportions is not None:
         h, inset = proportions.top_m, proportions.leg_inset_m
-        if proportions.top_lo_m is not None:
-            lo, hi = proportions.top_lo_m, proportions.top_hi_m
+        lo, hi = proportions.top_plan((d, w, h))
     top_t = _clip(0.05 * h, 0.015, 0.05)
     solids = [box_solid([lo[0], lo[1], h - top_t], [hi[0], hi[1], h])]
-    solids += table_legs(hi[0] - lo[0], hi[1] - lo[1], h, inset, (0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])))
+    solids += table_legs(lo, hi, h, inset)
     return [PartSpec("body", None, ConvexSolids(tuple(solids)), material, affordance_rank=3,
                      affordance="place objects on top", description=f"{label}: top slab on four legs", rgba=rgba)]
 

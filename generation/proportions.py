@@ -82,6 +82,14 @@ class Proportions:
     top_lo_m: tuple[float, float] | None = None
     top_hi_m: tuple[float, float] | None = None
 
+    def top_plan(self, size_m) -> tuple[np.ndarray, np.ndarray]:
+        """(lo (2,), hi (2,)): the plan rectangle of a table's top in the box frame, the one seen
+        (``top_lo_m``, ``top_hi_m``) or the whole box of ``size_m``."""
+        if self.top_lo_m is not None:
+            return np.asarray(self.top_lo_m, dtype=np.float64), np.asarray(self.top_hi_m, dtype=np.float64)
+        half = 0.5 * np.asarray(size_m, dtype=np.float64)[:2]
+        return -half, half
+
     def describe(self, label: str) -> str:
         """What was read, for the asset's description ("... as seen")."""
         if label in ("table", "desk"):
@@ -145,10 +153,12 @@ def seen_proportions(label: str, points_box_m: np.ndarray, size_m) -> Proportion
     constants, and none came under 10 %.)"""
     if label in ("table", "desk"):
         m = measure_proportions(points_box_m, size_m, (), TABLE_TOP_SHARE)
+        if m is None:
+            return None
         p = np.asarray(points_box_m, dtype=np.float64)
         half = 0.5 * np.asarray(size_m, dtype=np.float64)[:2]
-        near = (np.abs(p[:, 2] - m.top_m) <= TOP_BAND_M) & np.all(np.abs(p[:, :2]) <= half, axis=1) if m is not None else []
-        if m is None or np.count_nonzero(near) < 30:
+        near = (np.abs(p[:, 2] - m.top_m) <= TOP_BAND_M) & np.all(np.abs(p[:, :2]) <= half, axis=1)
+        if np.count_nonzero(near) < 30:
             return m
         lo = np.maximum(np.percentile(p[near, :2], TOP_PCT, axis=0), -half)
         hi = np.minimum(np.percentile(p[near, :2], 100.0 - TOP_PCT, axis=0), half)
@@ -176,22 +186,18 @@ def fit_leg_inset(proportions: Proportions, space, world_from_box: np.ndarray, s
     seen free space: the legs the camera saw stand where it saw them (a thin leg a few
     centimetres off shows the floor behind it), the first (outermost) on ties. ``space`` is the
     object's ``generation.visibility.FreeSpace``, ``world_from_box`` and ``size_m`` its box,
-    ``legs(d, w, top_m, inset_m, centre_xy)`` the leg meshes in the box frame
+    ``legs(lo_xy, hi_xy, top_m, inset_m)`` the leg meshes in the box frame under the top's plan
     (``generation.priors.table_legs``). Fitted by search, not by clustering leg points: a leg is
     a few dozen points or none, and the free space seen around it says as much."""
     from scene_builder.frames import transform_points
 
     from generation.visibility import surface_samples
 
-    d, w = float(size_m[0]), float(size_m[1])
-    centre = (0.0, 0.0)
-    if proportions.top_lo_m is not None:
-        lo, hi = np.asarray(proportions.top_lo_m), np.asarray(proportions.top_hi_m)
-        (d, w), centre = hi - lo, tuple(0.5 * (lo + hi))
+    lo, hi = proportions.top_plan(size_m)
     best, best_share = None, np.inf
     for share in LEG_INSET_SHARES:
-        inset = share * min(d, w)
-        pts = transform_points(world_from_box, surface_samples(legs(d, w, proportions.top_m, inset, centre), LEG_SAMPLES, seed))
+        inset = share * float(np.min(hi - lo))
+        pts = transform_points(world_from_box, surface_samples(legs(lo, hi, proportions.top_m, inset), LEG_SAMPLES, seed))
         v = space.violation(pts)
         if v < best_share - 1e-9:
             best, best_share = inset, v

@@ -125,7 +125,7 @@ def test_a_tables_legs_stand_where_the_camera_saw_them():
     d, w, top = 0.8, 1.2, 0.7
     world_from_box = np.eye(4)
     world_from_box[:3, 3] = (0.0, 2.0, 0.0)
-    truth = [box_solid([-d / 2, -w / 2, top - 0.03], [d / 2, w / 2, top])] + table_legs(d, w, top, 0.10)
+    truth = [box_solid([-d / 2, -w / 2, top - 0.03], [d / 2, w / 2, top])] + table_legs((-d / 2, -w / 2), (d / 2, w / 2), top, 0.10)
     room = [box_solid([-5, -5, -0.1], [5, 8, 0.0]), box_solid([-5, 4.0, 0.0], [5, 4.1, 3.0])]
     world = [transform_points(world_from_box, np.asarray(m.vertices_m)) for m in truth]
     meshes = [type(m)(v, m.faces) for m, v in zip(truth, world)] + room
@@ -143,7 +143,7 @@ def test_a_tables_legs_stand_where_the_camera_saw_them():
     assert got.leg_inset_m == pytest.approx(min(candidates, key=lambda x: abs(x - 0.10)))
 
     def legs_share(inset):
-        return space.violation(transform_points(world_from_box, surface_samples(table_legs(d, w, top, inset), 600, 0)))
+        return space.violation(transform_points(world_from_box, surface_samples(table_legs((-d / 2, -w / 2), (d / 2, w / 2), top, inset), 600, 0)))
 
     # (legs 10 px wide: the pixels at their edges see the floor beside them, some 10 % of samples)
     assert legs_share(got.leg_inset_m) < 0.2 < 0.4 < legs_share(None)
