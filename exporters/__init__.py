@@ -9,6 +9,8 @@ object the consumer rejects.
 
 from __future__ import annotations
 
+import dataclasses
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -79,14 +81,20 @@ def export_scene(scene: Scene, out_dir: Path, config: ExportConfig) -> ExportedF
         from exporters.usd import write_usdz
 
         write_usdz(usd)
-    return ExportedFiles(
-        mjcf=write_mjcf(scene, out_dir) if config.mjcf else None,
-        usd=usd,
-        urdf=write_urdf(scene, out_dir) if config.scene_urdf else None,
-        gltf=write_gltf(scene, out_dir) if config.gltf else None,
-        sdf=write_sdf(scene, out_dir) if config.sdf else None,
-        object_urdfs=write_object_urdfs(scene, out_dir) if config.urdf else None,
-    )
+    # The SDF is written and checked on a second thread while the others are written here: most
+    # of its time is libsdformat's checker process (0.4 s), waited on with the interpreter free.
+    # It starts after USD, so pxr's plugins load with no other thread running (two native
+    # libraries initialising on two threads at once can deadlock on the loader's lock).
+    with ThreadPoolExecutor(1, thread_name_prefix="sdf") as pool:
+        sdf = pool.submit(write_sdf, scene, out_dir) if config.sdf else None
+        files = ExportedFiles(
+            mjcf=write_mjcf(scene, out_dir) if config.mjcf else None,
+            usd=usd,
+            urdf=write_urdf(scene, out_dir) if config.scene_urdf else None,
+            gltf=write_gltf(scene, out_dir) if config.gltf else None,
+            object_urdfs=write_object_urdfs(scene, out_dir) if config.urdf else None,
+        )
+        return dataclasses.replace(files, sdf=None if sdf is None else sdf.result())
 
 
 def record_scene(

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from exporters import names
-from exporters.textures import TEXTURE_DIR, texture_file, write_mtl, write_texture
+from exporters.textures import SHARED_FILES, TEXTURE_DIR, texture_file, write_mtl, write_texture
 from scene_builder.errors import ExportError
 from scene_builder.frames import mujoco_camera, quat_wxyz_from_matrix, transform_points
 from scene_builder.model import AssetKind, Background, JointType, ObjectAsset, Part, PlacedObject, Plane, Scene, Texture, TriangleMesh
@@ -322,16 +322,17 @@ def _write_obj(path: Path, mesh: TriangleMesh) -> None:
     file (and its material file) is unchanged since."""
     key = str(Path(path).resolve())
     digest = _mesh_digest(mesh)
-    done = _WRITTEN.get(key)
-    if done is not None and done[0] == digest and _file_stamp(Path(path)) == done[1:]:
-        if mesh.texture is None or Path(path).with_suffix(".mtl").exists():
-            return
-    _write_obj_file(path, mesh)
-    if len(_WRITTEN) >= _WRITTEN_MAX:
-        _WRITTEN.clear()
-    stamp = _file_stamp(Path(path))
-    if stamp is not None:
-        _WRITTEN[key] = (digest, *stamp)
+    with SHARED_FILES:
+        done = _WRITTEN.get(key)
+        if done is not None and done[0] == digest and _file_stamp(Path(path)) == done[1:]:
+            if mesh.texture is None or Path(path).with_suffix(".mtl").exists():
+                return
+        _write_obj_file(path, mesh)
+        if len(_WRITTEN) >= _WRITTEN_MAX:
+            _WRITTEN.clear()
+        stamp = _file_stamp(Path(path))
+        if stamp is not None:
+            _WRITTEN[key] = (digest, *stamp)
 
 
 def _write_obj_file(path: Path, mesh: TriangleMesh) -> None:

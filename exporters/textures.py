@@ -4,6 +4,7 @@ viewers) at them. Pure Python plus PIL."""
 
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,11 @@ from exporters import names
 from scene_builder.model import Scene, Texture, TriangleMesh
 
 TEXTURE_DIR = "textures"
+
+#: Held while a file shared by several formats (``meshes/``, ``textures/``) is checked and written:
+#: ``exporters.export_scene`` writes the SDF on a second thread beside the URDFs, and one of them
+#: must not find a file the other is half-way through writing.
+SHARED_FILES = threading.RLock()
 
 
 def texture_file(texture: Texture) -> str:
@@ -26,9 +32,10 @@ def write_texture(texture: Texture, out_dir: Path) -> str:
 
     rel = f"{TEXTURE_DIR}/{texture_file(texture)}"
     path = Path(out_dir) / rel
-    if not path.exists():
-        path.parent.mkdir(parents=True, exist_ok=True)
-        Image.fromarray(np.ascontiguousarray(texture.image_rgb)).save(path, format="PNG", compress_level=1)
+    with SHARED_FILES:
+        if not path.exists():
+            path.parent.mkdir(parents=True, exist_ok=True)
+            Image.fromarray(np.ascontiguousarray(texture.image_rgb)).save(path, format="PNG", compress_level=1)
     return rel
 
 

@@ -17,10 +17,9 @@ Backends (registry task ``"generation"``):
 from __future__ import annotations
 
 import importlib.util
-import os
 from typing import TYPE_CHECKING, Callable, Protocol
 
-from scene_builder.config import GenerationConfig
+from scene_builder.config import GenerationConfig, usable_cores
 from scene_builder.model import BackendUse, GeneratedAsset, PerceivedObject, Perception
 from scene_builder.registry import Registry
 
@@ -127,7 +126,7 @@ def generate_assets(
     import contextlib
     from concurrent.futures import ThreadPoolExecutor
 
-    threads = min(_threads(), len(perception.objects)) if use.backend == "shape-prior" else 1
+    threads = min(usable_cores(), len(perception.objects)) if use.backend == "shape-prior" else 1
     out = []
     with ThreadPoolExecutor(threads, thread_name_prefix="generate") if threads > 1 else contextlib.nullcontext() as pool:
         made = map(one, perception.objects) if pool is None else pool.map(one, perception.objects)
@@ -136,14 +135,6 @@ def generate_assets(
             if on_object is not None:
                 on_object(obj.name)
     return tuple(out)
-
-
-def _threads() -> int:
-    """Threads that make objects: the cores this process may use, at most ``OMP_NUM_THREADS``
-    where it is set (``scene-builder batch`` sets it to each worker's share of the cores)."""
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    cap = os.environ.get("OMP_NUM_THREADS", "").strip()
-    return max(1, min(cores, int(cap)) if cap.isdigit() and int(cap) > 0 else cores)
 
 
 def assemble_asset(*args, **kwargs):

@@ -99,8 +99,9 @@ def _edges(gray: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
     from skimage.feature import canny
 
     e = canny(gray, sigma=sigma, low_threshold=0.03, high_threshold=0.08)
-    gx = ndimage.sobel(ndimage.gaussian_filter(gray, sigma), axis=1)
-    gy = ndimage.sobel(ndimage.gaussian_filter(gray, sigma), axis=0)
+    smooth = ndimage.gaussian_filter(gray, sigma)
+    gx = ndimage.sobel(smooth, axis=1)
+    gy = ndimage.sobel(smooth, axis=0)
     horiz = e & (np.abs(gy) >= np.abs(gx))
     vert = e & (np.abs(gx) > np.abs(gy))
     horiz = ndimage.binary_dilation(horiz, structure=np.ones((3, 1), dtype=bool))

@@ -29,6 +29,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from scene_builder.config import usable_cores
 from scene_builder.frames import transform_points
 from scene_builder.model import Camera, Front, Observation, PerceivedObject, Plane
 
@@ -463,19 +464,25 @@ def _photo_m_per_px(face: Face, camera: Camera) -> float:
 
 def with_fronts(objects: tuple[PerceivedObject, ...], observation: Observation, camera: Camera, walls: tuple[Plane, ...] = ()) -> tuple[PerceivedObject, ...]:
     """``objects`` with the fronts seen on the face of each that can have them (see the module
-    docstring); the others unchanged."""
-    out = []
-    for obj in objects:
-        if obj.label in FRONT_LABELS or obj.label in MAYBE_FRONT_LABELS:
-            face = face_of(obj.points_world_m, camera.position_m, walls)
-            if face.width_m > 0.1 and face.height_m > 0.1 and _photo_m_per_px(face, camera) <= MAX_PHOTO_M_PER_PX:
-                face = refine_yaw(observation.rgb, camera, face, obj.points_world_m, obj.mask)
-                depth = observation.depth_m if observation.depth_source == "sensor" else None
-                fronts = fronts_on_face(observation.rgb, camera, face, obj.label, obj.mask, depth)
-                if obj.label not in FRONT_LABELS and sum(f.handle_px is not None for f in fronts) < MIN_HANDLED_FRONTS:
-                    fronts = ()
-                if fronts:
-                    obj = replace(obj, fronts=fronts)
-        out.append(obj)
-    return tuple(out)
+    docstring); the others unchanged. Objects are read on threads (one per usable core): most of
+    the time is OpenCV and scipy, which free the interpreter; the result does not depend on it."""
+    from concurrent.futures import ThreadPoolExecutor
 
+    def one(obj: PerceivedObject) -> PerceivedObject:
+        if obj.label not in FRONT_LABELS and obj.label not in MAYBE_FRONT_LABELS:
+            return obj
+        face = face_of(obj.points_world_m, camera.position_m, walls)
+        if face.width_m <= 0.1 or face.height_m <= 0.1 or _photo_m_per_px(face, camera) > MAX_PHOTO_M_PER_PX:
+            return obj
+        face = refine_yaw(observation.rgb, camera, face, obj.points_world_m, obj.mask)
+        depth = observation.depth_m if observation.depth_source == "sensor" else None
+        fronts = fronts_on_face(observation.rgb, camera, face, obj.label, obj.mask, depth)
+        if obj.label not in FRONT_LABELS and sum(f.handle_px is not None for f in fronts) < MIN_HANDLED_FRONTS:
+            fronts = ()
+        return replace(obj, fronts=fronts) if fronts else obj
+
+    threads = min(usable_cores(), sum(o.label in FRONT_LABELS or o.label in MAYBE_FRONT_LABELS for o in objects))
+    if threads <= 1:
+        return tuple(map(one, objects))
+    with ThreadPoolExecutor(threads, thread_name_prefix="fronts") as pool:
+        return tuple(pool.map(one, objects))

@@ -5,8 +5,18 @@ Every field has a default that a user of ``scene-builder build`` gets without fl
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
+
+
+def usable_cores() -> int:
+    """The cores this process may use (its CPU affinity), at most ``OMP_NUM_THREADS`` where it is
+    set (``scene-builder batch`` sets it to each worker's share of the cores): how many threads a
+    stage runs side by side."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    cap = os.environ.get("OMP_NUM_THREADS", "").strip()
+    return max(1, min(cores, int(cap)) if cap.isdigit() and int(cap) > 0 else cores)
 
 
 @dataclass(frozen=True)

@@ -131,9 +131,9 @@ def test_objects_made_on_threads_are_those_made_one_at_a_time(perception, monkey
     in the same order, byte for byte, as on one thread; the progress callback in object order."""
     import generation
 
-    monkeypatch.setattr(generation, "_threads", lambda: 1)
+    monkeypatch.setattr(generation, "usable_cores", lambda: 1)
     one = generate_assets(perception, GenerationConfig(), seed=5)
-    monkeypatch.setattr(generation, "_threads", lambda: 3)
+    monkeypatch.setattr(generation, "usable_cores", lambda: 3)
     seen = []
     many = generate_assets(perception, GenerationConfig(), seed=5, on_object=seen.append)
     assert seen == [o.name for o in perception.objects] == [g.asset.name for g in many]
@@ -148,15 +148,15 @@ def test_objects_made_on_threads_are_those_made_one_at_a_time(perception, monkey
 def test_thread_count_follows_the_cores_and_omp_num_threads(monkeypatch):
     import os
 
-    import generation
+    from scene_builder.config import usable_cores
 
     cores = len(os.sched_getaffinity(0))
     monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
-    assert generation._threads() == cores
+    assert usable_cores() == cores
     monkeypatch.setenv("OMP_NUM_THREADS", "1")  # a batch worker's share of the cores
-    assert generation._threads() == 1
+    assert usable_cores() == 1
     monkeypatch.setenv("OMP_NUM_THREADS", "bogus")
-    assert generation._threads() == cores
+    assert usable_cores() == cores
 
 
 @pytest.mark.slow

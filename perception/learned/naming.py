@@ -10,11 +10,11 @@ check the file against). No torch is imported to name objects.
 from __future__ import annotations
 
 import functools
-import os
 from pathlib import Path
 
 import numpy as np
 
+from scene_builder.config import usable_cores
 from scene_builder.errors import InputError, ModelUnavailableError
 from scene_builder.vocabulary import BY_NAME
 
@@ -198,7 +198,7 @@ def _inference_threads() -> int:
     """Intra-op threads for the namer: half the cores this process may use (at least 1). On a
     2-core machine shared with other work, one torch thread ran a batch of 8 crops in 0.7 s and
     two threads in 1.7-7.8 s (workers spin-waiting on a busy core)."""
-    return max(1, len(os.sched_getaffinity(0)) // 2) if hasattr(os, "sched_getaffinity") else 1
+    return max(1, usable_cores() // 2)
 
 
 def _square_224(crop: np.ndarray) -> np.ndarray:
