@@ -300,16 +300,42 @@ class _Renders:
         return float(np.mean(err))
 
     def image_scores(self, photo: np.ndarray) -> tuple[float, float]:
-        """(PSNR dB, SSIM) of the RGB render against the photo (SSIM: scikit-image's). PSNR is
-        written here: scikit-image's ``peak_signal_noise_ratio`` lives beside a module that
-        imports scipy.stats (0.7 s of a build) for one line of arithmetic; the same definition
-        (10 log10(255^2 / MSE) over every channel), compared with scikit-image's in the tests."""
-        from skimage.metrics import structural_similarity
-
+        """(PSNR dB, SSIM) of the RGB render against the photo. PSNR is written here:
+        scikit-image's ``peak_signal_noise_ratio`` lives beside a module that imports scipy.stats
+        (0.7 s of a build) for one line of arithmetic; the same definition (10 log10(255^2 / MSE)
+        over every channel). SSIM: :func:`ssim`. Both compared with scikit-image's in the tests."""
         mse = float(np.mean((photo.astype(np.float64) - self.rgb.astype(np.float64)) ** 2))
         psnr = float("inf") if mse == 0 else float(10.0 * np.log10(255.0 ** 2 / mse))
-        ssim = float(structural_similarity(photo, self.rgb, channel_axis=2, data_range=255))
-        return psnr, ssim
+        return psnr, ssim(photo, self.rgb)
+
+
+#: SSIM's window (pixels) and constants, scikit-image's defaults (Wang et al. 2004 with a
+#: uniform window and the sample covariance).
+SSIM_WINDOW_PX = 7
+SSIM_K1, SSIM_K2 = 0.01, 0.03
+
+
+def ssim(a: np.ndarray, b: np.ndarray, data_range: float = 255.0) -> float:
+    """Mean structural similarity of two (H, W, C) images: scikit-image's
+    ``structural_similarity(a, b, channel_axis=2, data_range=data_range)`` (same window,
+    constants, sample covariance and border crop; equal to about 1e-15), with the window means
+    taken by OpenCV's box filter on all channels at once: 2-3x faster (0.5 -> 0.2 s on a
+    1280 x 960 photo, computed twice per physics check)."""
+    import cv2
+
+    x, y = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    win = SSIM_WINDOW_PX
+    cov = win * win / (win * win - 1.0)
+    c1, c2 = (SSIM_K1 * data_range) ** 2, (SSIM_K2 * data_range) ** 2
+
+    def mean(im: np.ndarray) -> np.ndarray:
+        return cv2.blur(im, (win, win), borderType=cv2.BORDER_REFLECT)
+
+    ux, uy = mean(x), mean(y)
+    vx, vy, vxy = cov * (mean(x * x) - ux * ux), cov * (mean(y * y) - uy * uy), cov * (mean(x * y) - ux * uy)
+    s = ((2.0 * ux * uy + c1) * (2.0 * vxy + c2)) / ((ux * ux + uy * uy + c1) * (vx + vy + c2))
+    pad = (win - 1) // 2
+    return float(s[pad:-pad, pad:-pad].mean())
 
 
 def _fidelity(first: _Renders, last: _Renders, perception: Perception, scene: Scene) -> Fidelity:

@@ -101,8 +101,14 @@ def headboard_pixels(bed_mask: np.ndarray, bed_points_world_m: np.ndarray, point
         # headboard's edge toward the wall or away from it).
         dist = np.min(np.stack([p @ w.normal + w.offset_m for w in walls]), axis=0)
         _, (rr, cc) = ndimage.distance_transform_edt(~free, return_indices=True)
-        smooth = ndimage.median_filter(dist[rr, cc], size=SMOOTH_PX, mode="nearest")
-        near &= smooth >= OFF_WALL_M
+        # Filtered over the box of the near pixels and the window's reach around it: the same
+        # values there as over the whole image (at the image's edges both replicate the edge).
+        rows, cols = np.flatnonzero(near.any(axis=1)), np.flatnonzero(near.any(axis=0))
+        reach = SMOOTH_PX // 2
+        r0, r1 = max(0, rows[0] - reach), min(near.shape[0], rows[-1] + 1 + reach)
+        c0, c1 = max(0, cols[0] - reach), min(near.shape[1], cols[-1] + 1 + reach)
+        smooth = ndimage.median_filter(dist[rr[r0:r1, c0:c1], cc[r0:r1, c0:c1]], size=SMOOTH_PX, mode="nearest")
+        near[r0:r1, c0:c1] &= smooth >= OFF_WALL_M
     touch = ndimage.binary_dilation(bed_mask, iterations=TOUCH_PX)
     best, best_n = None, 0
     for sign, end in ((1.0, m_hi), (-1.0, m_lo)):

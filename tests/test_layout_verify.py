@@ -273,19 +273,29 @@ def test_verify_reads_the_project_exporter_mjcf(tmp_path):
     assert verdict.stable, verdict.objects
 
 
-def test_image_scores_psnr_is_scikit_images():
-    """The render-vs-photo PSNR (written in numpy to keep scipy.stats' import out of a build) is
-    scikit-image's peak_signal_noise_ratio on the same uint8 images; identical images give inf."""
+def test_image_scores_are_scikit_images():
+    """The render-vs-photo PSNR (written in numpy to keep scipy.stats' import out of a build) and
+    SSIM (OpenCV's box filter) are scikit-image's peak_signal_noise_ratio and
+    structural_similarity on the same uint8 images, colour and grey; identical images give inf
+    and 1."""
     from types import SimpleNamespace
 
     from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
     from layout.verify import _Renders
+    from layout.verify import ssim as ssim_of
 
     rng = np.random.default_rng(5)
     photo = rng.integers(0, 256, (40, 50, 3), dtype=np.uint8)
     render = np.clip(photo.astype(int) + rng.integers(-30, 31, photo.shape), 0, 255).astype(np.uint8)
     psnr, ssim = _Renders.image_scores(SimpleNamespace(rgb=render), photo)
     assert psnr == pytest.approx(peak_signal_noise_ratio(photo, render, data_range=255), rel=1e-9)
-    assert ssim == pytest.approx(structural_similarity(photo, render, channel_axis=2, data_range=255))
-    assert _Renders.image_scores(SimpleNamespace(rgb=photo), photo)[0] == float("inf")
+    assert ssim == pytest.approx(structural_similarity(photo, render, channel_axis=2, data_range=255), abs=1e-12)
+    assert _Renders.image_scores(SimpleNamespace(rgb=photo), photo) == (float("inf"), pytest.approx(1.0))
+    # a photo with flat regions and a render that differs in one corner only
+    flat = np.full((64, 80, 3), 120, dtype=np.uint8)
+    flat[20:40, 30:60] = (200, 40, 10)
+    dented = flat.copy()
+    dented[:10, :12] = 0
+    assert ssim_of(flat, dented) == pytest.approx(structural_similarity(flat, dented, channel_axis=2, data_range=255), abs=1e-12)
+    assert ssim_of(photo[..., :1], render[..., :1]) == pytest.approx(structural_similarity(photo[..., 0], render[..., 0], data_range=255), abs=1e-12)
