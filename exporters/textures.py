@@ -1,13 +1,11 @@
 """Texture files shared by the exporters: ``OUT/textures/<name>.png`` (one per scene texture,
 deterministic bytes), and the OBJ material library that points OBJ consumers (URDF tools, mesh
-viewers) at them. Pure Python plus PIL."""
+viewers) at them. Pure Python."""
 
 from __future__ import annotations
 
 import threading
 from pathlib import Path
-
-import numpy as np
 
 from exporters import names
 from scene_builder.model import Scene, Texture, TriangleMesh
@@ -27,15 +25,14 @@ def texture_file(texture: Texture) -> str:
 
 def write_texture(texture: Texture, out_dir: Path) -> str:
     """Write ``out_dir/textures/<name>.png`` (once per name; PNG at a fixed compression level, so
-    the same image gives the same bytes) and return its path relative to ``out_dir``."""
-    from PIL import Image
-
+    the same image gives the same bytes: ``Texture.png_bytes``) and return its path relative
+    to ``out_dir``."""
     rel = f"{TEXTURE_DIR}/{texture_file(texture)}"
     path = Path(out_dir) / rel
     with SHARED_FILES:
         if not path.exists():
             path.parent.mkdir(parents=True, exist_ok=True)
-            Image.fromarray(np.ascontiguousarray(texture.image_rgb)).save(path, format="PNG", compress_level=1)
+            path.write_bytes(texture.png_bytes)
     return rel
 
 

@@ -32,6 +32,7 @@ frozen; copy before modifying. Dataclasses that hold arrays compare by identity 
 from __future__ import annotations
 
 import enum
+import functools
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -266,6 +267,18 @@ class Texture:
             raise ValueError(f"Texture {self.name}: empty image")
         if not self.name or any(c in self.name for c in "/\\\0") or self.name in (".", ".."):
             raise ValueError(f"Texture name {self.name!r} is not a safe file name")
+
+    @functools.cached_property
+    def png_bytes(self) -> bytes:
+        """The image as PNG at zlib level 1 (the same bytes for the same image), encoded once:
+        the exporters' ``textures/<name>.png`` and ``scene.json`` carry these bytes."""
+        import io
+
+        from PIL import Image
+
+        buf = io.BytesIO()
+        Image.fromarray(np.ascontiguousarray(self.image_rgb)).save(buf, format="PNG", compress_level=1)
+        return buf.getvalue()
 
 
 @dataclass(frozen=True, eq=False)

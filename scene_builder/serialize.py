@@ -40,16 +40,6 @@ _TYPES: dict[str, type] = {
 FORMAT_VERSION = 1
 
 
-def _png_base64(image_rgb: np.ndarray) -> str:
-    import io
-
-    from PIL import Image
-
-    buf = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(image_rgb)).save(buf, format="PNG", compress_level=1)
-    return base64.b64encode(buf.getvalue()).decode("ascii")
-
-
 def _image_from_png_base64(data: str) -> np.ndarray:
     import io
 
@@ -76,7 +66,7 @@ def to_jsonable(value, _textures: dict[str, int] | None = None):
                 raise ValueError(f"two different textures are named {value.name!r}; texture names must be unique")
             return {"__texture__": value.name}
         _textures[value.name] = id(value)
-        return {"__type__": "Texture", "name": value.name, "png_base64": _png_base64(value.image_rgb)}
+        return {"__type__": "Texture", "name": value.name, "png_base64": base64.b64encode(value.png_bytes).decode("ascii")}
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         out = {"__type__": type(value).__name__}
         for f in dataclasses.fields(value):

@@ -48,6 +48,24 @@ def test_textures_are_written_once_and_exact(exported):
     assert np.mean(tex[:, 0] - tex[:, 1]) > 150  # red everywhere (outside the mask: filled from it)
 
 
+def test_texture_files_and_scene_json_carry_the_same_png(exported, tmp_path):
+    """Each texture is encoded once (``Texture.png_bytes``): the file under textures/ holds those
+    bytes, scene.json the same bytes in base64, and they decode to the image."""
+    import base64
+    import io
+    import json
+
+    from scene_builder.serialize import scene_to_json
+
+    scene, out, *_ = exported
+    texture = scene.room.background.surface.texture
+    assert (out / "textures" / "background.png").read_bytes() == texture.png_bytes
+    np.testing.assert_array_equal(np.array(Image.open(io.BytesIO(texture.png_bytes))), texture.image_rgb)
+    text = scene_to_json(scene)
+    assert base64.b64encode(texture.png_bytes).decode("ascii") in text
+    assert json.loads(text)["format"] == "scene-builder/scene"
+
+
 def test_object_texture_coordinates_project_onto_its_pixels(exported):
     scene, out, files, obs, board = exported
     part = scene.objects[0].asset.parts[0]
