@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from generation.assembly import ConvexSolids, JointSpec, PartSpec, box_solid
-from generation.proportions import turned_box
+from generation.proportions import TABLE_LABELS, turned_box
 from scene_builder.model import JointType, TriangleMesh
 
 __all__ = ["PRIOR_LABELS", "prior_parts", "shelf_boards"]
@@ -336,7 +336,7 @@ def prior_parts(label: str, size_m, material: str, shell_thickness_m: float | No
     Raises ValueError for a label without a prior (see :data:`PRIOR_LABELS`).
     """
     d, w, h = (float(v) for v in size_m)
-    if label in ("table", "desk"):
+    if label in TABLE_LABELS:
         return _table(d, w, h, material, rgba, label, proportions)
     if label in ("chair", "stool"):
         return _chair(d, w, h, material, rgba, label)

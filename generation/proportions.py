@@ -30,10 +30,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-__all__ = ["SIDES", "Proportions", "fit_leg_inset", "measure_proportions", "seen_proportions", "turned_box"]
+__all__ = ["SIDES", "TABLE_LABELS", "Proportions", "fit_leg_inset", "measure_proportions", "seen_proportions", "turned_box"]
 
 #: The sides of the box a back may stand on, by the outward axis of that side.
 SIDES = ("-x", "+x", "-y", "+y")
+#: Categories read as a top on legs (:func:`seen_proportions`, :func:`fit_leg_inset`).
+TABLE_LABELS = ("table", "desk")
 #: Grid cell (m) of the top height map: fine enough for a 6 cm headboard strip, coarse enough
 #: that most cells hold a few points of a sensor's depth at 2-5 m.
 CELL_M = 0.05
@@ -92,7 +94,7 @@ class Proportions:
 
     def describe(self, label: str) -> str:
         """What was read, for the asset's description ("... as seen")."""
-        if label in ("table", "desk"):
+        if label in TABLE_LABELS:
             legs = "" if self.leg_inset_m is None else f" and legs {self.leg_inset_m * 100:.0f} cm in from its edges"
             plan = "" if self.top_lo_m is None else f", {self.top_hi_m[0] - self.top_lo_m[0]:.2f} x {self.top_hi_m[1] - self.top_lo_m[1]:.2f} m"
             return f"top at {self.top_m:.2f} m{plan}{legs}"
@@ -151,7 +153,7 @@ def seen_proportions(label: str, points_box_m: np.ndarray, size_m) -> Proportion
     and a chair's on any side, on the real, plain-SUN, Total3D-demo and COCO photos 6 of 7 sofas
     and 20 of 22 chairs whose prior changed filled more seen free space than with the
     constants, and none came under 10 %.)"""
-    if label in ("table", "desk"):
+    if label in TABLE_LABELS:
         m = measure_proportions(points_box_m, size_m, (), TABLE_TOP_SHARE)
         if m is None:
             return None

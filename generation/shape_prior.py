@@ -21,7 +21,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from scene_builder.config import GenerationConfig
+from scene_builder.config import GenerationConfig, usable_cores
 from scene_builder.frames import cut_by_photo_bottom, pose, transform_points
 from generation.visibility import FreeSpace, surface_samples
 from scene_builder.model import AssetKind, GeneratedAsset, Inertial, ObjectAsset, PerceivedObject, Perception
@@ -584,7 +584,7 @@ class ShapePriorGenerator:
         from scipy.spatial import cKDTree
 
         from generation.priors import PRIOR_LABELS, prior_parts, shelf_boards, table_legs
-        from generation.proportions import fit_leg_inset, seen_proportions
+        from generation.proportions import TABLE_LABELS, fit_leg_inset, seen_proportions
         from scene_builder.vocabulary import category
 
         label = obj.label
@@ -643,7 +643,7 @@ class ShapePriorGenerator:
                 held = _held(others, box_from_world, size)
                 boards = shelf_boards(held, size, pts) if held else None
             measured = seen_proportions(label, pts, size)
-            if measured is not None and label in ("table", "desk"):
+            if measured is not None and label in TABLE_LABELS:
                 measured = fit_leg_inset(measured, space, fit.world_from_box, size, table_legs, seed)
             specs = prior_parts(label, size, cm.material, cm.shell_thickness_m, rgba, config.max_collision_pieces, boards, measured)
             description += "; shape prior" if boards is None else f"; shape prior, {len(boards)} boards under what it holds"
@@ -735,9 +735,9 @@ class ShapePriorGenerator:
         # (completion_blockers, found above; _ownership is cached per object)
         columns = [_ownership(o)[2] for o in blocking]
 
-        # Both cores for the queries (most of the time here), unless objects are made on threads
-        # (generation.generate_assets): the other core is making another object.
-        query_workers = 2 if threading.current_thread() is threading.main_thread() else 1
+        # Every usable core for the queries (most of the time here), unless objects are made on
+        # threads (generation.generate_assets): the other cores are making other objects.
+        query_workers = usable_cores() if threading.current_thread() is threading.main_thread() else 1
 
         def blocked(p_box: np.ndarray) -> np.ndarray:
             """Voxel centres this object may not fill: seen free space, behind a wall, or nearer
