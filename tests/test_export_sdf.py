@@ -277,3 +277,28 @@ def test_a_bounded_wall_is_the_same_box_slab_in_sdf_and_mjcf(tmp_path):
         # Its room-side face lies on the wall's plane.
         centre, _, half = wall.slab()
         assert float(wall.signed_distance_m(centre[None])[0]) == pytest.approx(-half[1])
+
+
+def test_export_scene_checks_the_sdf_on_its_thread_and_reports_its_error(tmp_path, sdf_checker, monkeypatch):
+    """export_scene writes the SDF on a second thread beside the URDFs and glTF: the files are
+    the ones write_sdf alone writes, byte for byte, every other format is there, and a checker's
+    rejection reaches the caller as the ExportError it is (not lost on the thread)."""
+    import exporters.sdf as sdf
+    from exporters import export_scene
+    from scene_builder.config import ExportConfig
+
+    scene = mixed_scene()
+    config = ExportConfig(viz="off", scene_urdf=True)
+    files = export_scene(scene, tmp_path / "all", config)
+    alone = write_sdf(scene, tmp_path / "alone")
+    assert files.sdf.read_bytes() == alone.read_bytes()
+    for name in ("scene.xml", "scene.usda", "scene.urdf", "scene.glb"):
+        assert (tmp_path / "all" / name).is_file(), name
+    assert sorted(p.name for p in (tmp_path / "all" / "meshes").iterdir()) == sorted(p.name for p in (tmp_path / "alone" / "meshes").iterdir())
+
+    def rejects(path, command=None):
+        raise ExportError(f"libsdformat rejects {path.name}: made up for the test")
+
+    monkeypatch.setattr(sdf, "run_checker", rejects)
+    with pytest.raises(ExportError, match="made up for the test"):
+        export_scene(scene, tmp_path / "again", config)
