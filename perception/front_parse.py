@@ -398,7 +398,7 @@ def parse_face(face_rgb: np.ndarray, m_per_px: float, inside: np.ndarray | None 
     _cut(_Lines(horiz), _Lines(vert.T), root, min_piece)
     fronts = _fronts(root, handles, m_per_px)
     if len(fronts) < 2 and inside is not None and inside.any():
-        from perception.front_rects import handle_column, handle_grid, outlined_rectangles
+        from perception.front_rects import handle_column, handle_grid, inside_stiles, outlined_rectangles
 
         ins = cv2.warpAffine(inside.astype(np.uint8), fwd, (w, h), flags=cv2.INTER_NEAREST) > 0 if (sh or sv) else inside
         cols, rows = np.flatnonzero(ins.mean(axis=0) >= 0.5), np.flatnonzero(ins.mean(axis=1) >= 0.5)
@@ -425,7 +425,7 @@ def parse_face(face_rgb: np.ndarray, m_per_px: float, inside: np.ndarray | None 
             o_horiz, o_vert = _edges(own_gray, sigma=1.2)
             rects = handle_grid(own_handles, o_horiz, o_vert, box, m_per_px, ins)
         if len(rects) >= 2 and len(rects) > len(fronts):
-            fronts = [(rect, (True, True, True, True), hd) for rect, _, hd in rects]
+            fronts = [(rect, (True, True, True, True), hd) for rect, _, hd in inside_stiles(rects, vert, box)]
     panels = []
     for (x0, y0, x1, y1), sides, hd in fronts:
         pw, ph = (x1 - x0) * m_per_px, (y1 - y0) * m_per_px

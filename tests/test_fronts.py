@@ -3,6 +3,8 @@ moving parts, and the bench's matching and the probe's 'opens fully' rule."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -606,3 +608,26 @@ def test_theil_sen_and_spearman_agree_with_scipy():
             assert np.isclose(spearman(x, y), stats.spearmanr(x, y)[0])
     assert np.all(np.isnan(theil_sen(np.arange(4.0), np.ones(4))))
     assert np.isnan(spearman(np.ones(5), np.arange(5.0)))
+
+
+def test_drawers_told_by_their_pulls_stop_at_the_face_frames_stiles():
+    """A night stand's column of pulls spans its face's box across; where the face frame's stiles
+    show as vertical edges running down beside the drawers, each drawer's sides move in to them
+    (sunrgbd_imvotenet_000005's dresser), never past its pull; without stiles they stay."""
+    from perception.front_rects import inside_stiles
+
+    h, w = 120, 200
+    vert = np.zeros((h, w), dtype=bool)
+    rects = [((0, 7, 200, 57), 0.0, SimpleNamespace(box=(80, 30, 120, 34))), ((0, 57, 200, 107), 0.0, SimpleNamespace(box=(80, 80, 120, 84)))]
+    assert inside_stiles(rects, vert, (0, 0, 200, 120)) == rects
+    vert[:, 30] = vert[:, 171] = True  # the stiles' inner edges, down the whole face
+    vert[:, 100] = True  # an edge between the pulls (a split of the drawer, no stile)
+    moved = inside_stiles(rects, vert, (0, 0, 200, 120))
+    assert [r[0] for r in moved] == [(30, 7, 171, 57), (30, 57, 171, 107)]
+    # past a pull (a knob near the drawer's side), a stile does not move that side
+    near_edge = [((0, 7, 200, 57), 0.0, SimpleNamespace(box=(20, 30, 26, 34)))]
+    assert inside_stiles(near_edge, vert, (0, 0, 200, 120))[0][0] == (0, 7, 171, 57)
+    # a "stile" nearer the middle than the search reaches does not move a side
+    vert[:, 30] = vert[:, 171] = False
+    vert[:, 90] = True
+    assert inside_stiles(rects, vert, (0, 0, 200, 120)) == rects
