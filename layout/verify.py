@@ -239,6 +239,10 @@ def valid_depth(depth_m: np.ndarray) -> np.ndarray:
     return (d > 0) & (np.abs(d - med) <= OUTLIER_SHARE * med)
 
 
+#: A rendered depth this share of the far clipping plane's distance or farther hit nothing.
+FAR_SHARE = 0.999
+
+
 class _Renders:
     """RGB (the scene's own lights), depth and object labels rendered from ``input_camera``."""
 
@@ -255,7 +259,11 @@ class _Renders:
         m.vis.global_.offheight = max(int(m.vis.global_.offheight), h)
         return mujoco.Renderer(m, height=h, width=w)
 
-    def __init__(self, renderer, m, d, index: _SceneIndex, scene: Scene) -> None:
+    def __init__(self, renderer, m, d, index: _SceneIndex, scene: Scene, labels: bool = True) -> None:
+        """``labels``: render the segmentation too (which object each pixel shows, ``label``);
+        without it (the settled state's renders, whose labels nothing reads) a pixel hit
+        something where its depth lies nearer than the far clipping plane (on the real photos'
+        scenes the same pixels as the segmentation's; one render and read-back fewer)."""
         import mujoco
 
         cam = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, "input_camera")
@@ -266,6 +274,10 @@ class _Renders:
         renderer.update_scene(d, camera=cam)
         self.depth = np.array(renderer.render(), dtype=np.float64)
         renderer.disable_depth_rendering()
+        if not labels:
+            self.hit = self.depth < FAR_SHARE * float(m.vis.map.zfar * m.stat.extent)
+            self.names, self.code, self.label = [o.name for o in scene.objects], {}, None
+            return
         renderer.enable_segmentation_rendering()
         renderer.update_scene(d, camera=cam)
         seg = np.array(renderer.render())
@@ -445,7 +457,7 @@ def verify_scene(
     if perception is not None and (fidelity_when is None or fidelity_when(verdict)):
         renderer = _Renders.renderer(m, mjcf_path, perception.observation.depth_m.shape)
         try:
-            last = _Renders(renderer, m, d, index, scene)
+            last = _Renders(renderer, m, d, index, scene, labels=False)
             mujoco.mj_resetData(m, d)  # back to t = 0: the model's initial state, as checked above
             mujoco.mj_forward(m, d)
             first = _Renders(renderer, m, d, index, scene)

@@ -299,3 +299,32 @@ def test_image_scores_are_scikit_images():
     dented[:10, :12] = 0
     assert ssim_of(flat, dented) == pytest.approx(structural_similarity(flat, dented, channel_axis=2, data_range=255), abs=1e-12)
     assert ssim_of(photo[..., :1], render[..., :1]) == pytest.approx(structural_similarity(photo[..., 0], render[..., 0], data_range=255), abs=1e-12)
+
+
+def test_settled_renders_tell_hits_by_depth_as_the_segmentation_does(tmp_path):
+    """The settled state's renders skip the segmentation: a pixel hit something where its depth
+    is nearer than the far clipping plane. On a scene whose camera also sees past everything
+    (sky above the walls' tops) that is the segmentation's hit mask, pixel for pixel, and the
+    depth error against an observation is the same."""
+    import mujoco
+
+    from layout.verify import _Renders, _SceneIndex
+
+    scene = _scene([_placed("left", (0.5, 0.6, 0.5), (0.0, 0.6, 0.0)), _placed("right", (0.4, 0.4, 0.8), (0.4, -0.7, 0.0), yaw=0.5)])
+    perception = _raycast_perception(scene)
+    path = write_fixture_mjcf(scene, tmp_path / "h.xml")
+    m = mujoco.MjModel.from_xml_path(str(path))
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    index = _SceneIndex(m, scene, path)
+    renderer = _Renders.renderer(m, path, perception.observation.depth_m.shape)
+    try:
+        full = _Renders(renderer, m, d, index, scene)
+        quick = _Renders(renderer, m, d, index, scene, labels=False)
+    finally:
+        renderer.close()
+    assert 0 < np.count_nonzero(~full.hit) < full.hit.size  # some sky, some scene
+    np.testing.assert_array_equal(quick.hit, full.hit)
+    np.testing.assert_array_equal(quick.rgb, full.rgb)
+    valid = perception.observation.depth_m > 0
+    assert quick.depth_absrel(perception.observation.depth_m, valid) == full.depth_absrel(perception.observation.depth_m, valid)
