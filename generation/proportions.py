@@ -166,7 +166,7 @@ def seen_proportions(label: str, points_box_m: np.ndarray, size_m) -> Proportion
         hi = np.minimum(np.percentile(p[near, :2], 100.0 - TOP_PCT, axis=0), half)
         grow = np.maximum(0.0, TOP_KEEP_SHARE * 2 * half - (hi - lo)) / 2  # (not below TOP_KEEP_SHARE of the box)
         lo, hi = np.maximum(lo - grow, -half), np.minimum(hi + grow, half)
-        return Proportions(m.top_m, None, None, None, (float(lo[0]), float(lo[1])), (float(hi[0]), float(hi[1])))
+        return replace(m, top_lo_m=(float(lo[0]), float(lo[1])), top_hi_m=(float(hi[0]), float(hi[1])))
     if label != "bed":
         return None
     d, w = float(size_m[0]), float(size_m[1])

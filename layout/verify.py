@@ -276,7 +276,7 @@ class _Renders:
         renderer.disable_depth_rendering()
         if not labels:
             self.hit = self.depth < FAR_SHARE * float(m.vis.map.zfar * m.stat.extent)
-            self.names, self.code, self.label = [o.name for o in scene.objects], {}, None
+            self.code, self.label = {}, None
             return
         renderer.enable_segmentation_rendering()
         renderer.update_scene(d, camera=cam)
@@ -285,8 +285,7 @@ class _Renders:
         ids, types = seg[..., 0], seg[..., 1]
         self.hit = ids >= 0
         # Segmentation ids -> object index + 1 (0: not an object: the room, the background).
-        self.names = [o.name for o in scene.objects]
-        code = {n: k + 1 for k, n in enumerate(self.names)}
+        code = {o.name: k + 1 for k, o in enumerate(scene.objects)}
         label = np.zeros((h, w), dtype=np.int64)
         geom_code = np.array([code.get(index.geom_object(m, g), 0) for g in range(m.ngeom)] + [0], dtype=np.int64)
         is_geom = (types == int(mujoco.mjtObj.mjOBJ_GEOM)) & self.hit
@@ -302,8 +301,8 @@ class _Renders:
 
     def depth_absrel(self, observed_m: np.ndarray, valid: np.ndarray) -> float:
         """Mean |d_render - d_obs| / d_obs over the ``valid`` pixels (:func:`valid_depth`, computed
-        once per check: its median filter is the costly part); a pixel where the render hit
-        nothing counts as relative error 1."""
+        once per check for both renders); a pixel where the render hit nothing counts as
+        relative error 1."""
         if not np.any(valid):
             return float("nan")
         d_obs = observed_m[valid].astype(np.float64)
