@@ -304,7 +304,7 @@ def _handle_in(handles: list[_Handle], box, m_per_px: float) -> _Handle | None:
     return None
 
 
-def _fronts(root: _Node, handles: list[_Handle], m_per_px: float) -> list[tuple]:
+def _fronts(root: _Node, handles: list[_Handle], m_per_px: float, cut_handles: bool = True) -> list[tuple]:
     """The fronts of a cut tree: [(box, sides, handle or None)].
 
     A leaf holding a handle grows into its ancestors as long as what it takes in holds no handle
@@ -321,17 +321,42 @@ def _fronts(root: _Node, handles: list[_Handle], m_per_px: float) -> list[tuple]
         x0, y0, x1, y1 = leaf.box
         return min(x1 - x0, y1 - y0) >= min_px and all(leaf.sides)
 
+    def holding(node: _Node, hd: _Handle) -> _Node | None:
+        """The smallest node under ``node`` that holds ``hd`` off its border."""
+        if _handle_in([hd], node.box, m_per_px) is None:
+            return None
+        for c in node.children:
+            inner = holding(c, hd)
+            if inner is not None:
+                return inner
+        return node
+
+    starts = [(leaf, hd) for leaf in root.leaves() if (hd := has_handle(leaf)) is not None]
+    # A handle a cut runs through (wood grain across a drawer's pull) lies in no leaf: its front
+    # grows from the smallest piece holding it whole, when that piece is strips (no front-sized
+    # leaf: two doors' knobs either side of their meeting gap are one blob across it).
+    used = {id(hd) for _, hd in starts}
+    cut: list[tuple[_Node, _Handle]] = []
+    for hd in handles if cut_handles else ():
+        if id(hd) not in used:
+            bw, bh = hd.box[2] - hd.box[0], hd.box[3] - hd.box[1]
+            if max(bw, bh) < 3 * max(min(bw, bh), 1):
+                continue
+            node = holding(root, hd)
+            if node is not None and node.children and not any(big(x) for x in node.leaves()):
+                cut.append((node, hd))
+                used.add(id(hd))
+    starts += cut
     out, taken = [], set()
-    for leaf in root.leaves():
-        hd = has_handle(leaf)
-        if hd is None:
-            continue
+    for leaf, hd in starts:
+        if leaf.children and any(id(x) in taken for x in leaf.leaves()):
+            continue  # a cut handle inside a front found already
         node = leaf
         while node.parent is not None:
             sibling = next(c for c in node.parent.children if c is not node)
             if any(_handle_in(handles, sl.box, m_per_px) is not None or big(sl) for sl in sibling.leaves()):
                 break
-            if any(_overlaps(hd2, sibling.box) for hd2 in handles):
+            if any(_overlaps(hd2, sibling.box) for hd2 in handles) or any(_touches(hc.box, sibling.box) for _, hc in cut):
                 break
             px0, py0, px1, py1 = node.parent.box
             if max(px1 - px0, py1 - py0) * m_per_px > FRONT_MAX_M:
@@ -346,6 +371,11 @@ def _fronts(root: _Node, handles: list[_Handle], m_per_px: float) -> list[tuple]
         if id(leaf) not in taken and big(leaf) and has_handle(leaf) is None:
             out.append((leaf.box, leaf.sides, None))
     return out
+
+
+def _touches(a, b) -> bool:
+    """Whether boxes ``a`` and ``b`` (x0, y0, x1, y1) share pixels."""
+    return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
 
 
 def _overlaps(hd: _Handle, box) -> bool:
@@ -397,7 +427,9 @@ def parse_face(face_rgb: np.ndarray, m_per_px: float, inside: np.ndarray | None 
     root = _Node((0, 0, w, h), (False, False, False, False))
     _cut(_Lines(horiz), _Lines(vert.T), root, min_piece)
     fronts = _fronts(root, handles, m_per_px)
-    if len(fronts) < 2 and inside is not None and inside.any():
+    # (the fallbacks are looked for as before the cut pulls were taken: where the leaves' handles
+    # alone give fewer than two fronts)
+    if len(_fronts(root, handles, m_per_px, cut_handles=False)) < 2 and inside is not None and inside.any():
         from perception.front_rects import handle_column, handle_grid, inside_stiles, outlined_rectangles
 
         ins = cv2.warpAffine(inside.astype(np.uint8), fwd, (w, h), flags=cv2.INTER_NEAREST) > 0 if (sh or sv) else inside

@@ -93,6 +93,46 @@ def test_a_knob_touching_a_gap_line_is_a_handle_once_the_line_is_opened_away():
     assert all(hd.box[2] - hd.box[0] <= 16 for hd in found)  # a knob's size, not the line's
 
 
+def _grained_drawers() -> np.ndarray:
+    """Two drawers side by side, each 0.47 m x 0.18 m at 5 mm/px, in a 2 cm carcass border behind
+    1 cm dark gaps, each with a 20 cm bar pull in its middle; a dark grain line runs the left
+    drawer's whole width through its pull: the line cuts that drawer into strips 9 cm high and its
+    pull in two (wood grain stops at the drawer's edges, as urdformer_label40's does)."""
+    h, w = 48, 200
+    img = np.full((h, w, 3), 160, np.uint8)
+    img[4:-4, 4:-4] = 40  # the gaps around the fronts
+    img[6:42, 6:98] = 200  # the left drawer
+    img[6:42, 102:194] = 200  # the right drawer
+    img[21:27, 32:72] = 30  # the pulls
+    img[21:27, 128:168] = 30
+    img[23:25, 6:98] = 60  # the grain line through the left pull
+    return img
+
+
+def test_a_pull_that_wood_grain_runs_through_still_makes_its_drawer():
+    """urdformer_label40's drawers: grain lines cut each drawer into strips and its pull across, so
+    no strip held the pull whole and the drawer was not found."""
+    panels = sorted(parse_face(_grained_drawers(), M_PER_PX), key=lambda p: p.box[0])
+    assert [p.kind for p in panels] == ["drawer", "drawer"], [(p.kind, p.box) for p in panels]
+    assert all(p.handle is not None for p in panels)
+    assert iou(panels[0].box, (6, 6, 98, 42)) > 0.7, panels[0].box
+    assert iou(panels[1].box, (102, 6, 194, 42)) > 0.7, panels[1].box
+
+
+def test_two_knobs_either_side_of_a_pair_of_doors_gap_leave_two_doors():
+    """urdformer_label13: a pair of doors' knobs, each touching the 1 cm gap between them, are one
+    dark blob across the gap; the doors each side are front-sized pieces, so the blob is no pull
+    cut by grain and the doors stay two, not one front over both."""
+    img = np.full((160, 200, 3), 215, np.uint8)
+    img[:4, :] = img[-4:, :] = 170
+    img[:, :4] = img[:, -4:] = 170
+    img[4:-4, 99:101] = 40  # gap between the doors
+    img[75:81, 93:107] = 35  # the two knobs, one blob across the gap
+    panels = parse_face(img, M_PER_PX)
+    assert len(panels) == 2, [(p.kind, p.box) for p in panels]
+    assert sorted(p.hinge for p in panels) == ["left", "right"]
+
+
 def _night_stand_face() -> np.ndarray:
     """A 0.8 m x 0.6 m night stand face at 5 mm/px (a wall either side of it): two drawers inset
     in a face frame (10 cm stiles, a top moulding, a plinth), each outlined by a dark 1 cm
