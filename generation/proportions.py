@@ -98,7 +98,7 @@ class Proportions:
             legs = "" if self.leg_inset_m is None else f" and legs {self.leg_inset_m * 100:.0f} cm in from its edges"
             plan = "" if self.top_lo_m is None else f", {self.top_hi_m[0] - self.top_lo_m[0]:.2f} x {self.top_hi_m[1] - self.top_lo_m[1]:.2f} m"
             return f"top at {self.top_m:.2f} m{plan}{legs}"
-        head = f" and headboard on its {self.back_side} side" if self.back_side else ", no headboard"
+        head = f" and headboard on its {self.back_side} side, seen up to {self.back_top_m:.2f} m" if self.back_side else ", no headboard"
         return f"mattress top at {self.top_m:.2f} m{head}"
 
 

@@ -38,6 +38,8 @@ def test_the_mattress_top_and_the_headboards_side_are_read_from_the_points(side:
     assert got.back_side == side
     assert got.top_m == pytest.approx(0.62, abs=0.03)
     assert got.back_top_m == pytest.approx(1.3, abs=0.06)
+    # the asset's description says what was read
+    assert got.describe("bed") == f"mattress top at {got.top_m:.2f} m and headboard on its {side} side, seen up to {got.back_top_m:.2f} m"
 
 
 def test_a_bed_seen_from_its_side_gets_its_headboard_at_an_end_not_along_its_length():
