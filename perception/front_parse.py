@@ -448,16 +448,20 @@ def parse_face(face_rgb: np.ndarray, m_per_px: float, inside: np.ndarray | None 
             lo, hi = np.percentile(own[ins], [1.0, 99.9])
             own_gray = np.clip((own - lo) / max(hi - lo, 0.05), 0.0, 1.0)
             own_handles = _credible_handles(own_gray, m_per_px, opened)  # found once, for both fallbacks
+        stiles = vert  # the edges the fronts were told on: their sides move in to the stiles there
         if len(rects) < 2 and own_handles is not None:
             rects = handle_column(own_handles, box, m_per_px, ins)
+            if len(rects) >= 2:
+                stiles = _edges(own_gray, sigma=1.2)[1]
         if len(rects) < 2:
             # rows of handles: a dresser's row of small drawers over wide ones
             rects = handle_grid(handles, horiz, vert, box, m_per_px, ins)
         if len(rects) < 2 and own_handles is not None:
             o_horiz, o_vert = _edges(own_gray, sigma=1.2)
             rects = handle_grid(own_handles, o_horiz, o_vert, box, m_per_px, ins)
+            stiles = o_vert
         if len(rects) >= 2 and len(rects) > len(fronts):
-            fronts = [(rect, (True, True, True, True), hd) for rect, _, hd in inside_stiles(rects, vert, box)]
+            fronts = [(rect, (True, True, True, True), hd) for rect, _, hd in inside_stiles(rects, stiles, box)]
     panels = []
     for (x0, y0, x1, y1), sides, hd in fronts:
         pw, ph = (x1 - x0) * m_per_px, (y1 - y0) * m_per_px
