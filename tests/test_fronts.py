@@ -230,6 +230,34 @@ def test_match_count_is_one_to_one_at_iou_half():
     assert match_count([], truth) == 0
 
 
+def _bench_row(photo, scene, truth, built, matched, opened, pulled, runs_with_fronts=0):
+    return {"photo": photo, "scene": scene, "truth": truth, "built": built, "matched": matched, "kind_right": matched,
+            "control_built": 2, "control_matched": 1, "built_in_runs": runs_with_fronts, "runs_with_fronts": runs_with_fronts,
+            "opened": opened, "pulled": pulled, "wall_s": 5.0, "cpu_s": 6.0}
+
+
+def test_the_fronts_bench_summary_counts_every_hand_counted_front_and_says_what_is_met():
+    """Recall over all hand-counted fronts (a photo where nothing was built still counts), precision
+    over all built ones, the probe over all pulled ones; each verdict against issue 24's target."""
+    from scene_builder.bench.fronts import markdown, summarize
+
+    rows = [_bench_row("a", "cabinet", 10, 8, 7, 8, 8), _bench_row("b", "kitchen", 10, 0, 0, 0, 0, 0),
+            _bench_row("c", "kitchen", 5, 4, 3, 3, 4, 1)]
+    s = summarize(rows)
+    assert (s["all"]["truth"], s["all"]["built"], s["all"]["matched"]) == (25, 12, 10)
+    assert s["all"]["recall"] == pytest.approx(0.4) and s["all"]["precision"] == pytest.approx(10 / 12)
+    assert s["groups"]["kitchen"]["recall"] == pytest.approx(3 / 15)
+    assert s["all"]["control_recall"] == pytest.approx(3 / 25) and s["all"]["control_precision"] == pytest.approx(0.5)
+    assert (s["opened"], s["pulled"], s["kitchens"], s["kitchens_with_run"]) == (11, 12, 2, 1)
+    text = markdown({"rows": rows, "summary": s})
+    assert "recall **not met** (0.40), precision **met** (0.83)" in text
+    assert "11 of 12 built doors and drawers open fully (92 %" in text and "**met** (90 % asked)" in text
+    assert "1 of 2: **not met**" in text
+    rows[1] = _bench_row("b", "kitchen", 10, 9, 9, 9, 9, 1)
+    text = markdown({"rows": rows, "summary": summarize(rows)})
+    assert "recall **met** (0.76)" in text and "2 of 2: **met**" in text
+
+
 def test_a_front_cut_by_the_photos_edge_is_compared_as_far_as_it_is_seen():
     from scene_builder.bench.fronts import seen_rectangle
 

@@ -7,7 +7,7 @@ with their rectangles, written by looking at the photos) is built with the defau
 them), and again with ``PerceptionConfig.fronts`` off: the control, where articulated furniture
 gets its category template's doors and drawers and the built-ins stay on the background.
 
-    .venv/bin/python -m scene_builder.bench.fronts [--data ../shared/data] [--only NAME ...] [--no-control] [--no-probe]
+    .venv/bin/python -m scene_builder.bench.fronts [--data ../shared/data] [--only NAME ...] [--no-control] [--no-probe] [--json bench_results/fronts.json]
 
 Per photo: the built fronts (every part on a revolute or prismatic joint named ``door*``,
 ``drawer*`` or ``flap*``, of every object) projected into the photo as the bounding rectangle of
@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import resource
 import tempfile
 import time
@@ -39,7 +38,8 @@ ANNOTATION = REPO / "tests" / "data" / "fronts_annotation.json"
 MATCH_IOU = 0.5
 FRONT_NAMES = ("door", "drawer", "flap")
 
-__all__ = ["ANNOTATION", "MATCH_IOU", "SWINGS", "built_fronts", "iou", "joint_kind", "kinds_right", "main", "match_count", "match_pairs", "seen_rectangle"]
+__all__ = ["ANNOTATION", "MATCH_IOU", "SWINGS", "built_fronts", "iou", "joint_kind", "kinds_right", "main", "markdown", "match_count", "match_pairs", "photo_table", "run",
+           "seen_rectangle", "summarize"]
 
 
 def iou(a, b) -> float:
@@ -174,27 +174,27 @@ def _probe(mjcf: Path, fronts: list) -> tuple[int, int, list[str]]:
     return ok, len(fronts), fails
 
 
-def main(argv: list[str] | None = None) -> int:
+#: Issue 24's targets: front recall and precision against the hand count, and the share of built
+#: fronts that open fully in the probe.
+TARGET_RECALL = 0.6
+TARGET_PRECISION = 0.7
+TARGET_OPEN_SHARE = 0.9
+
+
+def run(data: Path = DEFAULT_DATA, only: list[str] | None = None, control: bool = True, probe: bool = True) -> dict:
+    """Build every annotated photo (with fronts, and without as the control unless ``control`` is
+    False), match, probe: {"rows": one dict per photo, "not_built": [...], "failures": [...],
+    "summary": :func:`summarize`}."""
     from scene_builder.errors import SceneBuilderError
 
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="the shared data folder (default ../shared/data)")
-    ap.add_argument("--only", nargs="*", default=None, help="photo folder names to run (default: every annotated photo)")
-    ap.add_argument("--no-control", action="store_true", help="skip the control builds (category templates, no built-ins)")
-    ap.add_argument("--no-probe", action="store_true", help="skip pulling the built fronts open")
-    args = ap.parse_args(argv)
     ann = json.loads(ANNOTATION.read_text())["photos"]
     rows, fails, not_built = [], [], []
-    totals: dict[str, list[int]] = {}  # group -> [truth, built, matched, built control, matched control]
-    probe = [0, 0]
-    times, cpus = [], []
-    kitchens: dict[str, int] = {}
     with tempfile.TemporaryDirectory() as tmp:
         for key, photo in ann.items():
             name = key.split("/")[-1]
-            if args.only and name not in args.only:
+            if only and name not in only:
                 continue
-            src = args.data / key
+            src = Path(data) / key
             truth = [f["box_xyxy_px"] for f in photo["fronts"]]
             size = tuple(photo["size"])
             try:
@@ -204,62 +204,124 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             fronts = built_fronts(result.scene, size)
             pairs = match_pairs([b for _, _, b in fronts], truth)
-            matched = len(pairs)
-            right = kinds_right(fronts, [f["kind"] for f in photo["fronts"]], pairs)
             runs = sorted({o for o, _, _ in fronts if result.scene.object(o).asset.is_fixed and o.startswith("built_in")})
-            opened, pulled, pf = (0, 0, []) if args.no_probe else _probe(result.files.mjcf, fronts)
-            probe[0] += opened
-            probe[1] += pulled
+            opened, pulled, pf = _probe(result.files.mjcf, fronts) if probe else (0, 0, [])
             fails += [f"{name}: {f}" for f in pf]
-            times.append(wall)
-            cpus.append(cpu)
-            c_built, c_matched = "-", "-"
-            if not args.no_control:
-                control, _, _ = _build(src, Path(tmp) / f"{name}_control", False)
-                cf = built_fronts(control.scene, size)
-                c_built, c_matched = len(cf), match_count([b for _, _, b in cf], truth)
-            group = photo["scene"]
-            t = totals.setdefault(group, [0, 0, 0, 0, 0, 0])
-            t[0] += len(truth)
-            t[1] += len(fronts)
-            t[2] += matched
-            t[5] += right
-            if not args.no_control:
-                t[3] += c_built
-                t[4] += c_matched
-            if group == "kitchen":
-                kitchens[name] = sum(1 for o in runs if any(ob == o for ob, _, _ in fronts))
-            rows.append(f"| {name} | {group} | {len(truth)} | {len(fronts)} | {matched} | {right} | {c_built} | {c_matched} | {len(runs)} "
-                        f"| {opened}/{pulled} | {wall:.1f} | {cpu:.1f} |")
-    print(f"Load average at the end: {' / '.join(f'{v:.1f}' for v in os.getloadavg())} (2 cores shared with other work).")
+            row = {"photo": name, "scene": photo["scene"], "truth": len(truth), "built": len(fronts), "matched": len(pairs),
+                   "kind_right": kinds_right(fronts, [f["kind"] for f in photo["fronts"]], pairs), "control_built": None, "control_matched": None,
+                   "built_in_runs": len(runs), "runs_with_fronts": sum(1 for o in runs if any(ob == o for ob, _, _ in fronts)),
+                   "opened": opened if probe else None, "pulled": pulled if probe else None, "wall_s": round(wall, 2), "cpu_s": round(cpu, 2)}
+            if control:
+                c, _, _ = _build(src, Path(tmp) / f"{name}_control", False)
+                cf = built_fronts(c.scene, size)
+                row["control_built"], row["control_matched"] = len(cf), match_count([b for _, _, b in cf], truth)
+            rows.append(row)
+    return {"rows": rows, "not_built": not_built, "failures": fails, "summary": summarize(rows)}
+
+
+def summarize(rows: list[dict]) -> dict:
+    """Per scene group and over all: hand-counted, built and matched fronts, recall, precision,
+    matched with the joint kind right, the control's built and matched (None without a control);
+    the probe's opened of pulled; kitchens with a built-in run that has fronts; build medians."""
+
+    def group(rs: list[dict]) -> dict:
+        t, b, m = sum(r["truth"] for r in rs), sum(r["built"] for r in rs), sum(r["matched"] for r in rs)
+        controlled = all(r["control_built"] is not None for r in rs)
+        cb = sum(r["control_built"] for r in rs) if controlled else None
+        cm = sum(r["control_matched"] for r in rs) if controlled else None
+        return {"photos": len(rs), "truth": t, "built": b, "matched": m, "kind_right": sum(r["kind_right"] for r in rs),
+                "recall": m / t if t else None, "precision": m / b if b else None, "control_built": cb, "control_matched": cm,
+                "control_recall": cm / t if controlled and t else None, "control_precision": cm / cb if controlled and cb else None}
+
+    groups = {}
+    for r in rows:
+        groups.setdefault(r["scene"], []).append(r)
+    probed = [r for r in rows if r["pulled"] is not None]
+    kitchens = [r for r in rows if r["scene"] == "kitchen"]
+    return {"groups": {g: group(rs) for g, rs in groups.items()}, "all": group(rows),
+            "opened": sum(r["opened"] for r in probed) if probed else None, "pulled": sum(r["pulled"] for r in probed) if probed else None,
+            "kitchens": len(kitchens), "kitchens_with_run": sum(r["runs_with_fronts"] > 0 for r in kitchens),
+            "wall_s_median": float(np.median([r["wall_s"] for r in rows])) if rows else None,
+            "cpu_s_median": float(np.median([r["cpu_s"] for r in rows])) if rows else None,
+            "wall_s_max": max((r["wall_s"] for r in rows), default=None)}
+
+
+def _ratio(num, den) -> str:
+    return f"{num}/{den} = {num / den:.2f}" if den else "-"
+
+
+def photo_table(doc: dict) -> str:
+    """The per-photo table (BENCHMARKS.md)."""
+    out = ["| photo | scene | hand-counted fronts | built fronts | matched (IoU >= 0.5) | matched, joint kind right | control: built | control: matched | built-in runs | opened fully / pulled | build s (wall) | build s (CPU) |",
+           "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in doc["rows"]:
+        cb = "-" if r["control_built"] is None else r["control_built"]
+        cm = "-" if r["control_matched"] is None else r["control_matched"]
+        probe = "-" if r["pulled"] is None else f"{r['opened']}/{r['pulled']}"
+        out.append(f"| {r['photo']} | {r['scene']} | {r['truth']} | {r['built']} | {r['matched']} | {r['kind_right']} | {cb} | {cm} | {r['built_in_runs']} | {probe} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} |")
+    return "\n".join(out)
+
+
+def markdown(doc: dict) -> str:
+    """The group table, the probe, the kitchens and issue 24's verdicts (the README's ``fronts``
+    block, ``bench.readme``)."""
+    s = doc["summary"]
+    out = ["| photos (hand-counted fronts) | built | matched | recall | precision | joint kind right (of matched) | control: recall | control: precision |",
+           "|---|---:|---:|---:|---:|---:|---:|---:|"]
+    for name, g in list(s["groups"].items()) + [("all", s["all"])]:
+        crec = _ratio(g["control_matched"], g["truth"]) if g["control_matched"] is not None else "-"
+        cprec = _ratio(g["control_matched"], g["control_built"]) if g["control_matched"] is not None else "-"
+        kind = f"{g['kind_right']}/{g['matched']}" if g["matched"] else "-"
+        out.append(f"| {name} ({g['photos']} photos, {g['truth']}) | {g['built']} | {g['matched']} | {_ratio(g['matched'], g['truth'])} | "
+                   f"{_ratio(g['matched'], g['built'])} | {kind} | {crec} | {cprec} |")
+    out.append("")
+    a = s["all"]
+    verdict = lambda ok: "met" if ok else "not met"  # noqa: E731
+    lines = [f"Issue 24 asks front recall >= {TARGET_RECALL} and precision >= {TARGET_PRECISION} over these photos: recall "
+             f"**{verdict(a['recall'] is not None and a['recall'] >= TARGET_RECALL)}** ({_f2(a['recall'])}), precision "
+             f"**{verdict(a['precision'] is not None and a['precision'] >= TARGET_PRECISION)}** ({_f2(a['precision'])})."]
+    if s["pulled"]:
+        share = s["opened"] / s["pulled"]
+        lines.append(f"Probe: {s['opened']} of {s['pulled']} built doors and drawers open fully ({share * 100:.0f} %; 90 % of their range or more, "
+                     f"within their limits, the carcass still): **{verdict(share >= TARGET_OPEN_SHARE)}** (90 % asked).")
+    if s["kitchens"]:
+        lines.append(f"Kitchen photos with at least one built-in run with fronts: {s['kitchens_with_run']} of {s['kitchens']}: "
+                     f"**{verdict(s['kitchens_with_run'] == s['kitchens'])}** (every one asked).")
+    if s["wall_s_median"] is not None:
+        lines.append(f"Build time in the bench's process, median over {len(doc['rows'])} photos: {s['wall_s_median']:.1f} s wall, {s['cpu_s_median']:.1f} s CPU.")
+    if doc.get("not_built"):
+        lines.append("Not built: " + "; ".join(doc["not_built"]))
+    meta = doc.get("meta")
+    if meta:
+        lines.append(f"Measured {meta.get('date', '?')} at commit {meta.get('commit', '?')} with `{meta.get('command', '?')}` "
+                     f"({meta.get('machine', '?')}; load average {meta.get('load', '?')} at the end).")
+    return "\n".join(out + ["\n\n".join(lines)]) + "\n"
+
+
+def _f2(x) -> str:
+    return "-" if x is None else f"{x:.2f}"
+
+
+def main(argv: list[str] | None = None) -> int:
+    from scene_builder.bench.suites import run_meta
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="the shared data folder (default ../shared/data)")
+    ap.add_argument("--only", nargs="*", default=None, help="photo folder names to run (default: every annotated photo)")
+    ap.add_argument("--no-control", action="store_true", help="skip the control builds (category templates, no built-ins)")
+    ap.add_argument("--no-probe", action="store_true", help="skip pulling the built fronts open")
+    ap.add_argument("--json", type=Path, default=None, help="also write the rows and the summary here")
+    args = ap.parse_args(argv)
+    doc = run(args.data, args.only, not args.no_control, not args.no_probe)
+    doc = {"meta": run_meta("scene_builder.bench.fronts", argv), **doc}
+    print(photo_table(doc))
     print()
-    print("| photo | scene | hand-counted fronts | built fronts | matched (IoU >= 0.5) | matched, joint kind right | control: built | control: matched | built-in runs | opened fully / pulled | build s (wall) | build s (CPU) |")
-    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
-    print("\n".join(rows))
-    print()
-    print("| photos | hand-counted | built | matched | recall | precision | joint kind right (of matched) | control recall | control precision |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
-    all_t = [sum(t[i] for t in totals.values()) for i in range(6)]
-    for group, t in list(totals.items()) + [("all", all_t)]:
-        rec = f"{t[2]}/{t[0]} = {t[2] / t[0]:.2f}" if t[0] else "-"
-        prec = f"{t[2]}/{t[1]} = {t[2] / t[1]:.2f}" if t[1] else "-"
-        crec = f"{t[4]}/{t[0]} = {t[4] / t[0]:.2f}" if t[0] and not args.no_control else "-"
-        cprec = f"{t[4]}/{t[3]} = {t[4] / t[3]:.2f}" if t[3] and not args.no_control else "-"
-        kind = f"{t[5]}/{t[2]}" if t[2] else "-"
-        print(f"| {group} | {t[0]} | {t[1]} | {t[2]} | {rec} | {prec} | {kind} | {crec} | {cprec} |")
-    print()
-    if probe[1]:
-        print(f"Probe: {probe[0]} of {probe[1]} built doors and drawers open fully = {probe[0] / probe[1]:.0%} "
-              "(90 % of their range or more, within their limits, the carcass still).")
-    if kitchens:
-        print(f"Kitchen photos with at least one built-in run with fronts: {sum(v > 0 for v in kitchens.values())} of {len(kitchens)}.")
-    if times:
-        print(f"Build time, median over {len(times)} photos: {np.median(times):.1f} s wall, {np.median(cpus):.1f} s CPU (max {max(times):.1f} s wall).")
-    if not_built:
-        print("Not built: " + "; ".join(not_built))
-    if fails:
-        print()
-        print("\n".join(f"- {f}" for f in fails))
+    print(markdown(doc))
+    if doc["failures"]:
+        print("\n".join(f"- {f}" for f in doc["failures"]))
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(doc, indent=1) + "\n")
     return 0
 
 

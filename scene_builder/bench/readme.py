@@ -8,6 +8,7 @@ and the JSON drift apart.
     .venv/bin/python -m scene_builder.bench.groundtruth --json bench_results/groundtruth.json
     .venv/bin/python -m scene_builder.bench.novel_view --rooms 4 --json bench_results/novel_view.json
     .venv/bin/python -m scene_builder.bench.cold_start --json bench_results/cold_start.json
+    .venv/bin/python -m scene_builder.bench.fronts --json bench_results/fronts.json
     .venv/bin/python -m scene_builder.bench.readme --write     # rewrite the blocks of README.md
     .venv/bin/python -m scene_builder.bench.readme --check     # exit 1 when a block is stale
 """
@@ -160,8 +161,16 @@ def _cold_start(data: dict) -> str:
     return markdown(data)
 
 
+def _fronts(data: dict) -> str:
+    """Doors and drawers against the hand count (bench.fronts) beside the template control."""
+    from scene_builder.bench.fronts import markdown
+
+    return markdown(data)
+
+
 #: block name -> (JSON file under bench_results/, renderer)
-BLOCKS = {"objects": ("groundtruth.json", _objects), "novel-view": ("novel_view.json", _novel_view), "cold-start": ("cold_start.json", _cold_start)}
+BLOCKS = {"objects": ("groundtruth.json", _objects), "novel-view": ("novel_view.json", _novel_view), "cold-start": ("cold_start.json", _cold_start),
+          "fronts": ("fronts.json", _fronts)}
 
 
 def render(name: str, results: Path = RESULTS) -> str:
