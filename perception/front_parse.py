@@ -20,6 +20,8 @@ rules below use it only for sizes that tolerate a factor of about 1.5).
 3. **Handles**: small dark or bright features (morphological black / white top-hat with a 5 cm
    square) that are compact (a knob) or a bar (a pull), 1-35 cm long and at most 5 cm thick, not
    touching the panel's border: the strongest one in the panel.
+   A bar pull that a cut runs through (grain along it) starts its front from the smallest piece
+   holding it whole, when that piece is only strips (:func:`_fronts`).
 4. **Kind**: a panel is a front when it has a handle, or when it is at least 12 cm in both
    directions and every side of it is a cut (not the face's border: the face's top, plinth and
    side strips are carcass). A front whose handle is near its left or right edge is a door hinged
@@ -66,6 +68,10 @@ FRONT_MIN_M = 0.12
 FRONT_MAX_M = 2.5
 #: Handles at least this share of the strongest one's score are credible.
 HANDLE_MIN_SHARE = 0.2
+#: A handle that no leaf of the cut tree holds whole starts a front of its own only when it is a
+#: bar at least this many times as long as thick (a pull that grain runs along; a knob split by a
+#: cut is more often two knobs, or a knob and a gap).
+CUT_PULL_ASPECT = 3.0
 #: A door's handle lies within this share of its width from its edge; a front at least
 #: WIDE_FRONT_RATIO times as wide as high with its handle farther in is a drawer.
 EDGE_HANDLE_SHARE = 0.15
@@ -310,8 +316,11 @@ def _fronts(root: _Node, handles: list[_Handle], m_per_px: float, cut_handles: b
     A leaf holding a handle grows into its ancestors as long as what it takes in holds no handle
     and no leaf that could be a front itself (FRONT_MIN_M in both directions, cut on every side):
     the strips that plank seams, wood grain or a raised panel's mouldings cut a front into, and
-    the rails around it, are the front's. Leaves without a handle, FRONT_MIN_M in both directions
-    and cut on every side, are fronts as they are."""
+    the rails around it, are the front's. A bar pull (:data:`CUT_PULL_ASPECT`) that a cut runs
+    through (wood grain along it) lies in no leaf: it grows the same way from the smallest node
+    holding it whole, when that node is all strips (no front-sized leaf), and fronts growing from
+    other handles stop short of it (``cut_handles`` False: leaves only). Leaves without a handle,
+    FRONT_MIN_M in both directions and cut on every side, are fronts as they are."""
     min_px = FRONT_MIN_M / m_per_px
 
     def has_handle(node: _Node) -> _Handle | None:
@@ -340,7 +349,7 @@ def _fronts(root: _Node, handles: list[_Handle], m_per_px: float, cut_handles: b
     for hd in handles if cut_handles else ():
         if id(hd) not in used:
             bw, bh = hd.box[2] - hd.box[0], hd.box[3] - hd.box[1]
-            if max(bw, bh) < 3 * max(min(bw, bh), 1):
+            if max(bw, bh) < CUT_PULL_ASPECT * max(min(bw, bh), 1):
                 continue
             node = holding(root, hd)
             if node is not None and node.children and not any(big(x) for x in node.leaves()):
