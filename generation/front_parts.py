@@ -9,7 +9,9 @@ neighbours by ``articulation.GAP_M``. Then, with the panels of the label's templ
 (``articulation._PARAMS``; particleboard cabinet panels for any other label):
 
 * the carcass: back, sides, top and bottom (``articulation._carcass``), no shelves (drawer trays
-  run through where shelves would be);
+  run through where shelves would be), its face closed by panels where no front was seen (a
+  range's controls above its oven door; a cabinet's door the parse did not find), or open there
+  when those panels stand where the camera saw through (``close_face``);
 * a door on a revolute joint at its hinge side, swinging outward, 0..1.7 rad
   (``articulation._vertical_door``);
 * a drawer on a prismatic joint along +X, its tray as deep as the carcass, travel 0.8 of the
@@ -29,7 +31,7 @@ from generation.assembly import PartSpec
 from scene_builder.frames import transform_points
 from scene_builder.model import Front
 
-__all__ = ["MIN_FRONT_M", "front_parts", "front_rectangles", "fronts_clear_of_walls"]
+__all__ = ["MIN_FRONT_M", "front_parts", "front_rectangles", "fronts_clear_of_walls", "seen_rectangles"]
 
 #: A front narrower or lower than this (m) in the box's frame is left out.
 MIN_FRONT_M = 0.05
@@ -39,6 +41,8 @@ MIN_FRONT_M = 0.05
 MAX_FACE_ANGLE_DEG = 45.0
 #: Moving parts keep this far in front of the walls beside them (fronts_clear_of_walls).
 WALL_CLEARANCE_M = 0.005
+#: Face panels (front_parts' ``close_face``) reach this far into the carcass panels around them.
+FACE_PANEL_OVERLAP_M = 5e-4
 
 
 def front_rectangles(fronts: tuple[Front, ...], box_from_world: np.ndarray, size_m) -> list[tuple[str, str, float, float, float, float]]:
@@ -110,10 +114,19 @@ def fronts_clear_of_walls(rects: list[tuple[str, str, float, float, float, float
     return out
 
 
-def front_parts(label: str, size_m, rects: list[tuple[str, str, float, float, float, float]], rgba=None) -> list[PartSpec]:
+def seen_rectangles(fronts: tuple[Front, ...], world_from_box: np.ndarray, size_m, walls) -> list[tuple[str, str, float, float, float, float]]:
+    """``fronts`` as rectangles of a box (:func:`front_rectangles`) at ``world_from_box`` of
+    ``size_m``, clear of the ``walls`` beside it (:func:`fronts_clear_of_walls`)."""
+    return fronts_clear_of_walls(front_rectangles(fronts, np.linalg.inv(world_from_box), size_m), world_from_box, size_m, walls)
+
+
+def front_parts(label: str, size_m, rects: list[tuple[str, str, float, float, float, float]], rgba=None, close_face: bool = True) -> list[PartSpec]:
     """Part specifications of a carcass of ``size_m`` = (D, W, H) with a moving part per front
     rectangle of :func:`front_rectangles` (names ``door_K``, ``drawer_K``, ``flap_K`` left to
-    right, top to bottom). The parts fill x in [-D/2, D/2] as the templates do."""
+    right, top to bottom). The parts fill x in [-D/2, D/2] as the templates do. With
+    ``close_face``, panels close the carcass's face where no front lies (:func:`_face_panels`):
+    a range's control panel above its oven door, a cabinet's front where a door was not found;
+    else the face is open there."""
     from generation.articulation import _PARAMS, GAP_M, _bottom_door, _carcass, _drawer, _mat, _vertical_door
     from generation.assembly import ConvexSolids
 
@@ -128,10 +141,11 @@ def front_parts(label: str, size_m, rects: list[tuple[str, str, float, float, fl
     body_depth = x_body_front + d / 2.0
     mat_body = _mat(p, rgba, p.panel_density_scale)
     mat_front = _mat(p, rgba)
-    body = PartSpec("body", None, ConvexSolids(tuple(_carcass(-d / 2.0, x_body_front, w, h, t))), mat_body,
+    g = GAP_M / 2
+    panels = _face_panels(rects, w, h, t, g, x_body_front - t, x_body_front) if close_face else []
+    body = PartSpec("body", None, ConvexSolids(tuple(_carcass(-d / 2.0, x_body_front, w, h, t)) + tuple(panels)), mat_body,
                     affordance_rank=6, affordance="place objects on top", description=f"{label} carcass")
     parts = [body]
-    g = GAP_M / 2
     order = sorted(rects, key=lambda r: (round(-r[5], 2), r[2]))  # top to bottom, left to right
     counts: dict[str, int] = {}
     for kind, hinge, y0, y1, z0, z1 in order:
@@ -145,3 +159,38 @@ def front_parts(label: str, size_m, rects: list[tuple[str, str, float, float, fl
         else:
             parts += _bottom_door(name, "body", x_door_back, x_front, y0, y1, z0, z1, mat_front, p, rgba)
     return parts
+
+
+def _face_panels(rects, w: float, h: float, t: float, g: float, x0: float, x1: float) -> list:
+    """Box solids (x in [x0, x1]) closing a carcass's face between its sides, top and bottom where
+    no front of ``rects`` ((kind, hinge, y0, y1, z0, z1), each grown by the gap ``g`` the fronts
+    keep) lies. Row by row between the fronts' edges, free cells side by side make one solid; the
+    solids reach FACE_PANEL_OVERLAP_M into the panels around them (touching faces make
+    non-manifold unions)."""
+    from generation.assembly import box_solid
+
+    e = FACE_PANEL_OVERLAP_M
+    ylo, yhi, zlo, zhi = -w / 2 + t - e, w / 2 - t + e, t - e, h - t + e
+    if yhi - ylo <= 2 * g or zhi - zlo <= 2 * g:
+        return []
+    grown = [(y0 - g, y1 + g, z0 - g, z1 + g) for _, _, y0, y1, z0, z1 in rects]
+    ys = sorted({ylo, yhi, *(float(np.clip(v, ylo, yhi)) for r in grown for v in r[:2])})
+    zs = sorted({zlo, zhi, *(float(np.clip(v, zlo, zhi)) for r in grown for v in r[2:])})
+    out = []
+    for za, zb in zip(zs, zs[1:]):
+        if zb - za <= 1e-6:
+            continue
+        zc, run = 0.5 * (za + zb), None
+        for ya, yb in zip(ys, ys[1:]):
+            if yb - ya <= 1e-6:
+                continue
+            yc = 0.5 * (ya + yb)
+            if not any(r[0] <= yc <= r[1] and r[2] <= zc <= r[3] for r in grown):
+                run = (ya, yb) if run is None else (run[0], yb)
+                continue
+            if run is not None:
+                out.append(box_solid([x0, run[0], za], [x1, run[1], zb]))
+                run = None
+        if run is not None:
+            out.append(box_solid([x0, run[0], za], [x1, run[1], zb]))
+    return out

@@ -220,6 +220,39 @@ def test_front_parts_make_a_joint_per_front_where_it_was_seen():
     assert parts[0].name == "body" and parts[0].joint is None
 
 
+def _boxes(part):
+    """(lo, hi) of each convex solid of ``part``."""
+    return [(q.vertices_m.min(axis=0), q.vertices_m.max(axis=0)) for q in part.geometry.solids]
+
+
+def _hit_x(boxes, y: float, z: float) -> float | None:
+    """The largest x at which a ray along -X at (y, z) enters one of ``boxes``, or None."""
+    xs = [hi[0] for lo, hi in boxes if lo[1] < y < hi[1] and lo[2] < z < hi[2]]
+    return max(xs) if xs else None
+
+
+@pytest.mark.parametrize("close_face", [True, False])
+def test_a_carcass_face_is_closed_where_no_front_was_seen(close_face):
+    # a range: its oven door in the lower half, a drawer under it, nothing found above (controls)
+    size = (0.6, 0.76, 0.9)
+    rects = front_rectangles((_front("flap", "bottom", -0.36, 0.36, 0.12, 0.6), _front("drawer", "", -0.36, 0.36, 0.02, 0.1)), np.eye(4), size)
+    parts = front_parts("oven", size, rects, close_face=close_face)
+    body = _boxes(parts[0])
+    above = _hit_x(body, 0.0, 0.75)  # where the controls are
+    if close_face:
+        assert above is not None and above > 0.2  # the face, not the back panel at -0.3
+    else:
+        assert above is not None and above < -0.2  # open: the ray reaches the back panel
+    # the door and the drawer still close the face where they are, and nothing of the carcass
+    # stands in the drawer's way out: every body solid beside its path ends behind the tray
+    assert _hit_x(body, 0.0, 0.35) < -0.2 and _hit_x(body, 0.0, 0.06) < -0.2
+    drawer = next(p for p in parts if p.name == "drawer_1")
+    for dlo, dhi in _boxes(drawer):
+        for blo, bhi in body:
+            across = min(dhi[1], bhi[1]) - max(dlo[1], blo[1]) > 1e-6 and min(dhi[2], bhi[2]) - max(dlo[2], blo[2]) > 1e-6
+            assert not across or bhi[0] <= dlo[0] + 1e-6
+
+
 def test_match_count_is_one_to_one_at_iou_half():
     truth = [(0, 0, 10, 10), (10, 0, 20, 10)]
     assert match_count([(0, 0, 10, 10)], truth) == 1
