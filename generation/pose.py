@@ -156,8 +156,14 @@ def fit_box(
     # front: the side face whose outward normal points most toward the camera
     to_cam = np.asarray(camera_position_m, dtype=np.float64)[:2] - centre_xy
     normals = np.vstack([axes, -axes])  # +u, +v, -u, -v
-    front = int(np.argmax(normals @ to_cam))
     ext_uv = hi - lo
+    sides = (0, 1, 2, 3)
+    if min(ext_uv) <= FACE_DEPTH_SHARE * max(ext_uv):
+        # One seen face: its front is that face, however obliquely it was seen (the dresser at
+        # sunrgbd_total3d_demo_5's right edge, seen 60 degrees off, was a box 1 cm wide whose
+        # front was the face's end).
+        sides = (0, 2) if ext_uv[0] <= ext_uv[1] else (1, 3)
+    front = max(sides, key=lambda i: float(normals[i] @ to_cam))
     if typical_size_m is not None:
         td, tw = float(typical_size_m[0]), float(typical_size_m[1])
         if max(td, tw) >= PLAN_ANISOTROPY * min(td, tw):

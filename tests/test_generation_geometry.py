@@ -79,6 +79,22 @@ def test_fit_box_reads_a_sofa_seen_end_on_by_its_proportions():
     np.testing.assert_array_equal(a.world_from_box, b.world_from_box)
 
 
+def test_fit_box_takes_one_face_seen_obliquely_for_the_front():
+    """A dresser at a photo's edge shows only its face, 60 degrees off head-on: the points are a
+    plane 1.2 m wide. Its box's front is that face (the box 1.2 m wide), not the face's end
+    (a box 1 cm wide whose depth is the face's width), which points more toward the camera."""
+    rng = np.random.default_rng(5)
+    yz = rng.uniform([-0.6, 0.0], [0.6, 1.0], size=(3000, 2))
+    pts = np.column_stack([np.full(len(yz), 2.0) + rng.normal(0.0, 0.002, len(yz)), 1.0 + yz[:, 0], yz[:, 1]])  # face x = 2, normal +x
+    camera = np.array([2.0 + 3.0 * np.cos(np.radians(60.0)), 1.0 - 3.0 * np.sin(np.radians(60.0)), 1.2])
+    fit = fit_box(pts, camera)
+    assert fit.size_m[1] == pytest.approx(1.2, abs=0.03) and fit.size_m[0] < 0.05
+    assert fit.world_from_box[:3, 0] @ np.array([1.0, 0.0, 0.0]) > 0.99  # +X is the face's normal
+    # seen 30 degrees off head-on, as before
+    camera = np.array([2.0 + 3.0 * np.cos(np.radians(30.0)), 1.0 - 3.0 * np.sin(np.radians(30.0)), 1.2])
+    assert fit_box(pts, camera).world_from_box[:3, 0] @ np.array([1.0, 0.0, 0.0]) > 0.99
+
+
 def test_fit_box_keeps_raised_bottom():
     rng = np.random.default_rng(2)
     box = SyntheticBox("microwave", (0.4, 0.5, 0.3), 0.0, (0.0, 0.0, 0.9))
