@@ -426,6 +426,17 @@ def box_clear_of_walls(world_from_box: np.ndarray, size_m: np.ndarray, walls) ->
     return _box_from_bounds(world_from_box, lo, hi)
 
 
+def _clear_of_walls(fit, size_m: np.ndarray, walls, points_world_m: np.ndarray, camera_position_m: np.ndarray):
+    """(fit, size, box_from_world, points and camera in the box frame): ``fit`` of ``size_m``
+    clear of the walls behind and beside it (:func:`box_clear_of_walls`; estimated depth bleeds
+    masks past them: total3d_demo_4's desk's prior reached 7 cm into a wall)."""
+    world_from_box, size = box_clear_of_walls(fit.world_from_box, size_m, walls)
+    if not np.array_equal(world_from_box, fit.world_from_box):
+        fit = dataclasses.replace(fit, world_from_box=world_from_box, size_m=size.copy())
+    box_from_world = np.linalg.inv(world_from_box)
+    return fit, size, box_from_world, transform_points(box_from_world, points_world_m), transform_points(box_from_world, camera_position_m[None])[0]
+
+
 def fronts_normal(fronts) -> np.ndarray | None:
     """(3,) the horizontal unit normal (world) of the face ``fronts`` were seen on (facing the
     camera), or None when there are none."""
@@ -611,25 +622,20 @@ class ShapePriorGenerator:
 
             size = np.maximum(size, 0.3 * np.asarray(category("cabinet").typical_size_m))
             size[2] = top_within_silhouette(space, fit.world_from_box, size)
-            # Clear of the walls behind and beside it (estimated depth bleeds a mask past them:
-            # sunrgbd_total3d_demo_5's night stand reached 4 cm into the wall behind it).
-            world_from_box, size = box_clear_of_walls(fit.world_from_box, size, perception.room.walls)
-            if not np.array_equal(world_from_box, fit.world_from_box):
-                fit = dataclasses.replace(fit, world_from_box=world_from_box, size_m=size.copy())
-                box_from_world = np.linalg.inv(world_from_box)
-                pts = transform_points(box_from_world, obj.points_world_m)
-                cam = transform_points(box_from_world, cam_world[None])[0]
+            fit, size, box_from_world, pts, cam = _clear_of_walls(fit, size, perception.room.walls, obj.points_world_m, cam_world)
             rects = seen_rectangles(obj.fronts, fit.world_from_box, size, perception.room.walls)
         if rects:
             specs = front_parts(label, size, rects, rgba)
             description += f"; {len(rects)} fronts seen in the photo"
         elif label in ARTICULATED_LABELS:
             size = np.maximum(size, 0.3 * np.asarray(cat.typical_size_m))  # templates need room for panels
+            fit, size, box_from_world, pts, cam = _clear_of_walls(fit, size, perception.room.walls, obj.points_world_m, cam_world)
             specs = articulated_parts(label, size, rgba)
             description += "; articulation template"
         elif label in PRIOR_LABELS:
             # panels need room: a sliver of points (a shelf seen edge-on) would leave an empty box
             size = np.maximum(size, 0.15 * np.asarray(cat.typical_size_m))
+            fit, size, box_from_world, pts, cam = _clear_of_walls(fit, size, perception.room.walls, obj.points_world_m, cam_world)
             boards = None
             if label == "shelf":
                 held = _held(others, box_from_world, size)
