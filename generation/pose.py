@@ -126,6 +126,8 @@ def fit_box(
 
     ``walls``: the room's wall planes. Points that are one seen face near a wall, turned from it
     by less than :data:`FACE_TO_WALL_MAX_DEG`, take the wall's direction (:func:`_wall_angle`).
+    Points that are one seen face (thinner than :data:`FACE_DEPTH_SHARE` of their width) have
+    that face for their front, however obliquely it was seen.
 
     ``face_normal``: (3,) the horizontal normal of a face whose doors and drawers were seen
     (``perception.fronts``, its direction read on the photo's lines and snapped to the walls): the

@@ -426,11 +426,14 @@ def box_clear_of_walls(world_from_box: np.ndarray, size_m: np.ndarray, walls) ->
     return _box_from_bounds(world_from_box, lo, hi)
 
 
-def _clear_of_walls(fit, size_m: np.ndarray, walls, points_world_m: np.ndarray, camera_position_m: np.ndarray):
-    """(fit, size, box_from_world, points and camera in the box frame): ``fit`` of ``size_m``
-    clear of the walls behind and beside it (:func:`box_clear_of_walls`; estimated depth bleeds
-    masks past them: total3d_demo_4's desk's prior reached 7 cm into a wall)."""
-    world_from_box, size = box_clear_of_walls(fit.world_from_box, size_m, walls)
+def _clear_of_walls(fit, size_m: np.ndarray, walls, points_world_m: np.ndarray, camera_position_m: np.ndarray, beyond_m: float | None = None):
+    """(fit, size, box_from_world, points and camera in the box frame): ``fit`` of ``size_m`` clear of
+    the walls behind and beside it (:func:`box_clear_of_walls`), always or (``beyond_m``) when a corner
+    lies more than that behind one (estimated depth bleeds masks past walls: total3d_demo_4's desk)."""
+    corners = transform_points(fit.world_from_box, np.array(np.meshgrid(*zip(*_box_bounds(size_m)), indexing="ij")).reshape(3, -1).T)
+    world_from_box, size = fit.world_from_box, np.asarray(size_m, dtype=np.float64)
+    if beyond_m is None or any(float(np.min(w.clearance_m(corners))) < -beyond_m for w in walls):
+        world_from_box, size = box_clear_of_walls(fit.world_from_box, size_m, walls)
     if not np.array_equal(world_from_box, fit.world_from_box):
         fit = dataclasses.replace(fit, world_from_box=world_from_box, size_m=size.copy())
     box_from_world = np.linalg.inv(world_from_box)
@@ -629,13 +632,13 @@ class ShapePriorGenerator:
             description += f"; {len(rects)} fronts seen in the photo"
         elif label in ARTICULATED_LABELS:
             size = np.maximum(size, 0.3 * np.asarray(cat.typical_size_m))  # templates need room for panels
-            fit, size, box_from_world, pts, cam = _clear_of_walls(fit, size, perception.room.walls, obj.points_world_m, cam_world)
+            fit, size, box_from_world, pts, cam = _clear_of_walls(fit, size, perception.room.walls, obj.points_world_m, cam_world, MAX_BEHIND_WALL_M)
             specs = articulated_parts(label, size, rgba)
             description += "; articulation template"
         elif label in PRIOR_LABELS:
             # panels need room: a sliver of points (a shelf seen edge-on) would leave an empty box
             size = np.maximum(size, 0.15 * np.asarray(cat.typical_size_m))
-            fit, size, box_from_world, pts, cam = _clear_of_walls(fit, size, perception.room.walls, obj.points_world_m, cam_world)
+            fit, size, box_from_world, pts, cam = _clear_of_walls(fit, size, perception.room.walls, obj.points_world_m, cam_world, MAX_BEHIND_WALL_M)
             boards = None
             if label == "shelf":
                 held = _held(others, box_from_world, size)
@@ -694,17 +697,14 @@ class ShapePriorGenerator:
                 description += "; its face open where no front was seen"
                 continue
             if rects and not refitted and label in ARTICULATED_LABELS and not _held(others, box_from_world, size):
-                # Tried once more on the face the fronts were seen on (see face_fitted_box). Not a
-                # box that other objects stand inside (a bookcase's books: promptda_arkit's
-                # cubbies read as fronts), which is no closed carcass of doors and drawers.
+                # Once more on the face the fronts were seen on (face_fitted_box); not a box other objects
+                # stand in (promptda_arkit's cubbies read as fronts): no closed carcass of doors and drawers.
                 refitted = True
                 fit, size = face_fitted_box(obj, space, cam_world, perception.room.walls, snap_m, blockers, perception.camera, others)
-                box_from_world = np.linalg.inv(fit.world_from_box)
-                pts = transform_points(box_from_world, obj.points_world_m)
+                pts = transform_points(box_from_world := np.linalg.inv(fit.world_from_box), obj.points_world_m)
                 rects = seen_rectangles(obj.fronts, fit.world_from_box, size, perception.room.walls)
                 if rects:  # (front_parts was imported above: there are rects, so fronts)
-                    closed = True
-                    specs = front_parts(label, size, rects, rgba)
+                    closed, specs = True, front_parts(label, size, rects, rgba)
                     description = f"{description.split('; ')[0]}; {len(rects)} fronts seen in the photo; box refitted to their face and the seen free space, " \
                                   f"{size[0]:.2f} x {size[1]:.2f} x {size[2]:.2f} m"
                     continue

@@ -283,12 +283,15 @@ def test_the_fronts_bench_summary_counts_every_hand_counted_front_and_says_what_
     assert s["all"]["control_recall"] == pytest.approx(3 / 25) and s["all"]["control_precision"] == pytest.approx(0.5)
     assert (s["opened"], s["pulled"], s["kitchens"], s["kitchens_with_run"]) == (11, 12, 2, 1)
     text = markdown({"rows": rows, "summary": s})
-    assert "recall **not met** (0.40), precision **met** (0.83)" in text
+    assert "recall **not met** (0.400), precision **met** (0.833)" in text
     assert "11 of 12 built doors and drawers open fully (92 %" in text and "**met** (90 % asked)" in text
     assert "1 of 2: **not met**" in text
     rows[1] = _bench_row("b", "kitchen", 10, 9, 9, 9, 9, 1)
     text = markdown({"rows": rows, "summary": summarize(rows)})
-    assert "recall **met** (0.76)" in text and "2 of 2: **met**" in text
+    assert "recall **met** (0.760)" in text and "2 of 2: **met**" in text
+    # just under a target reads as under it (two places would print 0.70 beside "not met")
+    text = markdown({"rows": [_bench_row("d", "cabinet", 100, 99, 69, 99, 99)], "summary": summarize([_bench_row("d", "cabinet", 100, 99, 69, 99, 99)])})
+    assert "precision **not met** (0.697)" in text
 
 
 def test_a_front_cut_by_the_photos_edge_is_compared_as_far_as_it_is_seen():

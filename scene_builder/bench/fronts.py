@@ -278,8 +278,8 @@ def markdown(doc: dict) -> str:
     a = s["all"]
     verdict = lambda ok: "met" if ok else "not met"  # noqa: E731
     lines = [f"Issue 24 asks front recall >= {TARGET_RECALL} and precision >= {TARGET_PRECISION} over these photos: recall "
-             f"**{verdict(a['recall'] is not None and a['recall'] >= TARGET_RECALL)}** ({_f2(a['recall'])}), precision "
-             f"**{verdict(a['precision'] is not None and a['precision'] >= TARGET_PRECISION)}** ({_f2(a['precision'])})."]
+             f"**{verdict(a['recall'] is not None and a['recall'] >= TARGET_RECALL)}** ({_f3(a['recall'])}), precision "
+             f"**{verdict(a['precision'] is not None and a['precision'] >= TARGET_PRECISION)}** ({_f3(a['precision'])})."]
     if s["pulled"]:
         share = s["opened"] / s["pulled"]
         lines.append(f"Probe: {s['opened']} of {s['pulled']} built doors and drawers open fully ({share * 100:.0f} %; 90 % of their range or more, "
@@ -298,8 +298,9 @@ def markdown(doc: dict) -> str:
     return "\n".join(out + ["\n\n".join(lines)]) + "\n"
 
 
-def _f2(x) -> str:
-    return "-" if x is None else f"{x:.2f}"
+def _f3(x) -> str:
+    """A verdict's figure to three places (0.697 is not 0.7, which two places would show)."""
+    return "-" if x is None else f"{x:.3f}"
 
 
 def main(argv: list[str] | None = None) -> int:
