@@ -426,20 +426,6 @@ def box_clear_of_walls(world_from_box: np.ndarray, size_m: np.ndarray, walls) ->
     return _box_from_bounds(world_from_box, lo, hi)
 
 
-def _clear_of_walls(fit, size_m: np.ndarray, walls, points_world_m: np.ndarray, camera_position_m: np.ndarray, beyond_m: float | None = None):
-    """(fit, size, box_from_world, points and camera in the box frame): ``fit`` of ``size_m`` clear of
-    the walls behind and beside it (:func:`box_clear_of_walls`), always or (``beyond_m``) when a corner
-    lies more than that behind one (estimated depth bleeds masks past walls: total3d_demo_4's desk)."""
-    corners = transform_points(fit.world_from_box, np.array(np.meshgrid(*zip(*_box_bounds(size_m)), indexing="ij")).reshape(3, -1).T)
-    world_from_box, size = fit.world_from_box, np.asarray(size_m, dtype=np.float64)
-    if beyond_m is None or any(float(np.min(w.clearance_m(corners))) < -beyond_m for w in walls):
-        world_from_box, size = box_clear_of_walls(fit.world_from_box, size_m, walls)
-    if not np.array_equal(world_from_box, fit.world_from_box):
-        fit = dataclasses.replace(fit, world_from_box=world_from_box, size_m=size.copy())
-    box_from_world = np.linalg.inv(world_from_box)
-    return fit, size, box_from_world, transform_points(box_from_world, points_world_m), transform_points(box_from_world, camera_position_m[None])[0]
-
-
 def fronts_normal(fronts) -> np.ndarray | None:
     """(3,) the horizontal unit normal (world) of the face ``fronts`` were seen on (facing the
     camera), or None when there are none."""
@@ -625,20 +611,25 @@ class ShapePriorGenerator:
 
             size = np.maximum(size, 0.3 * np.asarray(category("cabinet").typical_size_m))
             size[2] = top_within_silhouette(space, fit.world_from_box, size)
-            fit, size, box_from_world, pts, cam = _clear_of_walls(fit, size, perception.room.walls, obj.points_world_m, cam_world)
+            # Clear of the walls behind and beside it (estimated depth bleeds a mask past them:
+            # sunrgbd_total3d_demo_5's night stand reached 4 cm into the wall behind it).
+            world_from_box, size = box_clear_of_walls(fit.world_from_box, size, perception.room.walls)
+            if not np.array_equal(world_from_box, fit.world_from_box):
+                fit = dataclasses.replace(fit, world_from_box=world_from_box, size_m=size.copy())
+                box_from_world = np.linalg.inv(world_from_box)
+                pts = transform_points(box_from_world, obj.points_world_m)
+                cam = transform_points(box_from_world, cam_world[None])[0]
             rects = seen_rectangles(obj.fronts, fit.world_from_box, size, perception.room.walls)
         if rects:
             specs = front_parts(label, size, rects, rgba)
             description += f"; {len(rects)} fronts seen in the photo"
         elif label in ARTICULATED_LABELS:
             size = np.maximum(size, 0.3 * np.asarray(cat.typical_size_m))  # templates need room for panels
-            fit, size, box_from_world, pts, cam = _clear_of_walls(fit, size, perception.room.walls, obj.points_world_m, cam_world, MAX_BEHIND_WALL_M)
             specs = articulated_parts(label, size, rgba)
             description += "; articulation template"
         elif label in PRIOR_LABELS:
             # panels need room: a sliver of points (a shelf seen edge-on) would leave an empty box
             size = np.maximum(size, 0.15 * np.asarray(cat.typical_size_m))
-            fit, size, box_from_world, pts, cam = _clear_of_walls(fit, size, perception.room.walls, obj.points_world_m, cam_world, MAX_BEHIND_WALL_M)
             boards = None
             if label == "shelf":
                 held = _held(others, box_from_world, size)
@@ -697,14 +688,17 @@ class ShapePriorGenerator:
                 description += "; its face open where no front was seen"
                 continue
             if rects and not refitted and label in ARTICULATED_LABELS and not _held(others, box_from_world, size):
-                # Once more on the face the fronts were seen on (face_fitted_box); not a box other objects
-                # stand in (promptda_arkit's cubbies read as fronts): no closed carcass of doors and drawers.
+                # Tried once more on the face the fronts were seen on (see face_fitted_box). Not a
+                # box that other objects stand inside (a bookcase's books: promptda_arkit's
+                # cubbies read as fronts), which is no closed carcass of doors and drawers.
                 refitted = True
                 fit, size = face_fitted_box(obj, space, cam_world, perception.room.walls, snap_m, blockers, perception.camera, others)
-                pts = transform_points(box_from_world := np.linalg.inv(fit.world_from_box), obj.points_world_m)
+                box_from_world = np.linalg.inv(fit.world_from_box)
+                pts = transform_points(box_from_world, obj.points_world_m)
                 rects = seen_rectangles(obj.fronts, fit.world_from_box, size, perception.room.walls)
                 if rects:  # (front_parts was imported above: there are rects, so fronts)
-                    closed, specs = True, front_parts(label, size, rects, rgba)
+                    closed = True
+                    specs = front_parts(label, size, rects, rgba)
                     description = f"{description.split('; ')[0]}; {len(rects)} fronts seen in the photo; box refitted to their face and the seen free space, " \
                                   f"{size[0]:.2f} x {size[1]:.2f} x {size[2]:.2f} m"
                     continue
