@@ -682,8 +682,9 @@ class ShapePriorGenerator:
                 # (a built-in run stands where its fronts put it, in front of depth that an
                 # estimate painted onto the wall behind it: that depth's free space is no evidence)
                 return generated
-            if rects and closed:  # a box wider than the face its fronts were seen on closes that face where the
-                # camera saw through (sunrgbd_imvotenet_000003's dresser, refitted: 12 % closed, 9 % open)
+            if rects and closed:
+                # Its face left open where no front lies: a box wider than the face its fronts were seen
+                # on closes it where the camera saw through (000003's dresser, refitted: 12 % closed, 9 % open).
                 closed, specs = False, front_parts(label, size, rects, rgba, close_face=False)
                 description += "; its face open where no front was seen"
                 continue

@@ -263,9 +263,9 @@ def test_match_count_is_one_to_one_at_iou_half():
     assert match_count([], truth) == 0
 
 
-def _bench_row(photo, scene, truth, built, matched, opened, pulled, runs_with_fronts=0):
+def _bench_row(photo, scene, truth, built, matched, opened, pulled, built_in_runs=0):
     return {"photo": photo, "scene": scene, "truth": truth, "built": built, "matched": matched, "kind_right": matched,
-            "control_built": 2, "control_matched": 1, "built_in_runs": runs_with_fronts, "runs_with_fronts": runs_with_fronts,
+            "control_built": 2, "control_matched": 1, "built_in_runs": built_in_runs,
             "opened": opened, "pulled": pulled, "wall_s": 5.0, "cpu_s": 6.0}
 
 
